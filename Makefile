@@ -1,0 +1,35 @@
+# wand_calib_ros: the two entry points of the README.
+#   make demo  - create .venv, install, simulate the paper's two-fisheye rig and calibrate it
+#   make test  - create .venv, install with test tools, run ruff and the test suite
+PYTHON ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+DEMO_DIR := demo_output
+
+.PHONY: demo test setup lint clean
+
+$(BIN)/activate:
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/pip install --quiet --upgrade pip
+
+$(VENV)/.installed: $(BIN)/activate requirements.txt requirements-dev.txt setup.py
+	$(BIN)/pip install --quiet -r requirements-dev.txt
+	$(BIN)/pip install --quiet --no-deps -e .
+	touch $@
+
+setup: $(VENV)/.installed
+
+demo: setup
+	$(BIN)/wand-calib simulate paper --seed 1 --noise 1.0 --out $(DEMO_DIR)
+	$(BIN)/wand-calib calibrate --cameras $(DEMO_DIR)/cameras.yaml \
+		--observations $(DEMO_DIR)/observations.csv --output $(DEMO_DIR)/result.yaml \
+		--camera-info-dir $(DEMO_DIR)/camera_info --truth $(DEMO_DIR)/truth.yaml
+
+lint: setup
+	$(BIN)/ruff check .
+
+test: setup lint
+	$(BIN)/python -m pytest -q
+
+clean:
+	rm -rf $(VENV) $(DEMO_DIR) build install log *.egg-info

@@ -1,0 +1,187 @@
+"""The offline command ``wand-calib``: simulate rigs and calibrate recorded observations.
+
+Errors a user can cause end the command with exit code 2 and one line on
+stderr naming the problem; progress goes to stderr, results to files.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from wand_calib_ros.core.metrics import camera_errors, heldout_wand_rms, rereference
+from wand_calib_ros.core.pairwise import PairOptions
+from wand_calib_ros.core.pipeline import CalibrationOptions, calibrate
+from wand_calib_ros.core.result import CalibrationResult
+from wand_calib_ros.errors import WandCalibError
+from wand_calib_ros.io.observations_csv import read_observations, write_observations
+from wand_calib_ros.io.result_yaml import camera_entry, read_result, write_camera_infos, write_result, write_yaml
+from wand_calib_ros.io.rig_yaml import load_rig, save_rig
+from wand_calib_ros.sim.scenarios import SCENARIOS, image_placements, sample_placements
+
+log = logging.getLogger("wand_calib_ros")
+
+#: Placements in the held-out file written by ``simulate`` (judges D_RMS).
+HELDOUT_PLACEMENTS = 100
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="wand-calib", description="Wand calibration of fisheye, conventional and mixed camera rigs."
+    )
+    parser.add_argument("-v", "--verbose", action="store_true", help="debug output on stderr")
+    parser.add_argument("-q", "--quiet", action="store_true", help="only warnings and errors on stderr")
+    commands = parser.add_subparsers(dest="command", required=True)
+
+    cal = commands.add_parser("calibrate", help="calibrate a rig from wand observations")
+    cal.add_argument("--cameras", required=True, type=Path, help="rig description (cameras.yaml)")
+    cal.add_argument("--observations", required=True, type=Path, help="observations CSV (frame,camera,point,u,v)")
+    cal.add_argument("--output", required=True, type=Path, help="result YAML to write")
+    cal.add_argument("--camera-info-dir", type=Path, help="also write ROS camera_info YAML files here")
+    cal.add_argument("--reference", help="reference camera name (default: the first in cameras.yaml)")
+    cal.add_argument("--seed", type=int, default=0, help="seed of the RANSAC sampler (default 0)")
+    cal.add_argument("--truth", type=Path, help="truth YAML (from 'simulate') to compare the result with")
+
+    sim = commands.add_parser("simulate", help="write a synthetic rig with known truth")
+    sim.add_argument("scenario", choices=sorted(SCENARIOS), help="rig to simulate")
+    sim.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    sim.add_argument("--noise", type=float, default=1.0, help="pixel noise standard deviation (default 1.0)")
+    sim.add_argument("--out", required=True, type=Path, help="directory to write into")
+    sim.add_argument("--placements", type=int, help="number of wand placements (scenario default if omitted)")
+    sim.add_argument("--true-focal", type=float, help="paper scenario: true focal length in mm (default 2.0)")
+    sim.add_argument(
+        "--principal-point", type=float, nargs=2, metavar=("U0", "V0"),
+        help="paper scenario: true principal point in px (default 310 250)",
+    )
+    return parser
+
+
+def _print_summary(result: CalibrationResult, output: Path) -> None:
+    print(f"calibrated {len(result.cameras)} cameras (reference {result.reference_camera}) -> {output}")
+    for camera in result.cameras:
+        fx, fy = camera.model.focal_px
+        u0, v0 = camera.model.principal_point
+        print(
+            f"  {camera.name}: fx {fx:.2f} fy {fy:.2f} px, principal point ({u0:.2f}, {v0:.2f}) px, "
+            f"RMS {camera.rms_reprojection_px:.3f} px over {camera.n_observations} points"
+        )
+    print(
+        f"  wand |AC| {result.wand_length_mean_mm:.2f} +- {result.wand_length_std_mm:.2f} mm "
+        f"(nominal {result.wand.L:.1f}), RMS error {result.wand_length_rms_mm:.3f} mm; "
+        f"{result.placements_used} placements used, {result.placements_rejected} rejected"
+    )
+    print("  model = OpenCV/ROS 'equidistant': fx = k1*mu, fy = k1*mv, D = [k2..k5]/k1")
+    for warning in result.warnings:
+        print(f"  warning: {warning}")
+
+
+def _compare_with_truth(result: CalibrationResult, truth_path: Path) -> None:
+    _, truth = read_result(truth_path)
+    true_poses = rereference({name: g.pose for name, g in truth.items()}, result.reference_camera)
+    print(f"against the truth in {truth_path}:")
+    for camera in result.cameras:
+        if camera.name not in truth:
+            continue
+        e = camera_errors(camera.model, camera.pose, truth[camera.name].model, true_poses[camera.name])
+        extrinsic = (
+            f", E_r {e.rotation_deg:.4f} deg, E_t {e.translation:.5f}"
+            if camera.name != result.reference_camera else ""
+        )
+        print(
+            f"  {camera.name}: focal error {e.focal_mm * 1000:.2f} um ({e.focal_px:.3f} px), "
+            f"principal point error {e.principal_point_px:.3f} px{extrinsic}"
+        )
+    heldout = truth_path.parent / "heldout.csv"
+    if heldout.exists():
+        names = tuple(c.name for c in result.cameras)
+        obs = read_observations(heldout, names)
+        rms = heldout_wand_rms(
+            tuple(c.model for c in result.cameras), tuple(c.pose for c in result.cameras), obs.uv, result.wand
+        )
+        print(f"  held-out wand length error D_RMS {rms:.3f} mm over {obs.uv.shape[0]} placements ({heldout})")
+
+
+def _calibrate(args: argparse.Namespace) -> int:
+    started = time.perf_counter()
+    rig = load_rig(args.cameras)
+    observations = read_observations(args.observations, rig.camera_names)
+    log.info("read %d frames of %d cameras from %s", observations.uv.shape[0], len(rig.cameras), args.observations)
+    options = CalibrationOptions(reference_camera=args.reference, pair=PairOptions(seed=args.seed))
+    result = calibrate(rig, observations, options)
+    args.output.parent.mkdir(parents=True, exist_ok=True)
+    write_result(result, args.output)
+    if args.camera_info_dir:
+        paths = write_camera_infos(result, args.camera_info_dir)
+        log.info("wrote camera_info files %s", ", ".join(str(p) for p in paths))
+    log.info("done in %.2f s", time.perf_counter() - started)
+    _print_summary(result, args.output)
+    if args.truth:
+        _compare_with_truth(result, args.truth)
+    return 0
+
+
+def _simulate(args: argparse.Namespace) -> int:
+    factory = SCENARIOS[args.scenario]
+    kwargs: dict[str, object] = {}
+    if args.true_focal is not None or args.principal_point is not None:
+        if args.scenario != "paper":
+            raise WandCalibError("--true-focal and --principal-point apply to the 'paper' scenario only")
+        if args.true_focal is not None:
+            kwargs["true_focal_mm"] = args.true_focal
+        if args.principal_point is not None:
+            kwargs["principal_point"] = tuple(args.principal_point)
+    if args.placements is not None:
+        if args.placements < 1:
+            raise WandCalibError("--placements must be positive")
+        kwargs["n_placements"] = args.placements
+    if not (args.noise >= 0):
+        raise WandCalibError("--noise must be >= 0")
+    scenario = factory(**kwargs)
+    rng = np.random.default_rng(args.seed)
+    wand_a, direction = sample_placements(scenario, scenario.n_placements, rng)
+    data = image_placements(scenario, wand_a, direction, args.noise, rng)
+    held_a, held_d = sample_placements(scenario, HELDOUT_PLACEMENTS, rng)
+    heldout = image_placements(scenario, held_a, held_d, args.noise, rng, first_frame=1_000_000)
+    out: Path = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    save_rig(scenario.rig, out / "cameras.yaml")
+    write_observations(data.observations, out / "observations.csv")
+    write_observations(heldout.observations, out / "heldout.csv")
+    truth = {
+        "reference_camera": scenario.cameras[0].spec.name,
+        "scenario": scenario.name,
+        "seed": args.seed,
+        "noise_px": float(args.noise),
+        "cameras": {c.spec.name: camera_entry(c.model, c.pose) for c in scenario.cameras},
+    }
+    write_yaml(truth, out / "truth.yaml")
+    print(
+        f"simulated '{scenario.name}': {len(scenario.cameras)} cameras, {scenario.n_placements} placements, "
+        f"noise {args.noise} px -> {out}/cameras.yaml, observations.csv, heldout.csv, truth.yaml"
+    )
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``wand-calib``."""
+    args = _parser().parse_args(argv)
+    level = logging.DEBUG if args.verbose else logging.WARNING if args.quiet else logging.INFO
+    logging.basicConfig(level=level, format="wand-calib: %(message)s", stream=sys.stderr)
+    try:
+        return _calibrate(args) if args.command == "calibrate" else _simulate(args)
+    except WandCalibError as error:
+        print(f"wand-calib: error: {error}", file=sys.stderr)
+        return 2
+    except OSError as error:
+        print(f"wand-calib: error: {error.filename or ''}: {error.strerror}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,392 @@
+"""The generic radially symmetric camera model of the paper (Section II-A).
+
+A point ``X = (x, y, z)`` in the camera frame (mm; z along the optical axis,
+x right, y down) makes the angle ``theta = atan2(hypot(x, y), z)`` with the
+optical axis and has the azimuth ``phi = atan2(y, x)``. It is imaged at
+
+    r(theta) = k1*theta + k2*theta^3 + k3*theta^5 + k4*theta^7 + k5*theta^9   (mm)
+    u = m_u * r * cos(phi) + u0,   v = m_v * r * sin(phi) + v0               (px)
+
+with pixel densities ``m_u, m_v`` (px/mm) and principal point ``(u0, v0)`` in
+the OpenCV pixel convention ((0, 0) is the centre of the top-left pixel).
+Angles beyond 90 degrees (z < 0) are valid, so 185-degree lenses work.
+
+Only ``k1*m_u``, ``k1*m_v`` and ``k_i/k1`` are identifiable from images, so
+``m`` stays fixed at the value of the pixel size. The model is exactly
+OpenCV's / ROS's ``equidistant`` (fisheye) model with ``fx = k1*m_u``,
+``fy = k1*m_v``, ``cx = u0``, ``cy = v0`` and ``D = [k2, k3, k4, k5] / k1``
+(see :func:`to_opencv_fisheye`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wand_calib_ros.core.errors import ModelError
+
+FloatArray = NDArray[np.float64]
+
+#: Number of radial coefficients k1..k5.
+N_RADIAL = 5
+#: Free intrinsic parameters in the optimisers: k1..k5, u0, v0 (m stays fixed).
+N_INTRINSIC = 7
+
+
+def _frozen_array(values: object, shape: tuple[int, ...], name: str) -> FloatArray:
+    array = np.array(values, dtype=np.float64)
+    if array.shape != shape:
+        raise ModelError(f"{name} must have shape {shape}, got {array.shape}")
+    if not np.all(np.isfinite(array)):
+        raise ModelError(f"{name} must be finite, got {array.tolist()}")
+    array.setflags(write=False)
+    return array
+
+
+@dataclass(frozen=True, eq=False)
+class CameraModel:
+    """Intrinsics of one camera.
+
+    Attributes:
+        k: (5,) radial coefficients k1..k5 of r(theta), mm (theta in rad).
+        m: (2,) pixel densities m_u, m_v, px/mm.
+        principal_point: (2,) u0, v0, px (OpenCV pixel origin).
+        image_size: (width, height), px.
+    """
+
+    k: FloatArray
+    m: FloatArray
+    principal_point: FloatArray
+    image_size: tuple[int, int]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "k", _frozen_array(self.k, (N_RADIAL,), "k"))
+        object.__setattr__(self, "m", _frozen_array(self.m, (2,), "m"))
+        object.__setattr__(
+            self, "principal_point", _frozen_array(self.principal_point, (2,), "principal_point")
+        )
+        width, height = (int(s) for s in self.image_size)
+        object.__setattr__(self, "image_size", (width, height))
+        if self.k[0] <= 0 or np.any(self.m <= 0):
+            raise ModelError(f"k1 and m must be positive, got k1={self.k[0]}, m={self.m.tolist()}")
+
+    @property
+    def focal_px(self) -> FloatArray:
+        """(2,) identifiable focal lengths fx = k1*m_u, fy = k1*m_v in px."""
+        return self.k[0] * self.m
+
+    def intrinsic_vector(self) -> FloatArray:
+        """(7,) free intrinsics [k1..k5, u0, v0] in the optimisers' order."""
+        return np.concatenate([self.k, self.principal_point])
+
+    def with_intrinsic_vector(self, vector: FloatArray) -> CameraModel:
+        """A copy with k and principal point taken from a (7,) vector."""
+        return CameraModel(vector[:N_RADIAL], self.m, vector[N_RADIAL:N_INTRINSIC], self.image_size)
+
+
+def radius(k: FloatArray, theta: FloatArray) -> FloatArray:
+    """r(theta) in mm for (5,) coefficients and any-shaped angles in rad."""
+    t2 = theta * theta
+    return theta * (k[0] + t2 * (k[1] + t2 * (k[2] + t2 * (k[3] + t2 * k[4]))))
+
+
+def radius_over_theta(k: FloatArray, theta: FloatArray) -> FloatArray:
+    """r(theta)/theta, finite at theta = 0 (equals k1 there)."""
+    t2 = theta * theta
+    return k[0] + t2 * (k[1] + t2 * (k[2] + t2 * (k[3] + t2 * k[4])))
+
+
+def radius_derivative(k: FloatArray, theta: FloatArray) -> FloatArray:
+    """dr/dtheta in mm/rad."""
+    t2 = theta * theta
+    return k[0] + t2 * (3 * k[1] + t2 * (5 * k[2] + t2 * (7 * k[3] + t2 * 9 * k[4])))
+
+
+_LIMIT_GRID = np.linspace(0.0, np.pi, 1025)
+
+
+def monotonic_limit(k: FloatArray) -> float:
+    """First angle in (0, pi] where dr/dtheta reaches zero, or pi if it never does.
+
+    r(theta) is invertible on [0, monotonic_limit(k)]. A fine grid brackets the
+    first sign change of dr/dtheta; a safeguarded Newton iteration pins it down.
+    """
+    slope = radius_derivative(k, _LIMIT_GRID)
+    nonpositive = np.flatnonzero(slope <= 0)
+    if nonpositive.size == 0:
+        return float(np.pi)
+    first = int(nonpositive[0])
+    if first == 0:
+        return 0.0
+    lo, hi = float(_LIMIT_GRID[first - 1]), float(_LIMIT_GRID[first])
+    k1, k2, k3, k4, k5 = (float(c) for c in k)
+    theta = 0.5 * (lo + hi)
+    for _ in range(60):  # safeguarded Newton on dr/dtheta, scalar floats
+        t2 = theta * theta
+        f = k1 + t2 * (3 * k2 + t2 * (5 * k3 + t2 * (7 * k4 + t2 * 9 * k5)))
+        if f > 0:
+            lo = theta
+        else:
+            hi = theta
+        df = theta * (6 * k2 + t2 * (20 * k3 + t2 * (42 * k4 + t2 * 72 * k5)))
+        step = theta - f / df if df != 0 else lo - 1.0
+        theta = step if lo < step < hi else 0.5 * (lo + hi)
+        if hi - lo < 1e-15 or abs(f) < 1e-15 * abs(k1):
+            break
+    return theta
+
+
+def max_image_radius_mm(model: CameraModel) -> float:
+    """Largest distance (mm) from the principal point to an image corner."""
+    width, height = model.image_size
+    corners = np.array([[-0.5, -0.5], [width - 0.5, -0.5], [-0.5, height - 0.5], [width - 0.5, height - 0.5]])
+    return float(np.max(np.hypot(*((corners - model.principal_point) / model.m).T)))
+
+
+def turns_over_in_image(model: CameraModel, max_view_angle: float) -> bool:
+    """True when r(theta) stops increasing inside both the lens's field and the image.
+
+    Args:
+        model: the camera.
+        max_view_angle: theta_max of the lens in rad (half the field of view).
+    """
+    limit = monotonic_limit(model.k)
+    if limit >= max_view_angle:
+        return False
+    return float(radius(model.k, np.array(limit))) < max_image_radius_mm(model)
+
+
+def inverse_radius(k: FloatArray, r: FloatArray, *, tol: float = 1e-13) -> FloatArray:
+    """theta with r(theta) = r on the monotonic branch [0, monotonic_limit(k)].
+
+    Safeguarded Newton iteration (bisection whenever a step leaves the bracket),
+    vectorised over any shape. Radii beyond the largest one the model reaches
+    give NaN: such pixels cannot be explained by the model.
+
+    Args:
+        k: (5,) radial coefficients, mm.
+        r: image radii in mm, any shape, >= 0.
+        tol: absolute tolerance on theta (rad).
+    """
+    r = np.asarray(r, dtype=np.float64)
+    limit = monotonic_limit(k)
+    r_max = float(radius(k, np.array(limit)))
+    outside = ~(r <= r_max)  # also catches NaN
+    target = np.where(outside, 0.0, r)
+    lo = np.zeros_like(target)
+    hi = np.full_like(target, limit)
+    theta = np.clip(target / k[0], 0.0, limit)
+    for _ in range(100):
+        f = radius(k, theta) - target
+        lo = np.where(f <= 0, theta, lo)
+        hi = np.where(f > 0, theta, hi)
+        slope = radius_derivative(k, theta)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            step = theta - f / slope
+        bad = ~((step >= lo) & (step <= hi)) | (slope <= 0)
+        new = np.where(bad, 0.5 * (lo + hi), step)
+        done = np.max(np.abs(new - theta), initial=0.0) <= tol
+        theta = new
+        if done:
+            break
+    return np.where(outside, np.nan, theta)
+
+
+def _split_points(points: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    points = np.asarray(points, dtype=np.float64)
+    if points.ndim < 1 or points.shape[-1] != 3:
+        raise ValueError(f"points must have shape (..., 3), got {points.shape}")
+    return points[..., 0], points[..., 1], points[..., 2]
+
+
+def _angles(points: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+    """theta, rho, unit (cos phi, sin phi) and r/rho-ready ratio theta/rho."""
+    x, y, z = _split_points(points)
+    rho = np.hypot(x, y)
+    theta = np.arctan2(rho, z)
+    tiny = rho <= 1e-12 * np.maximum(np.abs(z), 1e-300)
+    safe_rho = np.where(tiny, 1.0, rho)
+    cos_phi = np.where(tiny, 1.0, x / safe_rho)
+    sin_phi = np.where(tiny, 0.0, y / safe_rho)
+    # theta/rho -> 1/z on the axis (z > 0).
+    theta_over_rho = np.where(tiny, 1.0 / np.where(z == 0, 1.0, z), theta / safe_rho)
+    return theta, rho, cos_phi, sin_phi, theta_over_rho
+
+
+def project(model: CameraModel, points: FloatArray) -> FloatArray:
+    """Pixels of points (or bearing vectors) in the camera frame.
+
+    Args:
+        model: the camera.
+        points: (..., 3) points in the camera frame (any positive scale).
+
+    Returns:
+        (..., 2) pixel coordinates u, v.
+    """
+    theta, _, cos_phi, sin_phi, _ = _angles(points)
+    r = radius(model.k, theta)
+    u = model.m[0] * r * cos_phi + model.principal_point[0]
+    v = model.m[1] * r * sin_phi + model.principal_point[1]
+    return np.stack([u, v], axis=-1)
+
+
+class ProjectionJacobian(NamedTuple):
+    """Projection with its exact derivatives.
+
+    Attributes:
+        uv: (N, 2) pixels.
+        d_point: (N, 2, 3) d(u, v)/d(x, y, z) in the camera frame.
+        d_intrinsics: (N, 2, 7) d(u, v)/d(k1..k5, u0, v0).
+    """
+
+    uv: FloatArray
+    d_point: FloatArray
+    d_intrinsics: FloatArray
+
+
+def project_with_jacobian(model: CameraModel, points: FloatArray) -> ProjectionJacobian:
+    """Project (N, 3) camera-frame points and return exact Jacobians (see ProjectionJacobian)."""
+    return project_with_jacobian_arrays(
+        model.k[None, :], model.m[None, :], model.principal_point[None, :], points
+    )
+
+
+def project_with_jacobian_arrays(
+    k: FloatArray, m: FloatArray, principal_point: FloatArray, points: FloatArray
+) -> ProjectionJacobian:
+    """Vectorised projection with Jacobians, one set of intrinsics per point.
+
+    Args:
+        k: (N, 5) or (1, 5) radial coefficients.
+        m: (N, 2) or (1, 2) pixel densities.
+        principal_point: (N, 2) or (1, 2).
+        points: (N, 3) camera-frame points.
+    """
+    x, y, z = _split_points(points)
+    theta, rho, cos_phi, sin_phi, theta_over_rho = _angles(points)
+    kT = k.T
+    r_over_theta = radius_over_theta(kT, theta)
+    r = r_over_theta * theta
+    dr = radius_derivative(kT, theta)
+    d2 = rho * rho + z * z
+    b = r_over_theta * theta_over_rho  # r / rho
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a = np.where(d2 > 0, dr * z / d2, b)  # dr/dtheta * dtheta/drho
+        dz_common = np.where(d2 > 0, -dr / d2, 0.0)
+    a_minus_b = a - b
+    mu, mv = m[:, 0], m[:, 1]
+    n = theta.shape[0]
+    d_point = np.empty((n, 2, 3))
+    d_point[:, 0, 0] = mu * (b + a_minus_b * cos_phi * cos_phi)
+    d_point[:, 0, 1] = mu * a_minus_b * cos_phi * sin_phi
+    d_point[:, 0, 2] = mu * dz_common * x
+    d_point[:, 1, 0] = mv * a_minus_b * cos_phi * sin_phi
+    d_point[:, 1, 1] = mv * (b + a_minus_b * sin_phi * sin_phi)
+    d_point[:, 1, 2] = mv * dz_common * y
+    powers = theta[:, None] ** (2 * np.arange(N_RADIAL) + 1)  # (N, 5)
+    d_intrinsics = np.zeros((n, 2, N_INTRINSIC))
+    d_intrinsics[:, 0, :N_RADIAL] = (mu * cos_phi)[:, None] * powers
+    d_intrinsics[:, 1, :N_RADIAL] = (mv * sin_phi)[:, None] * powers
+    d_intrinsics[:, 0, 5] = 1.0
+    d_intrinsics[:, 1, 6] = 1.0
+    uv = np.stack([mu * r * cos_phi + principal_point[:, 0], mv * r * sin_phi + principal_point[:, 1]], -1)
+    return ProjectionJacobian(uv, d_point, d_intrinsics)
+
+
+def unproject(model: CameraModel, uv: FloatArray) -> FloatArray:
+    """Unit bearing vectors of pixels (the inverse of :func:`project`).
+
+    Args:
+        model: the camera.
+        uv: (..., 2) pixel coordinates.
+
+    Returns:
+        (..., 3) unit vectors in the camera frame; NaN for pixels the model
+        cannot reach (beyond the radius where r(theta) stops increasing).
+    """
+    uv = np.asarray(uv, dtype=np.float64)
+    if uv.ndim < 1 or uv.shape[-1] != 2:
+        raise ValueError(f"uv must have shape (..., 2), got {uv.shape}")
+    xy = (uv - model.principal_point) / model.m
+    r = np.hypot(xy[..., 0], xy[..., 1])
+    theta = inverse_radius(model.k, r)
+    safe_r = np.where(r > 0, r, 1.0)
+    cos_phi = np.where(r > 0, xy[..., 0] / safe_r, 1.0)
+    sin_phi = np.where(r > 0, xy[..., 1] / safe_r, 0.0)
+    sin_theta = np.sin(theta)
+    return np.stack([sin_theta * cos_phi, sin_theta * sin_phi, np.cos(theta)], axis=-1)
+
+
+def unproject_with_jacobian(model: CameraModel, uv: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Bearings of (N, 2) pixels and their derivatives with respect to the intrinsics.
+
+    Returns:
+        (N, 3) unit bearings (NaN where unreachable) and (N, 3, 7) their
+        derivatives with respect to k1..k5, u0, v0 (implicit differentiation of
+        r(theta) = rho).
+    """
+    bearings = unproject(model, uv)
+    xy = (np.asarray(uv, dtype=np.float64) - model.principal_point) / model.m
+    rho = np.hypot(xy[:, 0], xy[:, 1])
+    theta = np.arccos(np.clip(bearings[:, 2], -1.0, 1.0))
+    safe_rho = np.where(rho > 0, rho, 1.0)
+    cos_phi = np.where(rho > 0, xy[:, 0] / safe_rho, 1.0)
+    sin_phi = np.where(rho > 0, xy[:, 1] / safe_rho, 0.0)
+    sin_theta, cos_theta = np.sin(theta), np.cos(theta)
+    # sin(theta)/rho -> 1/k1 at the centre.
+    sin_over_rho = np.where(rho > 0, sin_theta / safe_rho, 1.0 / model.k[0])
+    d_theta_d_rho = 1.0 / radius_derivative(model.k, theta)
+    dm_dtheta = np.stack([cos_theta * cos_phi, cos_theta * sin_phi, -sin_theta], axis=-1)
+    dm_dphi_over_sin = np.stack([-sin_phi, cos_phi, np.zeros_like(rho)], axis=-1)  # dm/dphi / sin(theta)
+    jac = np.empty((bearings.shape[0], 3, N_INTRINSIC))
+    powers = theta[:, None] ** (2 * np.arange(N_RADIAL) + 1)
+    jac[:, :, :N_RADIAL] = dm_dtheta[:, :, None] * (-powers * d_theta_d_rho[:, None])[:, None, :]
+    mu, mv = model.m
+    # u0: rho changes by -cos(phi)/mu, phi by sin(phi)/(rho mu); v0 likewise.
+    jac[:, :, 5] = dm_dtheta * (-cos_phi * d_theta_d_rho / mu)[:, None] + dm_dphi_over_sin * (
+        sin_over_rho * sin_phi / mu
+    )[:, None]
+    jac[:, :, 6] = dm_dtheta * (-sin_phi * d_theta_d_rho / mv)[:, None] - dm_dphi_over_sin * (
+        sin_over_rho * cos_phi / mv
+    )[:, None]
+    return bearings, jac
+
+
+class OpenCVFisheye(NamedTuple):
+    """OpenCV / ROS ``equidistant`` parameters equivalent to a CameraModel.
+
+    Attributes:
+        camera_matrix: (3, 3) K = [[fx, 0, cx], [0, fy, cy], [0, 0, 1]].
+        distortion: (4,) D = [k2, k3, k4, k5] / k1.
+    """
+
+    camera_matrix: FloatArray
+    distortion: FloatArray
+
+
+def to_opencv_fisheye(model: CameraModel) -> OpenCVFisheye:
+    """Exact conversion to OpenCV's fisheye (ROS ``equidistant``) parameters.
+
+    OpenCV maps theta to theta_d = theta (1 + D1 theta^2 + D2 theta^4 + D3 theta^6 + D4 theta^8)
+    and u = fx * theta_d * cos(phi) + cx, which equals this model's
+    m_u * r(theta) * cos(phi) + u0 with fx = k1 m_u and D = k[1:] / k1.
+    """
+    fx, fy = model.focal_px
+    camera_matrix = np.array(
+        [[fx, 0.0, model.principal_point[0]], [0.0, fy, model.principal_point[1]], [0.0, 0.0, 1.0]]
+    )
+    return OpenCVFisheye(camera_matrix, model.k[1:] / model.k[0])
+
+
+def from_opencv_fisheye(
+    camera_matrix: FloatArray, distortion: FloatArray, m: FloatArray, image_size: tuple[int, int]
+) -> CameraModel:
+    """Inverse of :func:`to_opencv_fisheye` for a given pixel density m (px/mm)."""
+    camera_matrix = np.asarray(camera_matrix, dtype=np.float64)
+    m = np.asarray(m, dtype=np.float64)
+    k1 = camera_matrix[0, 0] / m[0]
+    k = np.concatenate([[k1], k1 * np.asarray(distortion, dtype=np.float64).ravel()[:4]])
+    return CameraModel(k, m, camera_matrix[:2, 2], image_size)

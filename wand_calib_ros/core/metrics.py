@@ -1,0 +1,70 @@
+"""Accuracy measures of the paper (Section IV-A) against a known truth."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wand_calib_ros.core.camera_model import CameraModel
+from wand_calib_ros.core.geometry import Pose, rotation_error_deg, translation_error
+from wand_calib_ros.core.refine import ac_length_errors, triangulate_placements
+from wand_calib_ros.core.rig import WandSpec
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class CameraErrors:
+    """Errors of one calibrated camera against the truth.
+
+    Attributes:
+        focal_px: max |f - f_true| over fx, fy (identifiable focal lengths k1*m), px.
+        focal_mm: |k1 - k1_true| in mm (meaningful when m is the true pixel density).
+        principal_point_px: distance between estimated and true principal point, px.
+        rotation_deg: the paper's E_r (0 for the reference camera).
+        translation: the paper's E_t (NaN for the reference camera).
+    """
+
+    focal_px: float
+    focal_mm: float
+    principal_point_px: float
+    rotation_deg: float
+    translation: float
+
+
+def camera_errors(model: CameraModel, pose: Pose, true_model: CameraModel, true_pose: Pose) -> CameraErrors:
+    """Compare one camera with its truth (poses in the same reference frame)."""
+    t_norm = float(np.linalg.norm(true_pose.translation))
+    return CameraErrors(
+        focal_px=float(np.max(np.abs(model.focal_px - true_model.focal_px))),
+        focal_mm=abs(float(model.k[0] - true_model.k[0])),
+        principal_point_px=float(np.linalg.norm(model.principal_point - true_model.principal_point)),
+        rotation_deg=rotation_error_deg(true_pose.rotation, pose.rotation),
+        translation=translation_error(true_pose.translation, pose.translation) if t_norm > 0 else float("nan"),
+    )
+
+
+def heldout_wand_rms(
+    models: tuple[CameraModel, ...], poses: tuple[Pose, ...], uv: FloatArray, wand: WandSpec
+) -> float:
+    """The paper's D_RMS: RMS of L - |A^r C^r| over placements triangulated linearly.
+
+    Args:
+        models, poses: the calibration to judge.
+        uv: (P, C, 3, 2) pixels of placements not used in the calibration (NaN = unseen).
+        wand: wand lengths.
+    """
+    errors = ac_length_errors(triangulate_placements(models, poses, uv), wand)
+    return float(np.sqrt(np.nanmean(errors**2)))
+
+
+def rereference(poses: dict[str, Pose], reference: str) -> dict[str, Pose]:
+    """Express poses relative to another camera: X_c = R_c' X_ref' + T_c'."""
+    inverse = _invert(poses[reference])
+    return {name: pose.compose(inverse) for name, pose in poses.items()}
+
+
+def _invert(pose: Pose) -> Pose:
+    return Pose(pose.rotation.T, -pose.rotation.T @ pose.translation)

@@ -1,0 +1,177 @@
+"""Steps 1-3 of the paper for one camera pair, with the lens chosen by the data.
+
+Every plausible Step 1 start (one classic projection per camera) goes through
+Step 2 (essential matrix) and a screening run of Step 3 (wand-length LM) on a
+subset of placements; the combination with the lowest wand-length RMS wins and
+is refined by Step 3 on all placements.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wand_calib_ros.core.camera_model import CameraModel, unproject
+from wand_calib_ros.core.errors import CoreError, DegenerateDataError, InsufficientDataError
+from wand_calib_ros.core.essential import RelativePose, epipolar_angles, relative_pose
+from wand_calib_ros.core.intrinsics_init import LensCandidate, initial_model, lens_candidates
+from wand_calib_ros.core.result import LensTrial
+from wand_calib_ros.core.rig import CameraSpec, WandSpec
+from wand_calib_ros.core.wand_lm import WandFit, optimise_wand_lengths
+
+FloatArray = NDArray[np.float64]
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class PairOptions:
+    """Settings of the pairwise initialisation.
+
+    Attributes:
+        ransac_threshold_px: RANSAC inlier threshold, as pixels at the nominal focal length
+            (generous: the Step 1 intrinsics can be off by 20 % and 50 px).
+        screening_placements: placements used to rank the lens candidates in Step 3.
+        screening_evaluations: residual evaluations allowed per candidate while screening.
+        step3_placements: placements (spread over the recording) in the winner's Step 3;
+            Step 3 only initialises the bundle adjustment, which uses every placement.
+        min_placements: fewest placements both cameras must see completely.
+        seed: seed of the RANSAC sampler.
+    """
+
+    ransac_threshold_px: float = 10.0
+    screening_placements: int = 40
+    screening_evaluations: int = 30
+    step3_placements: int = 120
+    min_placements: int = 15
+    seed: int = 0
+
+
+@dataclass(frozen=True, eq=False)
+class PairInitialisation:
+    """Steps 1-3 result for cameras (0, 1) of a pair."""
+
+    fit: WandFit
+    projections: tuple[str, str]
+    trials: tuple[LensTrial, ...]
+
+
+def check_motion(spec: CameraSpec, uv: FloatArray) -> None:
+    """Refuse data in which the wand hardly moved or always points at the camera.
+
+    Args:
+        spec: the camera.
+        uv: (N, 3, 2) pixels of complete placements.
+
+    Raises:
+        DegenerateDataError: with what the user should change.
+    """
+    points = uv.reshape(-1, 2)
+    extent = np.ptp(points, axis=0)
+    diagonal = float(np.hypot(*spec.image_size))
+    if np.hypot(*extent) < 0.05 * diagonal:
+        raise DegenerateDataError(
+            f"camera '{spec.name}': the wand hardly moved (its points span only {extent[0]:.0f} x "
+            f"{extent[1]:.0f} px of a {spec.image_size[0]} x {spec.image_size[1]} image); "
+            "wave it through the whole view"
+        )
+    image_length = np.linalg.norm(uv[:, 2] - uv[:, 0], axis=-1)
+    if np.median(image_length) < 3.0:
+        raise DegenerateDataError(
+            f"camera '{spec.name}': the wand images as a dot (median |ac| {np.median(image_length):.1f} px); "
+            "it points along the line of sight or is too far away"
+        )
+
+
+def _spread_subset(n: int, size: int) -> NDArray[np.bool_]:
+    """(n,) mask of ``size`` indices spread evenly over the recording."""
+    mask = np.zeros(n, dtype=bool)
+    mask[np.unique(np.linspace(0, n - 1, min(n, size)).round().astype(np.int64))] = True
+    return mask
+
+
+def _step2(
+    specs: tuple[CameraSpec, CameraSpec], candidates: tuple[LensCandidate, LensCandidate],
+    uv0: FloatArray, uv1: FloatArray, wand: WandSpec, options: PairOptions,
+) -> tuple[tuple[CameraModel, CameraModel], RelativePose]:
+    models = (initial_model(specs[0], candidates[0]), initial_model(specs[1], candidates[1]))
+    focal_px = min(float(np.min(m.focal_px)) for m in models)
+    step2 = relative_pose(
+        unproject(models[0], uv0), unproject(models[1], uv1), wand.L,
+        threshold_rad=options.ransac_threshold_px / focal_px, rng=np.random.default_rng(options.seed),
+    )
+    return models, step2
+
+
+def initialise_pair(
+    specs: tuple[CameraSpec, CameraSpec],
+    uv0: FloatArray,
+    uv1: FloatArray,
+    wand: WandSpec,
+    options: PairOptions = PairOptions(),
+) -> PairInitialisation:
+    """Steps 1-3 for two cameras on the placements both see completely.
+
+    Args:
+        specs: the two cameras' descriptions.
+        uv0, uv1: (N, 3, 2) pixels of A, B, C in each camera.
+        wand: wand lengths.
+        options: settings.
+
+    Raises:
+        InsufficientDataError: fewer than ``options.min_placements`` placements.
+        DegenerateDataError: the motion cannot determine the calibration.
+    """
+    n = uv0.shape[0]
+    if n < options.min_placements:
+        raise InsufficientDataError(
+            f"cameras '{specs[0].name}' and '{specs[1].name}' both see the whole wand in only {n} placements; "
+            f"need at least {options.min_placements}"
+        )
+    for spec, uv in zip(specs, (uv0, uv1), strict=True):
+        check_motion(spec, uv)
+    screening = _spread_subset(n, options.screening_placements)
+    s0, s1 = uv0[screening], uv1[screening]
+    trials: list[LensTrial] = []
+    best: tuple[WandFit, tuple[LensCandidate, LensCandidate], NDArray[np.bool_]] | None = None
+    for combo in itertools.product(lens_candidates(specs[0]), lens_candidates(specs[1])):
+        names = (combo[0].projection, combo[1].projection)
+        try:
+            models, step2 = _step2(specs, combo, s0, s1, wand, options)
+            agree = step2.inliers.reshape(-1, 3).all(axis=1)
+            fit = optimise_wand_lengths(
+                models, step2.pose, s0[agree], s1[agree], wand,
+                max_evaluations=options.screening_evaluations, tolerance=1e-4,
+            )
+        except CoreError as error:
+            trials.append(LensTrial(names, float("nan"), str(error)))
+            log.info("lens start %s: failed (%s)", "/".join(names), error)
+            continue
+        trials.append(LensTrial(names, fit.rms_mm))
+        log.info("lens start %s: wand-length RMS %.3f mm", "/".join(names), fit.rms_mm)
+        if best is None or fit.rms_mm < best[0].rms_mm:
+            # Placements of the whole recording that agree with this start's epipolar geometry.
+            agree_all = _epipolar_agreement(models, step2.essential, uv0, uv1, options)
+            best = (fit, combo, agree_all)
+    if best is None:
+        reasons = "; ".join(f"{'/'.join(t.projections)}: {t.failure}" for t in trials)
+        raise DegenerateDataError(f"no lens start gives a relative pose ({reasons})")
+    screened, combo, agree_all = best
+    use = _spread_subset(n, options.step3_placements) & agree_all
+    fit = optimise_wand_lengths(screened.models, screened.pose, uv0[use], uv1[use], wand)
+    return PairInitialisation(fit, (combo[0].projection, combo[1].projection), tuple(trials))
+
+
+def _epipolar_agreement(
+    models: tuple[CameraModel, CameraModel], essential: FloatArray, uv0: FloatArray, uv1: FloatArray,
+    options: PairOptions,
+) -> NDArray[np.bool_]:
+    """(N,) placements whose three points all pass Step 2's RANSAC test under ``essential``."""
+    angles = epipolar_angles(
+        essential, unproject(models[0], uv0).reshape(-1, 3), unproject(models[1], uv1).reshape(-1, 3)
+    )
+    focal_px = min(float(np.min(m.focal_px)) for m in models)
+    return (angles < options.ransac_threshold_px / focal_px).reshape(-1, 3).all(axis=1)

@@ -1,0 +1,264 @@
+"""Step 4 around the solver: gate placements, bundle-adjust, keep r(theta) sane, report.
+
+Works for any number of cameras once every camera has initial intrinsics and
+a pose in the reference frame.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wand_calib_ros.core.bundle_adjustment import (
+    CAMERA_PARAM_NAMES,
+    N_CAMERA_PARAMS,
+    BundleProblem,
+    BundleResult,
+    BundleState,
+    bundle_adjust,
+    default_free_mask,
+)
+from wand_calib_ros.core.camera_model import (
+    CameraModel,
+    inverse_radius,
+    max_image_radius_mm,
+    monotonic_limit,
+    turns_over_in_image,
+    unproject,
+)
+from wand_calib_ros.core.errors import InsufficientDataError
+from wand_calib_ros.core.geometry import Pose, triangulate, wand_directions
+from wand_calib_ros.core.result import CalibrationResult, CameraCalibration, LensTrial
+from wand_calib_ros.core.rig import CameraSpec, RigSpec, WandSpec
+
+FloatArray = NDArray[np.float64]
+log = logging.getLogger(__name__)
+
+#: The paper's gate: placements whose |AC| is off by more than this fraction of L are dropped.
+GATE_FRACTION = 0.01
+#: ... unless that is within this many robust standard deviations of the |AC| errors (high noise).
+GATE_SIGMAS = 5.0
+#: The highest free radial coefficient is fixed to zero while |k| / std(k) is below this (Wald test).
+SIGNIFICANCE = 2.0
+#: Uncertainty of r(theta) at the widest observed angle (px) above which a camera gets a warning.
+WEAK_CURVE_PX = 0.5
+#: A camera whose observations stop below this fraction of the angle its image reaches gets a warning.
+COVERAGE_FRACTION = 0.8
+
+
+def triangulate_placements(models: tuple[CameraModel, ...], poses: tuple[Pose, ...], uv: FloatArray) -> FloatArray:
+    """Linear n-view triangulation of every wand point.
+
+    Args:
+        models, poses: per camera intrinsics and pose (reference frame).
+        uv: (P, C, 3, 2) pixels of A, B, C, NaN where not seen.
+
+    Returns:
+        (P, 3, 3) A, B, C in the reference frame (NaN where fewer than two views).
+    """
+    n_placements, n_cameras = uv.shape[:2]
+    bearings = np.stack([unproject(models[c], uv[:, c]) for c in range(n_cameras)], axis=2)  # (P, 3, C, 3)
+    rotations = np.stack([p.rotation for p in poses])
+    translations = np.stack([p.translation for p in poses])
+    return triangulate(bearings.reshape(-1, n_cameras, 3), rotations, translations).reshape(n_placements, 3, 3)
+
+
+def ac_length_errors(points: FloatArray, wand: WandSpec) -> FloatArray:
+    """(P,) L - |A^r C^r| in mm."""
+    return wand.L - np.linalg.norm(points[:, 2] - points[:, 0], axis=-1)
+
+
+def gate_threshold(errors: FloatArray, wand: WandSpec) -> float:
+    """The |AC| gate in mm: the paper's 1 % of L, widened to 5 robust sigmas when noise is high."""
+    finite = errors[np.isfinite(errors)]
+    mad_sigma = 1.4826 * float(np.median(np.abs(finite - np.median(finite)))) if finite.size else 0.0
+    return max(GATE_FRACTION * wand.L, GATE_SIGMAS * mad_sigma)
+
+
+@dataclass(frozen=True)
+class _Fixed:
+    """Radial coefficients held at zero per camera (indices into k1..k5)."""
+
+    per_camera: tuple[tuple[int, ...], ...]
+
+
+def _free_mask(n_cameras: int, reference: int, fixed: _Fixed) -> NDArray[np.bool_]:
+    free = default_free_mask(n_cameras, reference)
+    for camera, indices in enumerate(fixed.per_camera):
+        free[camera, list(indices)] = False
+    return free
+
+
+def _zero_fixed(models: tuple[CameraModel, ...], fixed: _Fixed) -> tuple[CameraModel, ...]:
+    out = []
+    for model, indices in zip(models, fixed.per_camera, strict=True):
+        vector = model.intrinsic_vector()
+        vector[list(indices)] = 0.0
+        out.append(model.with_intrinsic_vector(vector))
+    return tuple(out)
+
+
+def _max_theta(result: BundleResult, problem: BundleProblem) -> FloatArray:
+    """(C,) largest off-axis angle (rad) each camera observes at the solution."""
+    state = result.state
+    points = state.points(problem.wand)[problem.placement, problem.point]
+    out = np.zeros(problem.n_cameras)
+    for c, pose in enumerate(state.poses):
+        in_cam = pose.apply(points[problem.camera == c])
+        if in_cam.size:
+            out[c] = np.max(np.arctan2(np.hypot(in_cam[:, 0], in_cam[:, 1]), in_cam[:, 2]))
+    return out
+
+
+def refine_calibration(
+    rig: RigSpec,
+    uv: FloatArray,
+    models: tuple[CameraModel, ...],
+    poses: tuple[Pose, ...],
+    *,
+    reference: int = 0,
+    initial_projections: tuple[str, ...],
+    lens_trials: tuple[LensTrial, ...] = (),
+    min_placements: int = 10,
+) -> CalibrationResult:
+    """Gate, bundle-adjust and report (paper Step 4 / Section III-B Step 2).
+
+    Args:
+        rig: the rig description (cameras in the order of ``uv``'s axis 1).
+        uv: (P, C, 3, 2) observed pixels, NaN where not seen.
+        models: initial intrinsics per camera (k3..k5 are reset to zero as in the paper).
+        poses: initial poses per camera in the reference camera's frame.
+        reference: index of the reference camera.
+        initial_projections: per camera, the Step 1 projection it started from.
+        lens_trials: Step 1-3 candidate scores to carry into the result.
+        min_placements: fewest placements the bundle adjustment accepts.
+    """
+    wand = rig.wand
+    models = tuple(m.with_intrinsic_vector(np.r_[m.k[:2], 0.0, 0.0, 0.0, m.principal_point]) for m in models)
+    points = triangulate_placements(models, poses, uv)
+    errors = ac_length_errors(points, wand)
+    threshold = gate_threshold(errors, wand)
+    keep = np.isfinite(errors) & (np.abs(errors) <= threshold)
+    rejected = int(np.sum(np.isfinite(errors)) - keep.sum())
+    log.info("gate |AC| within %.1f mm: %d placements kept, %d dropped", threshold, keep.sum(), rejected)
+    if keep.sum() < min_placements:
+        raise InsufficientDataError(
+            f"only {int(keep.sum())} placements reconstruct to the wand length within {threshold:.1f} mm "
+            f"after initialisation; need at least {min_placements}"
+        )
+    uv_kept, points_kept = uv[keep], points[keep]
+    problem = BundleProblem.from_dense(wand, uv_kept)
+    initial = BundleState(models, poses, points_kept[:, 0], wand_directions(points_kept[:, 0], points_kept[:, 2]))
+    fixed = _Fixed(tuple(() for _ in models))
+    warnings: list[str] = []
+    start = initial
+    while True:
+        result = bundle_adjust(start, problem, _free_mask(len(models), reference, fixed))
+        log.info("bundle adjustment: %d iterations, sigma %.3f px", result.iterations, result.sigma)
+        per_camera = list(fixed.per_camera)
+        for c, (model, spec) in enumerate(zip(result.state.models, rig.cameras, strict=True)):
+            free_radial = [i for i in range(2, 5) if i not in per_camera[c]]
+            if not free_radial:
+                continue
+            highest = max(free_radial)
+            significance = abs(model.k[highest]) / max(result.camera_std[c, highest], 1e-300)
+            if turns_over_in_image(model, spec.max_view_angle):
+                warnings.append(
+                    f"{spec.name}: r(theta) turned over inside the image with k{highest + 1} free; k{highest + 1} "
+                    "fixed to 0 (the data do not reach wide enough angles to determine it)"
+                )
+                log.warning(warnings[-1])
+            elif significance < SIGNIFICANCE:
+                log.info("%s: k%d = %.3g is not significant (%.1f sigma): fixed to 0",
+                         spec.name, highest + 1, model.k[highest], significance)
+            else:
+                continue
+            per_camera[c] = (*per_camera[c], highest)
+        if tuple(per_camera) == fixed.per_camera:
+            break
+        fixed = _Fixed(tuple(per_camera))
+        state = result.state  # warm start with the newly fixed coefficients at zero
+        start = BundleState(_zero_fixed(state.models, fixed), state.poses, state.wand_a, state.wand_direction)
+    for model, spec in zip(result.state.models, rig.cameras, strict=True):
+        if turns_over_in_image(model, spec.max_view_angle):
+            warnings.append(
+                f"{spec.name}: r(theta) turns over at {np.degrees(monotonic_limit(model.k)):.0f} deg, inside the "
+                f"image and below max_view_angle_deg {spec.max_view_angle_deg:g}: check the rig description"
+            )
+    return _assemble(rig, uv_kept, problem, result, reference, fixed, initial_projections, lens_trials,
+                     rejected, warnings)
+
+
+def radial_std_px(model: CameraModel, covariance: FloatArray, theta: float) -> float:
+    """Standard deviation (px) of the image radius m*r(theta) from the (5, 5) covariance of k1..k5."""
+    gradient = float(np.max(model.m)) * theta ** (2 * np.arange(5) + 1)
+    return float(np.sqrt(max(gradient @ covariance @ gradient, 0.0)))
+
+
+def _coverage_warnings(
+    spec: CameraSpec, model: CameraModel, max_theta: float, result: BundleResult, camera: int
+) -> list[str]:
+    """Plain-language warnings about the distortion curve of one camera."""
+    out = []
+    block = slice(camera * N_CAMERA_PARAMS, camera * N_CAMERA_PARAMS + 5)
+    band = radial_std_px(model, result.camera_covariance[block, block], max_theta)
+    if band > WEAK_CURVE_PX:
+        out.append(
+            f"{spec.name}: the distortion curve is uncertain by {band:.1f} px at {np.degrees(max_theta):.0f} deg, "
+            "the widest angle observed; add wand placements near the image border"
+        )
+    image_theta = float(inverse_radius(model.k, np.array(max_image_radius_mm(model))))
+    reach = min(spec.max_view_angle, image_theta if np.isfinite(image_theta) else spec.max_view_angle)
+    if max_theta < COVERAGE_FRACTION * reach:
+        out.append(
+            f"{spec.name}: the wand was seen only up to {np.degrees(max_theta):.0f} deg off-axis while the image "
+            f"reaches {np.degrees(reach):.0f} deg; the distortion beyond is extrapolated (wave the wand near the "
+            "image corners)"
+        )
+    return out
+
+
+def _assemble(
+    rig: RigSpec, uv: FloatArray, problem: BundleProblem, result: BundleResult, reference: int, fixed: _Fixed,
+    initial_projections: tuple[str, ...], lens_trials: tuple[LensTrial, ...], rejected: int, warnings: list[str],
+) -> CalibrationResult:
+    state = result.state
+    max_theta = _max_theta(result, problem)
+    free = _free_mask(problem.n_cameras, reference, fixed)
+    cameras = []
+    for c, spec in enumerate(rig.cameras):
+        mine = problem.camera == c
+        rms = float(np.sqrt(np.mean(result.residuals[mine] ** 2))) if mine.any() else float("nan")
+        std = {
+            name: float(result.camera_std[c, i]) for i, name in enumerate(CAMERA_PARAM_NAMES) if free[c, i]
+        }
+        warnings.extend(_coverage_warnings(spec, state.models[c], max_theta[c], result, c))
+        cameras.append(
+            CameraCalibration(
+                spec.name, state.models[c], state.poses[c], rms, int(mine.sum()), std,
+                float(np.degrees(max_theta[c])), initial_projections[c],
+                tuple(f"k{i + 1}" for i in sorted(fixed.per_camera[c])),
+            )
+        )
+    points = triangulate_placements(state.models, state.poses, uv)
+    lengths = np.linalg.norm(points[:, 2] - points[:, 0], axis=-1)
+    lengths = lengths[np.isfinite(lengths)]
+    order = [reference] + [c for c in range(len(cameras)) if c != reference]
+    return CalibrationResult(
+        reference_camera=rig.cameras[reference].name,
+        cameras=tuple(cameras[c] for c in order),
+        wand=rig.wand,
+        wand_length_rms_mm=float(np.sqrt(np.mean((rig.wand.L - lengths) ** 2))),
+        wand_length_mean_mm=float(np.mean(lengths)),
+        wand_length_std_mm=float(np.std(lengths)),
+        sigma_px=result.sigma,
+        dof=result.dof,
+        placements_used=problem.n_placements,
+        placements_rejected=rejected,
+        iterations=result.iterations,
+        lens_trials=lens_trials,
+        warnings=tuple(warnings),
+    )

@@ -1,0 +1,94 @@
+"""Typed records of a finished calibration."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wand_calib_ros.core.camera_model import CameraModel
+from wand_calib_ros.core.geometry import Pose
+from wand_calib_ros.core.rig import WandSpec
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True, eq=False)
+class CameraCalibration:
+    """One calibrated camera.
+
+    Attributes:
+        name: camera name.
+        model: intrinsics (m fixed from the pixel size).
+        pose: X_cam = R X_ref + T (mm), reference = the result's reference camera.
+        rms_reprojection_px: per-coordinate RMS of its reprojection residuals, px.
+        n_observations: wand points it contributed to the bundle adjustment.
+        parameter_std: standard deviation of every estimated parameter
+            (k1..k5 mm, u0 v0 px, rx ry rz rad as a small rotation, tx ty tz mm);
+            fixed parameters are absent.
+        max_observed_theta_deg: largest off-axis angle among its observations.
+        initial_projection: the classic projection its Step 1 start came from.
+        fixed_coefficients: radial coefficients held at zero (e.g. ("k5",)).
+    """
+
+    name: str
+    model: CameraModel
+    pose: Pose
+    rms_reprojection_px: float
+    n_observations: int
+    parameter_std: dict[str, float]
+    max_observed_theta_deg: float
+    initial_projection: str
+    fixed_coefficients: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class LensTrial:
+    """One Step 1 candidate combination and how well Steps 2-3 fitted it."""
+
+    projections: tuple[str, ...]
+    wand_rms_mm: float
+    failure: str | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class CalibrationResult:
+    """A complete calibration.
+
+    Attributes:
+        reference_camera: name of the camera whose frame is the reference.
+        cameras: calibrated cameras (the reference first).
+        wand: wand lengths used.
+        wand_length_rms_mm: RMS of L - |A^r C^r| over the used placements,
+            each placement triangulated linearly with the final calibration.
+        wand_length_mean_mm: mean reconstructed |AC| over the used placements.
+        wand_length_std_mm: its standard deviation.
+        sigma_px: pixel noise estimated from the bundle adjustment residuals.
+        dof: (m, p) residual scalars and free parameters of the bundle adjustment.
+        placements_used: placements in the bundle adjustment.
+        placements_rejected: placements dropped by the |AC| gate before it.
+        iterations: bundle adjustment iterations.
+        lens_trials: Step 1 candidates tried and their Step 3 wand-length RMS.
+        warnings: plain-language remarks on weakly determined parameters.
+    """
+
+    reference_camera: str
+    cameras: tuple[CameraCalibration, ...]
+    wand: WandSpec
+    wand_length_rms_mm: float
+    wand_length_mean_mm: float
+    wand_length_std_mm: float
+    sigma_px: float
+    dof: tuple[int, int]
+    placements_used: int
+    placements_rejected: int
+    iterations: int
+    lens_trials: tuple[LensTrial, ...]
+    warnings: tuple[str, ...]
+
+    def camera(self, name: str) -> CameraCalibration:
+        for camera in self.cameras:
+            if camera.name == name:
+                return camera
+        raise KeyError(name)

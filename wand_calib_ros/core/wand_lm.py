@@ -1,0 +1,188 @@
+"""Step 3 of the paper: Levenberg-Marquardt on the wand-length errors.
+
+With the current intrinsics (k1, k2, u0, v0 of both cameras; m fixed) and the
+relative pose (Rodrigues vector, T), every placement is triangulated linearly
+and compared with the wand: g1 = L1 - |AB|, g2 = L2 - |BC|, g3 = L - |AC|
+(paper eqs. object1-object3). The 14 unknowns are found with MINPACK's
+Levenberg-Marquardt.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import least_squares
+
+from wand_calib_ros.core.camera_model import CameraModel, unproject, unproject_with_jacobian
+from wand_calib_ros.core.geometry import Pose, rotation_from_rotvec, triangulate, triangulation_jacobian
+from wand_calib_ros.core.rig import WandSpec
+
+FloatArray = NDArray[np.float64]
+log = logging.getLogger(__name__)
+
+#: Index of the intrinsics that Step 3 estimates inside CameraModel.intrinsic_vector(): k1, k2, u0, v0.
+_STEP3_INTRINSICS = np.array([0, 1, 5, 6])
+
+
+@dataclass(frozen=True, eq=False)
+class WandFit:
+    """Result of Step 3.
+
+    Attributes:
+        models: the two cameras' intrinsics.
+        pose: camera 1 relative to camera 0.
+        length_errors: (N, 3) g1, g2, g3 per placement at the solution, mm.
+    """
+
+    models: tuple[CameraModel, CameraModel]
+    pose: Pose
+    length_errors: FloatArray
+
+    @property
+    def rms_mm(self) -> float:
+        """RMS of all wand-length errors, mm (NaN placements ignored)."""
+        return float(np.sqrt(np.nanmean(self.length_errors**2)))
+
+
+def reconstruct_wands(
+    models: tuple[CameraModel, CameraModel], pose: Pose, uv0: FloatArray, uv1: FloatArray
+) -> FloatArray:
+    """Linear two-view reconstruction of A, B, C in camera 0's frame.
+
+    Args:
+        models: intrinsics of cameras 0 and 1.
+        pose: camera 1 relative to camera 0.
+        uv0, uv1: (N, 3, 2) pixels of A, B, C.
+
+    Returns:
+        (N, 3, 3) points, mm (NaN where a point cannot be unprojected).
+    """
+    n = uv0.shape[0]
+    bearings = np.stack([unproject(models[0], uv0).reshape(-1, 3), unproject(models[1], uv1).reshape(-1, 3)], 1)
+    rotations = np.stack([np.eye(3), pose.rotation])
+    translations = np.stack([np.zeros(3), pose.translation])
+    return triangulate(bearings, rotations, translations).reshape(n, 3, 3)
+
+
+def wand_length_errors(points: FloatArray, wand: WandSpec) -> FloatArray:
+    """(N, 3) g1, g2, g3 = nominal minus reconstructed |AB|, |BC|, |AC| in mm."""
+    ab = np.linalg.norm(points[:, 1] - points[:, 0], axis=-1)
+    bc = np.linalg.norm(points[:, 2] - points[:, 1], axis=-1)
+    ac = np.linalg.norm(points[:, 2] - points[:, 0], axis=-1)
+    return np.stack([wand.L1 - ab, wand.L2 - bc, wand.L - ac], axis=-1)
+
+
+def _unpack(
+    x: FloatArray, models: tuple[CameraModel, CameraModel]
+) -> tuple[tuple[CameraModel, CameraModel], Pose]:
+    updated = []
+    for i, model in enumerate(models):
+        vector = model.intrinsic_vector()
+        vector[_STEP3_INTRINSICS] = x[4 * i : 4 * i + 4]
+        updated.append(model.with_intrinsic_vector(vector))
+    pose = Pose(rotation_from_rotvec(x[8:11]), x[11:14])
+    return (updated[0], updated[1]), pose
+
+
+def _rotation_derivatives(rotvec: FloatArray, step: float = 1e-7) -> FloatArray:
+    """(3, 3, 3) dR/d(rotvec_i) by central differences on the 3x3 matrix (accurate to ~1e-9)."""
+    eye = np.eye(3) * step
+    plus = rotation_from_rotvec(rotvec[None, :] + eye)
+    minus = rotation_from_rotvec(rotvec[None, :] - eye)
+    return (plus - minus) / (2 * step)
+
+
+class _WandProblem:
+    """Residuals g and their exact Jacobian for Step 3 (x = 4 + 4 intrinsics, rotvec, T)."""
+
+    _PAIRS = ((0, 1), (1, 2), (0, 2))  # AB, BC, AC
+
+    def __init__(self, models: tuple[CameraModel, CameraModel], uv0: FloatArray, uv1: FloatArray, wand: WandSpec):
+        self.models, self.uv0, self.uv1, self.wand = models, uv0.reshape(-1, 2), uv1.reshape(-1, 2), wand
+        self.lengths = np.array([wand.L1, wand.L2, wand.L])
+        self._cache_x: FloatArray | None = None
+        self._cache: tuple[FloatArray, FloatArray] | None = None
+
+    def _evaluate(self, x: FloatArray) -> tuple[FloatArray, FloatArray]:
+        if self._cache_x is not None and np.array_equal(x, self._cache_x) and self._cache is not None:
+            return self._cache
+        n = self.uv0.shape[0] // 3
+        if x[0] <= 0 or x[4] <= 0:
+            return np.full(3 * n, self.wand.L), np.zeros((3 * n, 14))
+        models, pose = _unpack(x, self.models)
+        m0, dm0 = unproject_with_jacobian(models[0], self.uv0)
+        m1, dm1 = unproject_with_jacobian(models[1], self.uv1)
+        rotation, translation = pose.rotation, pose.translation
+        rays = np.stack([m0, m1 @ rotation], axis=1)  # w = R^T m
+        centres = np.stack([np.zeros(3), -rotation.T @ translation])
+        points = triangulate(rays, np.stack([np.eye(3), np.eye(3)]), -centres)
+        d_rays = np.zeros((rays.shape[0], 2, 3, 14))
+        d_centres = np.zeros((2, 3, 14))
+        d_rays[:, 0, :, 0:4] = dm0[:, :, _STEP3_INTRINSICS]
+        d_rays[:, 1, :, 4:8] = np.einsum("ji,njk->nik", rotation, dm1[:, :, _STEP3_INTRINSICS])
+        d_rotation = _rotation_derivatives(x[8:11])  # (3 params, 3, 3)
+        d_rays[:, 1, :, 8:11] = np.einsum("kji,nj->nik", d_rotation, m1)
+        d_centres[1, :, 8:11] = -np.einsum("kji,j->ik", d_rotation, translation)
+        d_centres[1, :, 11:14] = -rotation.T
+        d_points = triangulation_jacobian(
+            points, rays, centres, d_rays, np.broadcast_to(d_centres, d_rays.shape)
+        ).reshape(n, 3, 3, 14)
+        points = points.reshape(n, 3, 3)
+        residuals = np.empty((n, 3))
+        jacobian = np.empty((n, 3, 14))
+        for column, (p, q) in enumerate(self._PAIRS):
+            delta = points[:, q] - points[:, p]
+            distance = np.linalg.norm(delta, axis=-1)
+            residuals[:, column] = self.lengths[column] - distance
+            unit = delta / distance[:, None]
+            jacobian[:, column] = -np.einsum("ni,nik->nk", unit, d_points[:, q] - d_points[:, p])
+        bad = ~np.isfinite(residuals) | ~np.all(np.isfinite(jacobian), axis=-1)
+        # A placement that cannot be reconstructed costs as much as a wand of length zero.
+        residuals[bad] = self.wand.L
+        jacobian[bad] = 0.0
+        self._cache_x, self._cache = x.copy(), (residuals.ravel(), jacobian.reshape(-1, 14))
+        return self._cache
+
+    def residuals(self, x: FloatArray) -> FloatArray:
+        return self._evaluate(x)[0]
+
+    def jacobian(self, x: FloatArray) -> FloatArray:
+        return self._evaluate(x)[1]
+
+
+def optimise_wand_lengths(
+    models: tuple[CameraModel, CameraModel],
+    pose: Pose,
+    uv0: FloatArray,
+    uv1: FloatArray,
+    wand: WandSpec,
+    *,
+    max_evaluations: int = 200,
+    tolerance: float = 1e-8,
+) -> WandFit:
+    """Step 3: minimise sum(g1^2 + g2^2 + g3^2) over 12 intrinsics and 6 extrinsics (m fixed).
+
+    Args:
+        models: Step 1 intrinsics of cameras 0 and 1 (k3..k5 are kept as they are).
+        pose: Step 2 pose of camera 1 relative to camera 0.
+        uv0, uv1: (N, 3, 2) pixels of A, B, C of placements both cameras see.
+        wand: the wand lengths.
+        max_evaluations: cap on residual evaluations.
+        tolerance: relative tolerance on the cost and the parameters (MINPACK ftol, xtol).
+    """
+    x0 = np.concatenate(
+        [models[0].intrinsic_vector()[_STEP3_INTRINSICS], models[1].intrinsic_vector()[_STEP3_INTRINSICS],
+         pose.rotvec, pose.translation]
+    )
+    problem = _WandProblem(models, uv0, uv1, wand)
+    solution = least_squares(
+        problem.residuals, x0, jac=problem.jacobian, method="lm", x_scale="jac", max_nfev=max_evaluations,
+        ftol=tolerance, xtol=tolerance,
+    )
+    log.debug("step 3: %d evaluations, status %d", solution.nfev, solution.status)
+    fitted, fitted_pose = _unpack(solution.x, models)
+    errors = wand_length_errors(reconstruct_wands(fitted, fitted_pose, uv0, uv1), wand)
+    return WandFit(fitted, fitted_pose, errors)

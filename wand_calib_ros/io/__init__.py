@@ -1,0 +1,1 @@
+"""File formats: rig description, observations CSV, result and camera_info YAML."""

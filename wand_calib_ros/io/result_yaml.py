@@ -1,0 +1,174 @@
+"""Result YAML and ROS camera_info YAML files.
+
+The result contract::
+
+    reference_camera: cam0
+    cameras:
+      cam0:
+        k: [k1, k2, k3, k4, k5]          # mm, r(theta) = k1 theta + k2 theta^3 + ...
+        m: [mu, mv]                      # px/mm (fixed from the pixel size)
+        principal_point: [u0, v0]        # px, OpenCV convention
+        rotation: [[...], [...], [...]]  # X_cam = R X_ref + T
+        translation: [tx, ty, tz]        # mm
+        rms_reprojection_px: ...
+        image_size: [w, h]
+        opencv_equidistant: {camera_matrix: 3x3, distortion: [D1..D4]}
+        std: {k1: ..., u0: ..., rx: ..., tx: ...}
+        ...
+    metrics: {...}
+    warnings: [...]
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from wand_calib_ros.core.camera_model import CameraModel, to_opencv_fisheye
+from wand_calib_ros.core.errors import ModelError
+from wand_calib_ros.core.geometry import Pose
+from wand_calib_ros.core.result import CalibrationResult
+from wand_calib_ros.io.errors import FormatError
+
+CONVENTIONS = {
+    "frames": "X_cam = R X_ref + T, mm; reference = reference_camera",
+    "pixels": "OpenCV: (0, 0) is the centre of the top-left pixel",
+    "model": "r(theta) = k1 theta + k2 theta^3 + k3 theta^5 + k4 theta^7 + k5 theta^9 (mm); "
+    "u = mu r cos(phi) + u0, v = mv r sin(phi) + v0",
+    "equivalence": "exactly OpenCV fisheye / ROS 'equidistant': fx = k1 mu, fy = k1 mv, cx = u0, cy = v0, "
+    "D = [k2, k3, k4, k5] / k1",
+    "identifiable": "only k1 mu, k1 mv and k_i / k1 are determined by images; m comes from the pixel size",
+}
+
+
+def _floats(values: Any) -> Any:
+    array = np.asarray(values, dtype=np.float64)
+    return array.tolist()
+
+
+def camera_entry(model: CameraModel, pose: Pose) -> dict[str, Any]:
+    """The geometric part of one camera's result entry."""
+    opencv = to_opencv_fisheye(model)
+    return {
+        "k": _floats(model.k),
+        "m": _floats(model.m),
+        "principal_point": _floats(model.principal_point),
+        "rotation": _floats(pose.rotation),
+        "translation": _floats(pose.translation),
+        "image_size": list(model.image_size),
+        "opencv_equidistant": {
+            "camera_matrix": _floats(opencv.camera_matrix),
+            "distortion": _floats(opencv.distortion),
+        },
+    }
+
+
+def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
+    """The result YAML document."""
+    cameras: dict[str, Any] = {}
+    for camera in result.cameras:
+        entry = camera_entry(camera.model, camera.pose)
+        entry.update(
+            {
+                "rms_reprojection_px": float(camera.rms_reprojection_px),
+                "n_observations": int(camera.n_observations),
+                "std": {k: float(v) for k, v in camera.parameter_std.items()},
+                "max_observed_theta_deg": float(camera.max_observed_theta_deg),
+                "initial_projection": camera.initial_projection,
+                "fixed_coefficients": list(camera.fixed_coefficients),
+            }
+        )
+        cameras[camera.name] = entry
+    return {
+        "reference_camera": result.reference_camera,
+        "conventions": dict(CONVENTIONS),
+        "wand": {"L1": float(result.wand.L1), "L2": float(result.wand.L2)},
+        "cameras": cameras,
+        "metrics": {
+            "wand_length_rms_mm": float(result.wand_length_rms_mm),
+            "wand_length_mean_mm": float(result.wand_length_mean_mm),
+            "wand_length_std_mm": float(result.wand_length_std_mm),
+            "sigma_px": float(result.sigma_px),
+            "residuals": int(result.dof[0]),
+            "free_parameters": int(result.dof[1]),
+            "placements_used": int(result.placements_used),
+            "placements_rejected": int(result.placements_rejected),
+            "iterations": int(result.iterations),
+        },
+        "lens_trials": [
+            {"projections": list(t.projections), "wand_rms_mm": float(t.wand_rms_mm)}
+            | ({"failure": t.failure} if t.failure else {})
+            for t in result.lens_trials
+        ],
+        "warnings": list(result.warnings),
+    }
+
+
+def write_yaml(document: dict[str, Any], path: str | Path) -> None:
+    """Write a YAML document (block style, keys in insertion order)."""
+    Path(path).write_text(yaml.safe_dump(document, sort_keys=False, default_flow_style=None, width=120))
+
+
+def write_result(result: CalibrationResult, path: str | Path) -> None:
+    """Write the result YAML."""
+    write_yaml(result_to_dict(result), path)
+
+
+@dataclass(frozen=True, eq=False)
+class CameraGeometry:
+    """Intrinsics and pose of one camera as read from a result (or truth) file."""
+
+    model: CameraModel
+    pose: Pose
+
+
+def read_result(path: str | Path) -> tuple[str, dict[str, CameraGeometry]]:
+    """Read the geometry of a result YAML: (reference camera, per-camera model and pose)."""
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text())
+        cameras = {
+            name: CameraGeometry(
+                CameraModel(entry["k"], entry["m"], entry["principal_point"], tuple(entry["image_size"])),
+                Pose(entry["rotation"], entry["translation"]),
+            )
+            for name, entry in data["cameras"].items()
+        }
+        return str(data["reference_camera"]), cameras
+    except OSError as error:
+        raise FormatError(path, f"cannot read: {error.strerror}") from None
+    except (yaml.YAMLError, KeyError, TypeError, ValueError, AttributeError, ModelError) as error:
+        raise FormatError(path, f"not a wand_calib_ros result file ({type(error).__name__}: {error})") from None
+
+
+def camera_info_dict(name: str, model: CameraModel) -> dict[str, Any]:
+    """A ROS camera_calibration style camera_info YAML document (``equidistant``)."""
+    opencv = to_opencv_fisheye(model)
+    k = opencv.camera_matrix
+    projection = np.hstack([k, np.zeros((3, 1))])
+    return {
+        "image_width": int(model.image_size[0]),
+        "image_height": int(model.image_size[1]),
+        "camera_name": name,
+        "camera_matrix": {"rows": 3, "cols": 3, "data": _floats(k.ravel())},
+        "distortion_model": "equidistant",
+        "distortion_coefficients": {"rows": 1, "cols": 4, "data": _floats(opencv.distortion)},
+        "rectification_matrix": {"rows": 3, "cols": 3, "data": _floats(np.eye(3).ravel())},
+        "projection_matrix": {"rows": 3, "cols": 4, "data": _floats(projection.ravel())},
+    }
+
+
+def write_camera_infos(result: CalibrationResult, directory: str | Path) -> list[Path]:
+    """Write ``<camera>.yaml`` camera_info files into ``directory``; returns their paths."""
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for camera in result.cameras:
+        path = directory / f"{camera.name}.yaml"
+        write_yaml(camera_info_dict(camera.name, camera.model), path)
+        paths.append(path)
+    return paths
