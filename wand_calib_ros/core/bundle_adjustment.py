@@ -29,7 +29,7 @@ from wand_calib_ros.core.camera_model import (
     CameraModel,
     project_with_jacobian_arrays,
 )
-from wand_calib_ros.core.errors import CalibrationFailedError
+from wand_calib_ros.core.errors import CalibrationFailedError, ModelError
 from wand_calib_ros.core.geometry import Pose, rotation_from_rotvec, skew, tangent_basis
 from wand_calib_ros.core.rig import WandSpec
 
@@ -293,6 +293,8 @@ def _damp(blocks: FloatArray, lam: float) -> FloatArray:
 
 def _solve_free(s: FloatArray, rhs: FloatArray, free: NDArray[np.bool_]) -> FloatArray:
     delta = np.zeros_like(rhs)
+    if not free.any():
+        return delta
     sub = s[np.ix_(free, free)]
     try:
         delta[free] = scipy.linalg.cho_solve(scipy.linalg.cho_factor(sub), rhs[free])
@@ -345,7 +347,11 @@ def bundle_adjust(
             s, rhs = _reduced_system(_damp(u, lam), v_inv, w, gc, gp, structure, problem.n_cameras)
             delta_c = _solve_free(s, rhs, free_flat).reshape(problem.n_cameras, N_CAMERA_PARAMS)
             delta_p = _back_substitute(delta_c, v_inv, w, gp, structure)
-            candidate = _apply_step(state, delta_c, delta_p)
+            try:
+                candidate = _apply_step(state, delta_c, delta_p)
+            except ModelError:  # e.g. k1 <= 0: not a camera, reject the step
+                lam *= 10.0
+                continue
             new_res = residuals(candidate, problem)
             new_cost = float(np.sum(new_res**2)) if np.all(np.isfinite(new_res)) else np.inf
             if new_cost < cost:

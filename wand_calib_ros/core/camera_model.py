@@ -127,6 +127,8 @@ def monotonic_limit(k: FloatArray) -> float:
     for _ in range(60):  # safeguarded Newton on dr/dtheta, scalar floats
         t2 = theta * theta
         f = k1 + t2 * (3 * k2 + t2 * (5 * k3 + t2 * (7 * k4 + t2 * 9 * k5)))
+        if abs(f) <= 1e-14 * abs(k1) or hi - lo < 1e-15:
+            break
         if f > 0:
             lo = theta
         else:
@@ -134,8 +136,6 @@ def monotonic_limit(k: FloatArray) -> float:
         df = theta * (6 * k2 + t2 * (20 * k3 + t2 * (42 * k4 + t2 * 72 * k5)))
         step = theta - f / df if df != 0 else lo - 1.0
         theta = step if lo < step < hi else 0.5 * (lo + hi)
-        if hi - lo < 1e-15 or abs(f) < 1e-15 * abs(k1):
-            break
     return theta
 
 
@@ -331,7 +331,7 @@ def unproject_with_jacobian(model: CameraModel, uv: FloatArray) -> tuple[FloatAr
     bearings = unproject(model, uv)
     xy = (np.asarray(uv, dtype=np.float64) - model.principal_point) / model.m
     rho = np.hypot(xy[:, 0], xy[:, 1])
-    theta = np.arccos(np.clip(bearings[:, 2], -1.0, 1.0))
+    theta = np.arctan2(np.hypot(bearings[:, 0], bearings[:, 1]), bearings[:, 2])
     safe_rho = np.where(rho > 0, rho, 1.0)
     cos_phi = np.where(rho > 0, xy[:, 0] / safe_rho, 1.0)
     sin_phi = np.where(rho > 0, xy[:, 1] / safe_rho, 0.0)

@@ -69,14 +69,12 @@ def check_motion(spec: CameraSpec, uv: FloatArray) -> None:
     Raises:
         DegenerateDataError: with what the user should change.
     """
-    points = uv.reshape(-1, 2)
-    extent = np.ptp(points, axis=0)
+    spread = float(np.max(np.hypot(*np.std(uv, axis=0).T)))  # largest spread of A, B or C over placements
     diagonal = float(np.hypot(*spec.image_size))
-    if np.hypot(*extent) < 0.05 * diagonal:
+    if spread < 0.02 * diagonal:
         raise DegenerateDataError(
-            f"camera '{spec.name}': the wand hardly moved (its points span only {extent[0]:.0f} x "
-            f"{extent[1]:.0f} px of a {spec.image_size[0]} x {spec.image_size[1]} image); "
-            "wave it through the whole view"
+            f"camera '{spec.name}': the wand hardly moved (its points spread over only {spread:.1f} px of a "
+            f"{spec.image_size[0]} x {spec.image_size[1]} image); wave it through the whole view"
         )
     image_length = np.linalg.norm(uv[:, 2] - uv[:, 0], axis=-1)
     if np.median(image_length) < 3.0:

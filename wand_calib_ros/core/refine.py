@@ -41,6 +41,8 @@ log = logging.getLogger(__name__)
 GATE_FRACTION = 0.01
 #: ... unless that is within this many robust standard deviations of the |AC| errors (high noise).
 GATE_SIGMAS = 5.0
+#: A set-aside placement is re-admitted when none of its residuals exceeds this many sigma.
+READMIT_SIGMAS = 4.0
 #: The highest free radial coefficient is fixed to zero while |k| / std(k) is below this (Wald test).
 SIGNIFICANCE = 2.0
 #: Uncertainty of r(theta) at the widest observed angle (px) above which a camera gets a warning.
@@ -142,21 +144,50 @@ def refine_calibration(
     errors = ac_length_errors(points, wand)
     threshold = gate_threshold(errors, wand)
     keep = np.isfinite(errors) & (np.abs(errors) <= threshold)
-    rejected = int(np.sum(np.isfinite(errors)) - keep.sum())
-    log.info("gate |AC| within %.1f mm: %d placements kept, %d dropped", threshold, keep.sum(), rejected)
+    log.info("gate |AC| within %.1f mm: %d placements kept, %d set aside", threshold, keep.sum(), (~keep).sum())
     if keep.sum() < min_placements:
         raise InsufficientDataError(
             f"only {int(keep.sum())} placements reconstruct to the wand length within {threshold:.1f} mm "
             f"after initialisation; need at least {min_placements}"
         )
-    uv_kept, points_kept = uv[keep], points[keep]
-    problem = BundleProblem.from_dense(wand, uv_kept)
-    initial = BundleState(models, poses, points_kept[:, 0], wand_directions(points_kept[:, 0], points_kept[:, 2]))
-    fixed = _Fixed(tuple(() for _ in models))
+    initial = BundleState(models, poses, points[keep, 0], wand_directions(points[keep, 0], points[keep, 2]))
     warnings: list[str] = []
+    result, fixed = _adjust_with_model_selection(rig, uv[keep], initial, reference, warnings)
+    admitted, placements = _readmit(rig, uv[~keep], result, _free_mask(len(models), reference, fixed))
+    uv_used = uv[keep]
+    if admitted.any():
+        log.info("%d placements set aside by the gate agree with the solution: re-admitted", admitted.sum())
+        back = np.flatnonzero(~keep)[admitted]
+        uv_used = np.concatenate([uv_used, uv[back]])
+        keep[back] = True
+        state = BundleState(
+            result.state.models, result.state.poses,
+            np.concatenate([result.state.wand_a, placements.wand_a[admitted]]),
+            np.concatenate([result.state.wand_direction, placements.wand_direction[admitted]]),
+        )
+        result = bundle_adjust(state, BundleProblem.from_dense(wand, uv_used), _free_mask(len(models), reference, fixed))
+    for model, spec in zip(result.state.models, rig.cameras, strict=True):
+        if turns_over_in_image(model, spec.max_view_angle):
+            warnings.append(
+                f"{spec.name}: r(theta) turns over at {np.degrees(monotonic_limit(model.k)):.0f} deg, inside the "
+                f"image and below max_view_angle_deg {spec.max_view_angle_deg:g}: check the rig description"
+            )
+    problem = BundleProblem.from_dense(wand, uv_used)
+    rejected = int(np.sum(np.isfinite(errors)) - np.sum(keep & np.isfinite(errors)))
+    return _assemble(rig, uv_used, problem, result, reference, fixed, initial_projections, lens_trials,
+                     rejected, warnings)
+
+
+def _adjust_with_model_selection(
+    rig: RigSpec, uv: FloatArray, initial: BundleState, reference: int, warnings: list[str]
+) -> tuple[BundleResult, _Fixed]:
+    """Bundle-adjust, then fix the highest free k3..k5 of a camera while it is insignificant
+    (|k| < 2 sigma) or makes r(theta) turn over inside the image, re-adjusting after each change."""
+    problem = BundleProblem.from_dense(rig.wand, uv)
+    fixed = _Fixed(tuple(() for _ in rig.cameras))
     start = initial
     while True:
-        result = bundle_adjust(start, problem, _free_mask(len(models), reference, fixed))
+        result = bundle_adjust(start, problem, _free_mask(len(rig.cameras), reference, fixed))
         log.info("bundle adjustment: %d iterations, sigma %.3f px", result.iterations, result.sigma)
         per_camera = list(fixed.per_camera)
         for c, (model, spec) in enumerate(zip(result.state.models, rig.cameras, strict=True)):
@@ -178,18 +209,42 @@ def refine_calibration(
                 continue
             per_camera[c] = (*per_camera[c], highest)
         if tuple(per_camera) == fixed.per_camera:
-            break
+            return result, fixed
         fixed = _Fixed(tuple(per_camera))
         state = result.state  # warm start with the newly fixed coefficients at zero
         start = BundleState(_zero_fixed(state.models, fixed), state.poses, state.wand_a, state.wand_direction)
-    for model, spec in zip(result.state.models, rig.cameras, strict=True):
-        if turns_over_in_image(model, spec.max_view_angle):
-            warnings.append(
-                f"{spec.name}: r(theta) turns over at {np.degrees(monotonic_limit(model.k)):.0f} deg, inside the "
-                f"image and below max_view_angle_deg {spec.max_view_angle_deg:g}: check the rig description"
-            )
-    return _assemble(rig, uv_kept, problem, result, reference, fixed, initial_projections, lens_trials,
-                     rejected, warnings)
+
+
+def _readmit(
+    rig: RigSpec, uv: FloatArray, result: BundleResult, free: NDArray[np.bool_]
+) -> tuple[NDArray[np.bool_], BundleState]:
+    """Which set-aside placements fit the solved cameras (every residual within READMIT_SIGMAS sigma).
+
+    Each placement is triangulated with the final cameras and its five wand
+    parameters are optimised with the cameras held fixed.
+
+    Returns:
+        (S,) mask over the set-aside placements and their optimised wand parameters.
+    """
+    empty = BundleState(result.state.models, result.state.poses, np.zeros((0, 3)), np.zeros((0, 3)))
+    if uv.shape[0] == 0:
+        return np.zeros(0, dtype=bool), empty
+    points = triangulate_placements(result.state.models, result.state.poses, uv)
+    usable = np.all(np.isfinite(points), axis=(1, 2)) & (np.linalg.norm(points[:, 2] - points[:, 0], axis=1) > 0)
+    admitted = np.zeros(uv.shape[0], dtype=bool)
+    wand_a = np.full((uv.shape[0], 3), np.nan)
+    direction = np.full((uv.shape[0], 3), np.nan)
+    if not usable.any():
+        return admitted, BundleState(result.state.models, result.state.poses, wand_a, direction)
+    start = BundleState(result.state.models, result.state.poses, points[usable, 0],
+                        wand_directions(points[usable, 0], points[usable, 2]))
+    problem = BundleProblem.from_dense(rig.wand, uv[usable])
+    fitted = bundle_adjust(start, problem, np.zeros_like(free), max_iterations=20)
+    worst = np.zeros(problem.n_placements)
+    np.maximum.at(worst, problem.placement, np.linalg.norm(fitted.residuals, axis=1))
+    admitted[usable] = worst <= READMIT_SIGMAS * result.sigma
+    wand_a[usable], direction[usable] = fitted.state.wand_a, fitted.state.wand_direction
+    return admitted, BundleState(result.state.models, result.state.poses, wand_a, direction)
 
 
 def radial_std_px(model: CameraModel, covariance: FloatArray, theta: float) -> float:
