@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 
@@ -17,7 +17,7 @@ from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.sim.scenarios import SCENARIOS, Scenario, SimulatedData, simulate
 
 
-@lru_cache(maxsize=None)
+@cache
 def scenario_data(
     name: str, seed: int, noise: float = 1.0, heldout: int = 100, **kwargs: float | tuple[float, float]
 ) -> tuple[Scenario, SimulatedData, SimulatedData]:
@@ -43,7 +43,7 @@ def truth_bundle(
     models = []
     for c, camera in enumerate(scenario.cameras):
         vector = camera.model.intrinsic_vector()
-        for name in (fixed[c] if fixed else ()):
+        for name in fixed[c] if fixed else ():
             index = int(name[1]) - 1
             free[c, index] = False
             vector[index] = 0.0

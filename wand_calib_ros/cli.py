@@ -56,7 +56,10 @@ def _parser() -> argparse.ArgumentParser:
     sim.add_argument("--placements", type=int, help="number of wand placements (scenario default if omitted)")
     sim.add_argument("--true-focal", type=float, help="paper scenario: true focal length in mm (default 2.0)")
     sim.add_argument(
-        "--principal-point", type=float, nargs=2, metavar=("U0", "V0"),
+        "--principal-point",
+        type=float,
+        nargs=2,
+        metavar=("U0", "V0"),
         help="paper scenario: true principal point in px (default 310 250)",
     )
     return parser
@@ -90,8 +93,7 @@ def _compare_with_truth(result: CalibrationResult, truth_path: Path) -> None:
             continue
         e = camera_errors(camera.model, camera.pose, truth[camera.name].model, true_poses[camera.name])
         extrinsic = (
-            f", E_r {e.rotation_deg:.4f} deg, E_t {e.translation:.5f}"
-            if camera.name != result.reference_camera else ""
+            f", E_r {e.rotation_deg:.4f} deg, E_t {e.translation:.5f}" if camera.name != result.reference_camera else ""
         )
         print(
             f"  {camera.name}: focal error {e.focal_mm * 1000:.2f} um ({e.focal_px:.3f} px), "

@@ -22,8 +22,10 @@ def _setup(noise: float, n: int, seed: int, n_cameras: int = 2):  # type: ignore
     scenario = paper_fisheye_scenario(n_cameras=n_cameras)
     data = simulate(scenario, noise, np.random.default_rng(seed), n=n)
     state = BundleState(
-        tuple(c.model for c in scenario.cameras), tuple(c.pose for c in scenario.cameras),
-        data.wand_a, data.wand_direction,
+        tuple(c.model for c in scenario.cameras),
+        tuple(c.pose for c in scenario.cameras),
+        data.wand_a,
+        data.wand_direction,
     )
     return scenario, data, state, BundleProblem.from_dense(scenario.wand, data.observations.uv)
 
@@ -49,23 +51,29 @@ def test_jacobians_match_finite_differences() -> None:
     for j in range(5):
         delta = np.zeros((8, 5))
         delta[:, j] = h
-        numeric = (residuals(_apply_step(state, np.zeros((3, 13)), delta), problem)
-                   - residuals(_apply_step(state, np.zeros((3, 13)), -delta), problem)) / (2 * h)
+        numeric = (
+            residuals(_apply_step(state, np.zeros((3, 13)), delta), problem)
+            - residuals(_apply_step(state, np.zeros((3, 13)), -delta), problem)
+        ) / (2 * h)
         assert np.allclose(jp[:, :, j], numeric, atol=1e-5)
 
 
 def test_recovers_the_truth_from_a_perturbed_start_without_noise() -> None:
-    scenario, data, truth, problem = _setup(0.0, 80, 2, n_cameras=3)
+    scenario, _data, truth, problem = _setup(0.0, 80, 2, n_cameras=3)
     rng = np.random.default_rng(3)
     models = tuple(
         m.with_intrinsic_vector(m.intrinsic_vector() + np.r_[0.02, -0.01, 0, 0, 0, 4.0, -3.0]) for m in truth.models
     )
-    poses = (truth.poses[0],) + tuple(
-        Pose.from_rotvec(p.rotvec + rng.normal(scale=0.01, size=3), p.translation + rng.normal(scale=10.0, size=3))
-        for p in truth.poses[1:]
+    poses = (
+        truth.poses[0],
+        *tuple(
+            Pose.from_rotvec(p.rotvec + rng.normal(scale=0.01, size=3), p.translation + rng.normal(scale=10.0, size=3))
+            for p in truth.poses[1:]
+        ),
     )
-    start = BundleState(models, poses, truth.wand_a + rng.normal(scale=5.0, size=truth.wand_a.shape),
-                        truth.wand_direction)
+    start = BundleState(
+        models, poses, truth.wand_a + rng.normal(scale=5.0, size=truth.wand_a.shape), truth.wand_direction
+    )
     result = bundle_adjust(start, problem, default_free_mask(3))
     assert result.converged
     assert np.max(np.abs(result.residuals)) < 1e-6

@@ -24,7 +24,10 @@ from wand_calib_ros.sim.scenarios import equisolid_taylor
 
 MODELS = {
     "fisheye185": (CameraModel(equisolid_taylor(2.0), [178.57, 178.57], [310.0, 250.0], (640, 480)), 92.5),
-    "fisheye_k5": (CameraModel([1.8, 0.03, -0.004, 0.0005, -0.00002], [178.6, 180.0], [330.2, 241.7], (658, 492)), 95.0),
+    "fisheye_k5": (
+        CameraModel([1.8, 0.03, -0.004, 0.0005, -0.00002], [178.6, 180.0], [330.2, 241.7], (658, 492)),
+        95.0,
+    ),
     "conventional": (CameraModel([4.3, 1.18, 0.27, 0.19, -0.19], [178.57, 178.57], [335.0, 238.0], (658, 492)), 45.0),
 }
 

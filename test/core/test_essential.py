@@ -32,7 +32,7 @@ def test_noise_free_fisheye_pair_gives_the_exact_pose() -> None:
 def test_rays_beyond_ninety_degrees_are_handled() -> None:
     rng = np.random.default_rng(5)
     truth = Pose.from_rotvec(np.array([0.0, np.radians(150.0), 0.0]), np.array([0.0, 0.0, -1000.0]))
-    a = rng.normal(scale=600.0, size=(30, 3)) + [900.0, 0.0, -500.0]
+    a = rng.normal(scale=600.0, size=(30, 3)) + np.array([900.0, 0.0, -500.0])
     n = rng.normal(size=(30, 3))
     n /= np.linalg.norm(n, axis=1, keepdims=True)
     points = a[:, None, :] + np.array([0.0, 400.0, 600.0])[None, :, None] * n[:, None, :]  # (30, 3, 3)
@@ -76,5 +76,10 @@ def test_too_few_and_degenerate_correspondences_are_errors() -> None:
         relative_pose(b0[:2], b1[:2], 600.0, threshold_rad=1e-3, rng=np.random.default_rng(0))
     noise = np.random.default_rng(4).normal(size=b1.shape)
     with pytest.raises(DegenerateDataError):
-        relative_pose(b0, noise / np.linalg.norm(noise, axis=-1, keepdims=True), 600.0,
-                      threshold_rad=1e-6, rng=np.random.default_rng(0))
+        relative_pose(
+            b0,
+            noise / np.linalg.norm(noise, axis=-1, keepdims=True),
+            600.0,
+            threshold_rad=1e-6,
+            rng=np.random.default_rng(0),
+        )

@@ -41,7 +41,7 @@ def test_noise_free_triangulation_is_exact_in_every_direction(n_views: int) -> N
 def test_missing_views_are_ignored_and_single_views_give_nan() -> None:
     rng = np.random.default_rng(7)
     rotations, translations = _rig(rng, 3)
-    points = rng.normal(scale=1000.0, size=(10, 3)) + [0, 0, 2000]
+    points = rng.normal(scale=1000.0, size=(10, 3)) + np.array([0.0, 0.0, 2000.0])
     bearings = _bearings(points, rotations, translations)
     bearings[:5, 1] = np.nan
     bearings[9, 1:] = np.nan
@@ -60,13 +60,13 @@ def test_parallel_rays_give_nan() -> None:
 def test_triangulation_jacobian_matches_finite_differences() -> None:
     rng = np.random.default_rng(3)
     rotations, translations = _rig(rng, 3)
-    points = rng.normal(scale=1000.0, size=(20, 3)) + [0, 0, 1500]
+    points = rng.normal(scale=1000.0, size=(20, 3)) + np.array([0.0, 0.0, 1500.0])
     rays = np.einsum("vji,nvj->nvi", rotations, _bearings(points, rotations, translations))  # R^T m
     rays += rng.normal(scale=0.01, size=rays.shape)
     rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
     centres = -np.einsum("vji,vj->vi", rotations, translations)
-    d_rays = rng.normal(size=rays.shape + (4,))
-    d_centres = np.broadcast_to(rng.normal(size=(3, 3, 4)), rays.shape + (4,))
+    d_rays = rng.normal(size=(*rays.shape, 4))
+    d_centres = np.broadcast_to(rng.normal(size=(3, 3, 4)), (*rays.shape, 4))
 
     def solve(t: float, k: int) -> np.ndarray:
         r = rays + t * d_rays[..., k]

@@ -126,7 +126,9 @@ def test_too_few_placements_is_a_clear_error() -> None:
 
 def test_wand_held_still_is_degenerate() -> None:
     scenario, data, _ = scenario_data("paper", 1)
-    uv = np.repeat(data.observations.uv[:1], 50, axis=0) + np.random.default_rng(0).normal(scale=0.5, size=(50, 2, 3, 2))
+    uv = np.repeat(data.observations.uv[:1], 50, axis=0) + np.random.default_rng(0).normal(
+        scale=0.5, size=(50, 2, 3, 2)
+    )
     still = WandObservations(np.arange(50), data.observations.camera_names, uv)
     with pytest.raises(DegenerateDataError, match="hardly moved"):
         calibrate(scenario.rig, still)

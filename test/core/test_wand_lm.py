@@ -47,8 +47,12 @@ def test_analytic_jacobian_matches_finite_differences() -> None:
     uv = data.observations.uv
     models, pose = _perturbed_start(scenario)
     problem = _WandProblem(models, uv[:, 0], uv[:, 1], scenario.wand)
-    x = np.r_[models[0].intrinsic_vector()[_STEP3_INTRINSICS], models[1].intrinsic_vector()[_STEP3_INTRINSICS],
-              pose.rotvec, pose.translation]
+    x = np.r_[
+        models[0].intrinsic_vector()[_STEP3_INTRINSICS],
+        models[1].intrinsic_vector()[_STEP3_INTRINSICS],
+        pose.rotvec,
+        pose.translation,
+    ]
     jac = problem.jacobian(x).copy()
     for i in range(14):
         h = 1e-6 * max(1.0, abs(x[i]))

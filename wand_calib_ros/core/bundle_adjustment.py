@@ -73,8 +73,13 @@ class BundleProblem:
         seen = np.all(np.isfinite(uv), axis=-1)  # (P, C, 3)
         placement, camera, point = np.nonzero(seen)
         return BundleProblem(
-            wand, n_cameras, n_placements, camera.astype(np.int64), placement.astype(np.int64),
-            point.astype(np.int64), uv[placement, camera, point],
+            wand,
+            n_cameras,
+            n_placements,
+            camera.astype(np.int64),
+            placement.astype(np.int64),
+            point.astype(np.int64),
+            uv[placement, camera, point],
         )
 
     @property
@@ -226,8 +231,14 @@ def _structure(problem: BundleProblem) -> _Structure:
         return scipy.sparse.csr_matrix((np.ones(rows.size), (rows, np.arange(rows.size))), shape=(n_rows, rows.size))
 
     return _Structure(
-        block_of_obs, block_camera, block_placement, block_starts, placement_block_starts,
-        pair_first, pair_second, tuple(np.flatnonzero(problem.camera == i) for i in range(c)),
+        block_of_obs,
+        block_camera,
+        block_placement,
+        block_starts,
+        placement_block_starts,
+        pair_first,
+        pair_second,
+        tuple(np.flatnonzero(problem.camera == i) for i in range(c)),
         indicator(block_camera, c),
         indicator(block_camera[pair_first] * c + block_camera[pair_second], c * c),
     )
@@ -254,8 +265,14 @@ def _normal_equations(
 
 
 def _reduced_system(
-    u: FloatArray, v_inv: FloatArray, w: FloatArray, gc: FloatArray, gp: FloatArray, structure: _Structure,
-    n_cameras: int, chunk: int = 200_000,
+    u: FloatArray,
+    v_inv: FloatArray,
+    w: FloatArray,
+    gc: FloatArray,
+    gp: FloatArray,
+    structure: _Structure,
+    n_cameras: int,
+    chunk: int = 200_000,
 ) -> tuple[FloatArray, FloatArray]:
     """Schur complement S = U - W V^-1 W^T (dense, C*13 square) and its right-hand side."""
     y = w @ v_inv[structure.block_placement]  # (B, 13, 5)
@@ -373,8 +390,15 @@ def bundle_adjust(
 
 
 def _camera_covariance(
-    res: FloatArray, u: FloatArray, v: FloatArray, w: FloatArray, gc: FloatArray, gp: FloatArray,
-    structure: _Structure, problem: BundleProblem, free_flat: NDArray[np.bool_],
+    res: FloatArray,
+    u: FloatArray,
+    v: FloatArray,
+    w: FloatArray,
+    gc: FloatArray,
+    gp: FloatArray,
+    structure: _Structure,
+    problem: BundleProblem,
+    free_flat: NDArray[np.bool_],
 ) -> tuple[FloatArray, float, tuple[int, int]]:
     """Marginal covariance of the camera parameters: sigma^2 * S^-1 (S = Schur complement of J^T J)."""
     m = res.size

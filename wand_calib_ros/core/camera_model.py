@@ -65,9 +65,7 @@ class CameraModel:
     def __post_init__(self) -> None:
         object.__setattr__(self, "k", _frozen_array(self.k, (N_RADIAL,), "k"))
         object.__setattr__(self, "m", _frozen_array(self.m, (2,), "m"))
-        object.__setattr__(
-            self, "principal_point", _frozen_array(self.principal_point, (2,), "principal_point")
-        )
+        object.__setattr__(self, "principal_point", _frozen_array(self.principal_point, (2,), "principal_point"))
         width, height = (int(s) for s in self.image_size)
         object.__setattr__(self, "image_size", (width, height))
         if self.k[0] <= 0 or np.any(self.m <= 0):
@@ -249,9 +247,7 @@ class ProjectionJacobian(NamedTuple):
 
 def project_with_jacobian(model: CameraModel, points: FloatArray) -> ProjectionJacobian:
     """Project (N, 3) camera-frame points and return exact Jacobians (see ProjectionJacobian)."""
-    return project_with_jacobian_arrays(
-        model.k[None, :], model.m[None, :], model.principal_point[None, :], points
-    )
+    return project_with_jacobian_arrays(model.k[None, :], model.m[None, :], model.principal_point[None, :], points)
 
 
 def project_with_jacobian_arrays(
@@ -346,12 +342,12 @@ def unproject_with_jacobian(model: CameraModel, uv: FloatArray) -> tuple[FloatAr
     jac[:, :, :N_RADIAL] = dm_dtheta[:, :, None] * (-powers * d_theta_d_rho[:, None])[:, None, :]
     mu, mv = model.m
     # u0: rho changes by -cos(phi)/mu, phi by sin(phi)/(rho mu); v0 likewise.
-    jac[:, :, 5] = dm_dtheta * (-cos_phi * d_theta_d_rho / mu)[:, None] + dm_dphi_over_sin * (
-        sin_over_rho * sin_phi / mu
-    )[:, None]
-    jac[:, :, 6] = dm_dtheta * (-sin_phi * d_theta_d_rho / mv)[:, None] - dm_dphi_over_sin * (
-        sin_over_rho * cos_phi / mv
-    )[:, None]
+    jac[:, :, 5] = (
+        dm_dtheta * (-cos_phi * d_theta_d_rho / mu)[:, None] + dm_dphi_over_sin * (sin_over_rho * sin_phi / mu)[:, None]
+    )
+    jac[:, :, 6] = (
+        dm_dtheta * (-sin_phi * d_theta_d_rho / mv)[:, None] - dm_dphi_over_sin * (sin_over_rho * cos_phi / mv)[:, None]
+    )
     return bearings, jac
 
 

@@ -178,9 +178,7 @@ def decompose_essential(essential: FloatArray, m0: FloatArray, m1: FloatArray) -
     return best
 
 
-def wand_scale(
-    pose: Pose, bearings0: FloatArray, bearings1: FloatArray, wand_length: float
-) -> tuple[float, float]:
+def wand_scale(pose: Pose, bearings0: FloatArray, bearings1: FloatArray, wand_length: float) -> tuple[float, float]:
     """Scale factor lambda of the paper: wand length over reconstructed |AC|.
 
     Args:
@@ -194,9 +192,9 @@ def wand_scale(
     """
     n = bearings0.shape[0]
     pair = np.stack([bearings0[:, [0, 2]].reshape(-1, 3), bearings1[:, [0, 2]].reshape(-1, 3)], axis=1)
-    points = triangulate(
-        pair, np.stack([np.eye(3), pose.rotation]), np.stack([np.zeros(3), pose.translation])
-    ).reshape(n, 2, 3)
+    points = triangulate(pair, np.stack([np.eye(3), pose.rotation]), np.stack([np.zeros(3), pose.translation])).reshape(
+        n, 2, 3
+    )
     lengths = np.linalg.norm(points[:, 1] - points[:, 0], axis=1)
     ratios = wand_length / lengths[np.isfinite(lengths) & (lengths > 0)]
     if ratios.size == 0:

@@ -73,7 +73,7 @@ def rotation_from_rotvec(rotvec: FloatArray) -> FloatArray:
 def skew(vectors: FloatArray) -> FloatArray:
     """(..., 3, 3) cross-product matrices [v]x of (..., 3) vectors."""
     v = np.asarray(vectors, dtype=np.float64)
-    out = np.zeros(v.shape[:-1] + (3, 3))
+    out = np.zeros((*v.shape[:-1], 3, 3))
     out[..., 0, 1], out[..., 0, 2] = -v[..., 2], v[..., 1]
     out[..., 1, 0], out[..., 1, 2] = v[..., 2], -v[..., 0]
     out[..., 2, 0], out[..., 2, 1] = -v[..., 1], v[..., 0]
@@ -138,9 +138,18 @@ def _adjugate_sym3(matrices: FloatArray) -> tuple[FloatArray, FloatArray]:
     a, b, c = matrices[:, 0, 0], matrices[:, 0, 1], matrices[:, 0, 2]
     d, e, f = matrices[:, 1, 1], matrices[:, 1, 2], matrices[:, 2, 2]
     adjugate = np.stack(
-        [d * f - e * e, c * e - b * f, b * e - c * d,
-         c * e - b * f, a * f - c * c, b * c - a * e,
-         b * e - c * d, b * c - a * e, a * d - b * b], axis=-1,
+        [
+            d * f - e * e,
+            c * e - b * f,
+            b * e - c * d,
+            c * e - b * f,
+            a * f - c * c,
+            b * c - a * e,
+            b * e - c * d,
+            b * c - a * e,
+            a * d - b * b,
+        ],
+        axis=-1,
     ).reshape(-1, 3, 3)
     return adjugate, a * adjugate[:, 0, 0] + b * adjugate[:, 0, 1] + c * adjugate[:, 0, 2]
 

@@ -112,8 +112,7 @@ def projection_names_for(spec: CameraSpec) -> tuple[str, ...]:
         names = (lens,)
     else:
         raise ModelError(
-            f"camera '{spec.name}': unknown lens '{lens}', expected one of "
-            f"{list(LENS_CLASSES) + sorted(PROJECTIONS)}"
+            f"camera '{spec.name}': unknown lens '{lens}', expected one of {list(LENS_CLASSES) + sorted(PROJECTIONS)}"
         )
     if spec.max_view_angle >= np.pi / 2:
         names = tuple(n for n in names if n != "perspective")
@@ -133,9 +132,7 @@ def lens_candidates(spec: CameraSpec, *, min_separation_px: float = 2.0) -> tupl
     """
     theta_max = spec.max_view_angle
     if not (0 < theta_max < np.pi):
-        raise ModelError(
-            f"camera '{spec.name}': max_view_angle_deg must be in (0, 180), got {spec.max_view_angle_deg}"
-        )
+        raise ModelError(f"camera '{spec.name}': max_view_angle_deg must be in (0, 180), got {spec.max_view_angle_deg}")
     if not (spec.nominal_focal_mm > 0):
         raise ModelError(f"camera '{spec.name}': nominal_focal_mm must be positive")
     fits = [fit_projection(name, spec.nominal_focal_mm, theta_max) for name in projection_names_for(spec)]

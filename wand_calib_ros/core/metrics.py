@@ -46,9 +46,7 @@ def camera_errors(model: CameraModel, pose: Pose, true_model: CameraModel, true_
     )
 
 
-def heldout_wand_rms(
-    models: tuple[CameraModel, ...], poses: tuple[Pose, ...], uv: FloatArray, wand: WandSpec
-) -> float:
+def heldout_wand_rms(models: tuple[CameraModel, ...], poses: tuple[Pose, ...], uv: FloatArray, wand: WandSpec) -> float:
     """The paper's D_RMS: RMS of L - |A^r C^r| over placements triangulated linearly.
 
     Args:

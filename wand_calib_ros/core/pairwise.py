@@ -92,14 +92,21 @@ def _spread_subset(n: int, size: int) -> NDArray[np.bool_]:
 
 
 def _step2(
-    specs: tuple[CameraSpec, CameraSpec], candidates: tuple[LensCandidate, LensCandidate],
-    uv0: FloatArray, uv1: FloatArray, wand: WandSpec, options: PairOptions,
+    specs: tuple[CameraSpec, CameraSpec],
+    candidates: tuple[LensCandidate, LensCandidate],
+    uv0: FloatArray,
+    uv1: FloatArray,
+    wand: WandSpec,
+    options: PairOptions,
 ) -> tuple[tuple[CameraModel, CameraModel], RelativePose]:
     models = (initial_model(specs[0], candidates[0]), initial_model(specs[1], candidates[1]))
     focal_px = min(float(np.min(m.focal_px)) for m in models)
     step2 = relative_pose(
-        unproject(models[0], uv0), unproject(models[1], uv1), wand.L,
-        threshold_rad=options.ransac_threshold_px / focal_px, rng=np.random.default_rng(options.seed),
+        unproject(models[0], uv0),
+        unproject(models[1], uv1),
+        wand.L,
+        threshold_rad=options.ransac_threshold_px / focal_px,
+        rng=np.random.default_rng(options.seed),
     )
     return models, step2
 
@@ -141,8 +148,13 @@ def initialise_pair(
             models, step2 = _step2(specs, combo, s0, s1, wand, options)
             agree = step2.inliers.reshape(-1, 3).all(axis=1)
             fit = optimise_wand_lengths(
-                models, step2.pose, s0[agree], s1[agree], wand,
-                max_evaluations=options.screening_evaluations, tolerance=1e-4,
+                models,
+                step2.pose,
+                s0[agree],
+                s1[agree],
+                wand,
+                max_evaluations=options.screening_evaluations,
+                tolerance=1e-4,
             )
         except CoreError as error:
             trials.append(LensTrial(names, float("nan"), str(error)))
@@ -164,7 +176,10 @@ def initialise_pair(
 
 
 def _epipolar_agreement(
-    models: tuple[CameraModel, CameraModel], essential: FloatArray, uv0: FloatArray, uv1: FloatArray,
+    models: tuple[CameraModel, CameraModel],
+    essential: FloatArray,
+    uv0: FloatArray,
+    uv1: FloatArray,
     options: PairOptions,
 ) -> NDArray[np.bool_]:
     """(N,) placements whose three points all pass Step 2's RANSAC test under ``essential``."""

@@ -72,7 +72,11 @@ def calibrate(
     # Placements seen completely by one camera only constrain nothing and are left out.
     usable = complete.sum(axis=1) >= 2
     return refine_calibration(
-        rig, np.where(complete[usable][..., None, None], obs.uv[usable], np.nan),
-        (models[0], models[1]), (poses[0], poses[1]), reference=reference,
-        initial_projections=(projections[0], projections[1]), lens_trials=init.trials,
+        rig,
+        np.where(complete[usable][..., None, None], obs.uv[usable], np.nan),
+        (models[0], models[1]),
+        (poses[0], poses[1]),
+        reference=reference,
+        initial_projections=(projections[0], projections[1]),
+        lens_trials=init.trials,
     )

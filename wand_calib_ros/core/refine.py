@@ -161,11 +161,14 @@ def refine_calibration(
         uv_used = np.concatenate([uv_used, uv[back]])
         keep[back] = True
         state = BundleState(
-            result.state.models, result.state.poses,
+            result.state.models,
+            result.state.poses,
             np.concatenate([result.state.wand_a, placements.wand_a[admitted]]),
             np.concatenate([result.state.wand_direction, placements.wand_direction[admitted]]),
         )
-        result = bundle_adjust(state, BundleProblem.from_dense(wand, uv_used), _free_mask(len(models), reference, fixed))
+        result = bundle_adjust(
+            state, BundleProblem.from_dense(wand, uv_used), _free_mask(len(models), reference, fixed)
+        )
     for model, spec in zip(result.state.models, rig.cameras, strict=True):
         if turns_over_in_image(model, spec.max_view_angle):
             warnings.append(
@@ -174,8 +177,9 @@ def refine_calibration(
             )
     problem = BundleProblem.from_dense(wand, uv_used)
     rejected = int(np.sum(np.isfinite(errors)) - np.sum(keep & np.isfinite(errors)))
-    return _assemble(rig, uv_used, problem, result, reference, fixed, initial_projections, lens_trials,
-                     rejected, warnings)
+    return _assemble(
+        rig, uv_used, problem, result, reference, fixed, initial_projections, lens_trials, rejected, warnings
+    )
 
 
 def _adjust_with_model_selection(
@@ -203,8 +207,13 @@ def _adjust_with_model_selection(
                 )
                 log.warning(warnings[-1])
             elif significance < SIGNIFICANCE:
-                log.info("%s: k%d = %.3g is not significant (%.1f sigma): fixed to 0",
-                         spec.name, highest + 1, model.k[highest], significance)
+                log.info(
+                    "%s: k%d = %.3g is not significant (%.1f sigma): fixed to 0",
+                    spec.name,
+                    highest + 1,
+                    model.k[highest],
+                    significance,
+                )
             else:
                 continue
             per_camera[c] = (*per_camera[c], highest)
@@ -236,8 +245,12 @@ def _readmit(
     direction = np.full((uv.shape[0], 3), np.nan)
     if not usable.any():
         return admitted, BundleState(result.state.models, result.state.poses, wand_a, direction)
-    start = BundleState(result.state.models, result.state.poses, points[usable, 0],
-                        wand_directions(points[usable, 0], points[usable, 2]))
+    start = BundleState(
+        result.state.models,
+        result.state.poses,
+        points[usable, 0],
+        wand_directions(points[usable, 0], points[usable, 2]),
+    )
     problem = BundleProblem.from_dense(rig.wand, uv[usable])
     fitted = bundle_adjust(start, problem, np.zeros_like(free), max_iterations=20)
     worst = np.zeros(problem.n_placements)
@@ -277,8 +290,16 @@ def _coverage_warnings(
 
 
 def _assemble(
-    rig: RigSpec, uv: FloatArray, problem: BundleProblem, result: BundleResult, reference: int, fixed: _Fixed,
-    initial_projections: tuple[str, ...], lens_trials: tuple[LensTrial, ...], rejected: int, warnings: list[str],
+    rig: RigSpec,
+    uv: FloatArray,
+    problem: BundleProblem,
+    result: BundleResult,
+    reference: int,
+    fixed: _Fixed,
+    initial_projections: tuple[str, ...],
+    lens_trials: tuple[LensTrial, ...],
+    rejected: int,
+    warnings: list[str],
 ) -> CalibrationResult:
     state = result.state
     max_theta = _max_theta(result, problem)
@@ -287,14 +308,18 @@ def _assemble(
     for c, spec in enumerate(rig.cameras):
         mine = problem.camera == c
         rms = float(np.sqrt(np.mean(result.residuals[mine] ** 2))) if mine.any() else float("nan")
-        std = {
-            name: float(result.camera_std[c, i]) for i, name in enumerate(CAMERA_PARAM_NAMES) if free[c, i]
-        }
+        std = {name: float(result.camera_std[c, i]) for i, name in enumerate(CAMERA_PARAM_NAMES) if free[c, i]}
         warnings.extend(_coverage_warnings(spec, state.models[c], max_theta[c], result, c))
         cameras.append(
             CameraCalibration(
-                spec.name, state.models[c], state.poses[c], rms, int(mine.sum()), std,
-                float(np.degrees(max_theta[c])), initial_projections[c],
+                spec.name,
+                state.models[c],
+                state.poses[c],
+                rms,
+                int(mine.sum()),
+                std,
+                float(np.degrees(max_theta[c])),
+                initial_projections[c],
                 tuple(f"k{i + 1}" for i in sorted(fixed.per_camera[c])),
             )
         )

@@ -113,8 +113,7 @@ class WandObservations:
         uv = np.asarray(self.uv, dtype=np.float64)
         if uv.shape != (frames.size, len(self.camera_names), 3, 2):
             raise ValueError(
-                f"uv must have shape (F, C, 3, 2) = ({frames.size}, {len(self.camera_names)}, 3, 2), "
-                f"got {uv.shape}"
+                f"uv must have shape (F, C, 3, 2) = ({frames.size}, {len(self.camera_names)}, 3, 2), got {uv.shape}"
             )
         frames.setflags(write=False)
         uv.setflags(write=False)

@@ -75,9 +75,7 @@ def wand_length_errors(points: FloatArray, wand: WandSpec) -> FloatArray:
     return np.stack([wand.L1 - ab, wand.L2 - bc, wand.L - ac], axis=-1)
 
 
-def _unpack(
-    x: FloatArray, models: tuple[CameraModel, CameraModel]
-) -> tuple[tuple[CameraModel, CameraModel], Pose]:
+def _unpack(x: FloatArray, models: tuple[CameraModel, CameraModel]) -> tuple[tuple[CameraModel, CameraModel], Pose]:
     updated = []
     for i, model in enumerate(models):
         vector = model.intrinsic_vector()
@@ -174,13 +172,23 @@ def optimise_wand_lengths(
         tolerance: relative tolerance on the cost and the parameters (MINPACK ftol, xtol).
     """
     x0 = np.concatenate(
-        [models[0].intrinsic_vector()[_STEP3_INTRINSICS], models[1].intrinsic_vector()[_STEP3_INTRINSICS],
-         pose.rotvec, pose.translation]
+        [
+            models[0].intrinsic_vector()[_STEP3_INTRINSICS],
+            models[1].intrinsic_vector()[_STEP3_INTRINSICS],
+            pose.rotvec,
+            pose.translation,
+        ]
     )
     problem = _WandProblem(models, uv0, uv1, wand)
     solution = least_squares(
-        problem.residuals, x0, jac=problem.jacobian, method="lm", x_scale="jac", max_nfev=max_evaluations,
-        ftol=tolerance, xtol=tolerance,
+        problem.residuals,
+        x0,
+        jac=problem.jacobian,
+        method="lm",
+        x_scale="jac",
+        max_nfev=max_evaluations,
+        ftol=tolerance,
+        xtol=tolerance,
     )
     log.debug("step 3: %d evaluations, status %d", solution.nfev, solution.status)
     fitted, fitted_pose = _unpack(solution.x, models)

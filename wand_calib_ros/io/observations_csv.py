@@ -22,9 +22,7 @@ from wand_calib_ros.io.errors import FormatError
 COLUMNS = ("frame", "camera", "point", "u", "v")
 
 
-def read_observations(
-    path: str | Path, camera_names: Iterable[str] | None = None
-) -> WandObservations:
+def read_observations(path: str | Path, camera_names: Iterable[str] | None = None) -> WandObservations:
     """Read an observations CSV.
 
     Args:
@@ -53,7 +51,9 @@ def _parse(handle: TextIO, path: Path, known: list[str] | None) -> WandObservati
     header = [h.strip() for h in header]
     missing = [c for c in COLUMNS if c not in header]
     if missing:
-        raise FormatError(path, f"missing column(s) {', '.join(missing)}; expected header frame,camera,point,u,v", row=1)
+        raise FormatError(
+            path, f"missing column(s) {', '.join(missing)}; expected header frame,camera,point,u,v", row=1
+        )
     index = [header.index(c) for c in COLUMNS]
     width = max(index) + 1
     label_index = {label: i for i, label in enumerate(POINT_LABELS)}
@@ -79,14 +79,13 @@ def _parse(handle: TextIO, path: Path, known: list[str] | None) -> WandObservati
             raise FormatError(path, f"u, v must be numbers, got {u_text!r}, {v_text!r}", row=row_number) from None
         if not (math.isfinite(u) and math.isfinite(v)):
             raise FormatError(
-                path, f"camera '{camera}' frame {frame} point {point}: u, v must be finite, got {u_text}, {v_text}",
+                path,
+                f"camera '{camera}' frame {frame} point {point}: u, v must be finite, got {u_text}, {v_text}",
                 row=row_number,
             )
         if camera not in cameras:
             if known is not None:
-                raise FormatError(
-                    path, f"unknown camera '{camera}'; the rig has {', '.join(known)}", row=row_number
-                )
+                raise FormatError(path, f"unknown camera '{camera}'; the rig has {', '.join(known)}", row=row_number)
             cameras[camera] = len(cameras)
         key = (frames.setdefault(frame, len(frames)), cameras[camera], label_index[point])
         if key in seen:

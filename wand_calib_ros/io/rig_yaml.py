@@ -78,9 +78,7 @@ def parse_rig(data: Any, path: str | Path = "<rig>") -> RigSpec:
             raise FormatError(path, f"{label} max_view_angle_deg is half the field of view and must be < 180")
         lens = item.get("lens")
         if lens is not None and lens not in (*LENS_CLASSES, *PROJECTIONS):
-            raise FormatError(
-                path, f"{label} lens must be one of {[*LENS_CLASSES, *PROJECTIONS]}, got {lens!r}"
-            )
+            raise FormatError(path, f"{label} lens must be one of {[*LENS_CLASSES, *PROJECTIONS]}, got {lens!r}")
         cameras.append(
             CameraSpec(
                 name=str(item["name"]),

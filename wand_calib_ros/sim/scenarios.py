@@ -82,16 +82,13 @@ def fit_radial(projection: str | Callable[[FloatArray], FloatArray], focal_mm: f
         max_angle: upper end of the fit, rad.
     """
     theta = np.linspace(0.0, max_angle, 400)[1:]
-    if isinstance(projection, str):
-        target = PROJECTIONS[projection](focal_mm, theta)
-    else:
-        target = focal_mm * projection(theta)
+    target = PROJECTIONS[projection](focal_mm, theta) if isinstance(projection, str) else focal_mm * projection(theta)
     design = theta[:, None] ** (2 * np.arange(5) + 1)
     return np.linalg.lstsq(design, target, rcond=None)[0]
 
 
 def equisolid_taylor(focal_mm: float) -> FloatArray:
-    """(5,) Taylor coefficients of 2 f sin(theta/2): exact to 1e-9 mm up to 95 degrees."""
+    """(5,) Taylor coefficients of 2 f sin(theta/2): within 2e-8 mm (4e-6 px at 5.6 um) up to 95 degrees."""
     return focal_mm * np.array([1.0, -1.0 / 24, 1.0 / 1920, -1.0 / 322560, 1.0 / 92897280])
 
 
@@ -222,8 +219,13 @@ def sample_placements(scenario: Scenario, n: int, rng: np.random.Generator) -> t
 
 
 def image_placements(
-    scenario: Scenario, wand_a: FloatArray, direction: FloatArray, noise_px: float, rng: np.random.Generator,
-    *, first_frame: int = 0,
+    scenario: Scenario,
+    wand_a: FloatArray,
+    direction: FloatArray,
+    noise_px: float,
+    rng: np.random.Generator,
+    *,
+    first_frame: int = 0,
 ) -> SimulatedData:
     """Project placements into every camera and add Gaussian noise (NaN where not visible)."""
     points = wand_a[:, None, :] + scenario.wand.offsets[None, :, None] * direction[:, None, :]

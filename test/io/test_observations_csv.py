@@ -1,0 +1,66 @@
+"""Observations CSV: round trip and row-precise errors."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from wand_calib_ros.core.rig import WandObservations
+from wand_calib_ros.io.errors import FormatError
+from wand_calib_ros.io.observations_csv import read_observations, write_observations
+
+HEADER = "frame,camera,point,u,v\n"
+ROWS = "0,cam0,A,1.5,2.5\n0,cam0,B,3,4\n0,cam0,C,5,6\n0,cam1,A,7,8\n2,cam1,C,9,10\n"
+
+
+def test_write_read_round_trip(tmp_path: Path) -> None:
+    rng = np.random.default_rng(0)
+    uv = rng.uniform(0, 640, size=(20, 3, 3, 2))
+    uv[3, 1] = np.nan
+    uv[5, 2, 1] = np.nan
+    observations = WandObservations(np.arange(20) * 3, ("a", "b", "c"), uv)
+    write_observations(observations, tmp_path / "obs.csv")
+    back = read_observations(tmp_path / "obs.csv", ("a", "b", "c"))
+    assert back.camera_names == ("a", "b", "c")
+    assert np.array_equal(back.frames, observations.frames)
+    assert np.allclose(back.uv, uv, atol=1e-6, equal_nan=True)
+
+
+def test_extra_columns_and_column_order_are_accepted(tmp_path: Path) -> None:
+    path = tmp_path / "obs.csv"
+    path.write_text("v,quality,u,point,camera,frame\n2.5,0.9,1.5,A,cam0,7\n")
+    obs = read_observations(path)
+    assert obs.frames.tolist() == [7] and obs.uv[0, 0, 0].tolist() == [1.5, 2.5]
+
+
+def test_missing_points_are_nan_and_frames_sorted(tmp_path: Path) -> None:
+    path = tmp_path / "obs.csv"
+    path.write_text(HEADER + "5,cam0,A,1,1\n" + ROWS)
+    obs = read_observations(path, ("cam0", "cam1"))
+    assert obs.frames.tolist() == [0, 2, 5]
+    assert obs.complete.tolist() == [[True, False], [False, False], [False, False]]
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("frame,camera,u,v\n0,cam0,1,2\n", "row 1: missing column\\(s\\) point"),
+        (HEADER + "0,cam0,A,nan,2\n", "row 2: camera 'cam0' frame 0 point A: u, v must be finite"),
+        (HEADER + "0,cam0,A,1,2\n1,cam9,A,1,2\n", "row 3: unknown camera 'cam9'; the rig has cam0, cam1"),
+        (HEADER + "0,cam0,D,1,2\n", "row 2: point must be A, B or C"),
+        (HEADER + "x,cam0,A,1,2\n", "row 2: frame must be an integer"),
+        (HEADER + "0,cam0,A,one,2\n", "row 2: u, v must be numbers"),
+        (HEADER + "0,cam0,A,1,2\n0,cam0,A,1,2\n", "row 3: camera 'cam0' frame 0 point A appears twice"),
+        (HEADER + "0,cam0\n", "row 2: expected at least 5 columns"),
+        (HEADER, "no observations"),
+        ("", "empty file"),
+    ],
+)
+def test_bad_files_name_file_row_and_problem(tmp_path: Path, text: str, message: str) -> None:
+    path = tmp_path / "obs.csv"
+    path.write_text(text)
+    with pytest.raises(FormatError, match=message) as error:
+        read_observations(path, ("cam0", "cam1"))
+    assert str(path) in str(error.value)

@@ -1,0 +1,68 @@
+"""Rig description: round trip and clear errors."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from wand_calib_ros.io.errors import FormatError
+from wand_calib_ros.io.rig_yaml import load_rig, save_rig
+from wand_calib_ros.sim.scenarios import mixed_pair_scenario
+
+GOOD = """wand: {L1: 400.0, L2: 200.0}
+cameras:
+  - {name: cam0, image_size: [640, 480], pixel_size_um: [5.6, 5.6], nominal_focal_mm: 1.8, max_view_angle_deg: 92.5}
+  - {name: cam1, image_size: [640, 480], pixel_size_um: [5.6, 5.6], nominal_focal_mm: 1.8, max_view_angle_deg: 92.5,
+     lens: fisheye, image_topic: /cam1/image_raw}
+"""
+
+
+def test_reads_the_contract_example(tmp_path: Path) -> None:
+    path = tmp_path / "cameras.yaml"
+    path.write_text(GOOD)
+    rig = load_rig(path)
+    assert rig.wand.L == 600.0 and rig.camera_names == ("cam0", "cam1")
+    assert rig.cameras[1].lens == "fisheye" and rig.cameras[0].lens is None
+    assert rig.cameras[0].m[0] == pytest.approx(1000 / 5.6)
+
+
+def test_write_read_round_trip(tmp_path: Path) -> None:
+    rig = mixed_pair_scenario().rig
+    save_rig(rig, tmp_path / "rig.yaml")
+    assert load_rig(tmp_path / "rig.yaml") == rig
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        (GOOD.replace("L1: 400.0", "L1: 0.0"), "wand lengths must be positive"),
+        (GOOD.replace("L2: 200.0", "L2: -5"), "wand lengths must be positive"),
+        (GOOD.replace("wand: {L1: 400.0, L2: 200.0}", "wand: {L1: 400.0}"), "L1 and L2"),
+        (GOOD.replace("nominal_focal_mm: 1.8, max", "max"), "camera 'cam0' lacks nominal_focal_mm"),
+        (GOOD.replace("lens: fisheye", "lens: pinhole"), "lens must be one of"),
+        (GOOD.replace("max_view_angle_deg: 92.5}", "max_view_angle_deg: 200}"), "must be < 180"),
+        (
+            GOOD.replace(
+                "[640, 480], pixel_size_um: [5.6, 5.6], nominal_focal_mm: 1.8, max_view_angle_deg: 92.5}",
+                "[640, 480], pixel_size_um: [5.6], nominal_focal_mm: 1.8, max_view_angle_deg: 92.5}",
+                1,
+            ),
+            "pixel_size_um must be a list of two numbers",
+        ),
+        (GOOD.replace("name: cam1", "name: cam0"), "repeated: cam0"),
+        ("cameras: [", "not valid YAML"),
+        ("- 1\n- 2\n", "expected a mapping"),
+    ],
+)
+def test_bad_rig_descriptions_name_the_problem(tmp_path: Path, text: str, message: str) -> None:
+    path = tmp_path / "cameras.yaml"
+    path.write_text(text)
+    with pytest.raises(FormatError, match=message) as error:
+        load_rig(path)
+    assert str(path) in str(error.value)
+
+
+def test_missing_file_is_a_format_error(tmp_path: Path) -> None:
+    with pytest.raises(FormatError, match="cannot read"):
+        load_rig(tmp_path / "nope.yaml")

@@ -1,0 +1,157 @@
+"""The wand-calib command: end to end, and one clear line for every bad input."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from wand_calib_ros.cli import main
+from wand_calib_ros.io.observations_csv import read_observations, write_observations
+
+
+@pytest.fixture(scope="module")
+def simulated(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("paper")
+    assert main(["-q", "simulate", "paper", "--seed", "3", "--noise", "0.5", "--out", str(out)]) == 0
+    return out
+
+
+def _calibrate(sim: Path, out: Path, *extra: str) -> int:
+    return main(
+        [
+            "-q",
+            "calibrate",
+            "--cameras",
+            str(sim / "cameras.yaml"),
+            "--observations",
+            str(sim / "observations.csv"),
+            "--output",
+            str(out / "result.yaml"),
+            *extra,
+        ]
+    )
+
+
+def test_simulate_then_calibrate_recovers_the_truth(simulated: Path, tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    code = _calibrate(
+        simulated, tmp_path, "--camera-info-dir", str(tmp_path / "info"), "--truth", str(simulated / "truth.yaml")
+    )
+    assert code == 0
+    printed = capsys.readouterr().out
+    assert "equidistant" in printed and "held-out wand length error" in printed
+    result = yaml.safe_load((tmp_path / "result.yaml").read_text())
+    truth = yaml.safe_load((simulated / "truth.yaml").read_text())
+    for name in ("cam0", "cam1"):
+        fx = result["cameras"][name]["opencv_equidistant"]["camera_matrix"][0][0]
+        fx_true = truth["cameras"][name]["opencv_equidistant"]["camera_matrix"][0][0]
+        assert abs(fx - fx_true) < 3.0
+        pp = np.array(result["cameras"][name]["principal_point"])
+        assert np.linalg.norm(pp - truth["cameras"][name]["principal_point"]) < 5.0
+    assert np.allclose(result["cameras"]["cam1"]["translation"], truth["cameras"]["cam1"]["translation"], atol=10.0)
+    assert (tmp_path / "info" / "cam1.yaml").exists()
+
+
+def _expect_one_line_error(capsys, code: int, *needles: str) -> None:  # type: ignore[no-untyped-def]
+    captured = capsys.readouterr()
+    assert code == 2
+    lines = [line for line in captured.err.splitlines() if line.startswith("wand-calib: error:")]
+    assert len(lines) == 1, captured.err
+    assert "Traceback" not in captured.err
+    for needle in needles:
+        assert needle in lines[0]
+
+
+def test_missing_columns(simulated: Path, tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    (tmp_path / "obs.csv").write_text("frame,camera,u,v\n0,cam0,1,2\n")
+    shutil.copy(simulated / "cameras.yaml", tmp_path)
+    code = main(
+        [
+            "-q",
+            "calibrate",
+            "--cameras",
+            str(tmp_path / "cameras.yaml"),
+            "--observations",
+            str(tmp_path / "obs.csv"),
+            "--output",
+            str(tmp_path / "r.yaml"),
+        ]
+    )
+    _expect_one_line_error(capsys, code, "obs.csv", "row 1", "missing column(s) point")
+
+
+def test_nan_in_observations(simulated: Path, tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    lines = (simulated / "observations.csv").read_text().splitlines()
+    lines[7] = ",".join([*lines[7].split(",")[:3], "nan", "12.0"])
+    (tmp_path / "observations.csv").write_text("\n".join(lines) + "\n")
+    shutil.copy(simulated / "cameras.yaml", tmp_path)
+    code = _calibrate(tmp_path, tmp_path)
+    _expect_one_line_error(capsys, code, "row 8", "must be finite")
+
+
+def test_unknown_camera_name(simulated: Path, tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    text = (simulated / "observations.csv").read_text().replace(",cam1,", ",camX,", 1)
+    (tmp_path / "observations.csv").write_text(text)
+    shutil.copy(simulated / "cameras.yaml", tmp_path)
+    code = _calibrate(tmp_path, tmp_path)
+    _expect_one_line_error(capsys, code, "unknown camera 'camX'", "row")
+
+
+def test_too_few_placements(simulated: Path, tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    obs = read_observations(simulated / "observations.csv")
+    write_observations(obs.select_frames(np.arange(obs.frames.size) < 8), tmp_path / "observations.csv")
+    shutil.copy(simulated / "cameras.yaml", tmp_path)
+    code = _calibrate(tmp_path, tmp_path)
+    _expect_one_line_error(capsys, code, "only 8 placements", "cam0", "cam1")
+
+
+def test_non_positive_wand_length(simulated: Path, tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    text = (simulated / "cameras.yaml").read_text().replace("L2: 200.0", "L2: 0.0")
+    (tmp_path / "cameras.yaml").write_text(text)
+    shutil.copy(simulated / "observations.csv", tmp_path)
+    code = _calibrate(tmp_path, tmp_path)
+    _expect_one_line_error(capsys, code, "cameras.yaml", "wand lengths must be positive")
+
+
+def test_all_placements_degenerate(simulated: Path, tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    obs = read_observations(simulated / "observations.csv")
+    still = obs.uv[:1].repeat(60, axis=0) + np.random.default_rng(0).normal(scale=0.3, size=(60, *obs.uv.shape[1:]))
+    from wand_calib_ros.core.rig import WandObservations
+
+    write_observations(WandObservations(np.arange(60), obs.camera_names, still), tmp_path / "observations.csv")
+    shutil.copy(simulated / "cameras.yaml", tmp_path)
+    code = _calibrate(tmp_path, tmp_path)
+    _expect_one_line_error(capsys, code, "hardly moved", "cam0")
+
+
+def test_missing_input_file(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    code = _calibrate(tmp_path, tmp_path)
+    _expect_one_line_error(capsys, code, "cameras.yaml", "cannot read")
+
+
+def test_console_script_runs_as_a_separate_process(simulated: Path, tmp_path: Path) -> None:
+    completed = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "wand_calib_ros.cli",
+            "calibrate",
+            "--cameras",
+            str(simulated / "cameras.yaml"),
+            "--observations",
+            str(tmp_path / "missing.csv"),
+            "--output",
+            str(tmp_path / "r.yaml"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert completed.returncode == 2
+    assert completed.stderr.strip().splitlines()[-1].startswith("wand-calib: error:")
+    assert "Traceback" not in completed.stderr
