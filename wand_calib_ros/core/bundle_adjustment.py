@@ -333,7 +333,7 @@ def bundle_adjust(
     free: NDArray[np.bool_],
     *,
     max_iterations: int = 100,
-    tolerance: float = 1e-10,
+    tolerance: float = 1e-8,
 ) -> BundleResult:
     """Sparse Levenberg-Marquardt over all unknowns (paper's bundle adjustment).
 

@@ -152,7 +152,7 @@ def refine_calibration(
         )
     initial = BundleState(models, poses, points[keep, 0], wand_directions(points[keep, 0], points[keep, 2]))
     warnings: list[str] = []
-    result, fixed = _adjust_with_model_selection(rig, uv[keep], initial, reference, warnings)
+    result, fixed = _adjust_with_model_selection(rig, uv[keep], initial, reference)
     admitted, placements = _readmit(rig, uv[~keep], result, _free_mask(len(models), reference, fixed))
     uv_used = uv[keep]
     if admitted.any():
@@ -183,10 +183,17 @@ def refine_calibration(
 
 
 def _adjust_with_model_selection(
-    rig: RigSpec, uv: FloatArray, initial: BundleState, reference: int, warnings: list[str]
+    rig: RigSpec, uv: FloatArray, initial: BundleState, reference: int
 ) -> tuple[BundleResult, _Fixed]:
-    """Bundle-adjust, then fix the highest free k3..k5 of a camera while it is insignificant
-    (|k| < 2 sigma) or makes r(theta) turn over inside the image, re-adjusting after each change."""
+    """Bundle-adjust with every k3..k5 free, then drop what the data do not support and re-adjust.
+
+    Per camera the highest free coefficient among k3..k5 is fixed to zero while it
+    is insignificant (|k| < SIGNIFICANCE sigma) or makes r(theta) turn over inside
+    the image. The decisions are made on the linearised problem: fixing k_h = 0
+    moves the other parameters to their conditional mean
+    ``x - cov[:, h] / cov[h, h] * x[h]`` and shrinks the covariance accordingly, so
+    one re-adjustment (from that better start) usually settles the model.
+    """
     problem = BundleProblem.from_dense(rig.wand, uv)
     fixed = _Fixed(tuple(() for _ in rig.cameras))
     start = initial
@@ -194,34 +201,54 @@ def _adjust_with_model_selection(
         result = bundle_adjust(start, problem, _free_mask(len(rig.cameras), reference, fixed))
         log.info("bundle adjustment: %d iterations, sigma %.3f px", result.iterations, result.sigma)
         per_camera = list(fixed.per_camera)
-        for c, (model, spec) in enumerate(zip(result.state.models, rig.cameras, strict=True)):
-            free_radial = [i for i in range(2, 5) if i not in per_camera[c]]
-            if not free_radial:
-                continue
-            highest = max(free_radial)
-            significance = abs(model.k[highest]) / max(result.camera_std[c, highest], 1e-300)
-            if turns_over_in_image(model, spec.max_view_angle):
-                warnings.append(
-                    f"{spec.name}: r(theta) turned over inside the image with k{highest + 1} free; k{highest + 1} "
-                    "fixed to 0 (the data do not reach wide enough angles to determine it)"
-                )
-                log.warning(warnings[-1])
-            elif significance < SIGNIFICANCE:
-                log.info(
-                    "%s: k%d = %.3g is not significant (%.1f sigma): fixed to 0",
-                    spec.name,
-                    highest + 1,
-                    model.k[highest],
-                    significance,
-                )
-            else:
-                continue
-            per_camera[c] = (*per_camera[c], highest)
+        models = list(result.state.models)
+        for c, spec in enumerate(rig.cameras):
+            per_camera[c], models[c] = _reduce_radial(spec, result, c, per_camera[c])
         if tuple(per_camera) == fixed.per_camera:
             return result, fixed
         fixed = _Fixed(tuple(per_camera))
-        state = result.state  # warm start with the newly fixed coefficients at zero
-        start = BundleState(_zero_fixed(state.models, fixed), state.poses, state.wand_a, state.wand_direction)
+        state = result.state
+        start = BundleState(_zero_fixed(tuple(models), fixed), state.poses, state.wand_a, state.wand_direction)
+
+
+def _reduce_radial(
+    spec: CameraSpec, result: BundleResult, camera: int, fixed: tuple[int, ...]
+) -> tuple[tuple[int, ...], CameraModel]:
+    """Sequential Wald tests on k5, k4, k3 of one camera (see _adjust_with_model_selection).
+
+    Returns:
+        The camera's fixed radial indices and its intrinsics moved to the conditional estimate.
+    """
+    model = result.state.models[camera]
+    block = slice(camera * N_CAMERA_PARAMS, camera * N_CAMERA_PARAMS + 7)
+    estimate = model.intrinsic_vector()
+    covariance = result.camera_covariance[block, block].copy()
+    fixed_now = list(fixed)
+    for highest in (4, 3, 2):
+        if highest in fixed_now:
+            continue
+        variance = covariance[highest, highest]
+        significance = abs(estimate[highest]) / np.sqrt(variance) if variance > 0 else 0.0
+        current = model.with_intrinsic_vector(estimate)
+        if turns_over_in_image(current, spec.max_view_angle):
+            log.info("%s: r(theta) turns over inside the image with k%d free: fixed to 0", spec.name, highest + 1)
+        elif significance < SIGNIFICANCE:
+            log.info(
+                "%s: k%d = %.3g is not significant (%.1f sigma): fixed to 0",
+                spec.name,
+                highest + 1,
+                estimate[highest],
+                significance,
+            )
+        else:
+            break
+        if variance > 0:
+            gain = covariance[:, highest] / variance
+            estimate = estimate - gain * estimate[highest]
+            covariance = covariance - np.outer(gain, covariance[highest])
+        estimate[highest] = 0.0
+        fixed_now.append(highest)
+    return tuple(fixed_now), model.with_intrinsic_vector(estimate)
 
 
 def _readmit(
