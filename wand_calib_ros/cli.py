@@ -73,6 +73,7 @@ def _print_summary(result: CalibrationResult, output: Path) -> None:
         print(
             f"  {camera.name}: fx {fx:.2f} fy {fy:.2f} px, principal point ({u0:.2f}, {v0:.2f}) px, "
             f"RMS {camera.rms_reprojection_px:.3f} px over {camera.n_observations} points"
+            + (f"; {', '.join(camera.fixed_coefficients)} fixed at 0" if camera.fixed_coefficients else "")
         )
     print(
         f"  wand |AC| {result.wand_length_mean_mm:.2f} +- {result.wand_length_std_mm:.2f} mm "

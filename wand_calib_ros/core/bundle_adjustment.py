@@ -369,14 +369,15 @@ def bundle_adjust(
             except ModelError:  # e.g. k1 <= 0: not a camera, reject the step
                 lam *= 10.0
                 continue
-            new_res = residuals(candidate, problem)
+            # Jacobians come with the trial residuals: steps are rarely rejected near a solution.
+            new_res, new_jc, new_jp = _linearise(candidate, problem)
             new_cost = float(np.sum(new_res**2)) if np.all(np.isfinite(new_res)) else np.inf
             if new_cost < cost:
                 accepted = True
                 relative_decrease = (cost - new_cost) / max(cost, 1e-300)
                 state, cost = candidate, new_cost
                 lam = max(lam / 5.0, 1e-12)
-                res, jc, jp = _linearise(state, problem)
+                res, jc, jp = new_res, new_jc, new_jp
                 step_small = np.max(np.abs(delta_c)) < tolerance and np.max(np.abs(delta_p)) < tolerance * 1e3
                 converged = relative_decrease < tolerance or step_small
                 break
