@@ -17,7 +17,7 @@ placement (the structure the Schur complement needs is computed once).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
@@ -193,102 +193,130 @@ def _apply_step(state: BundleState, delta_c: FloatArray, delta_p: FloatArray) ->
 
 @dataclass(frozen=True, eq=False)
 class _Structure:
-    """Index structure of the Schur complement, computed once per problem."""
+    """Index structure of the Schur complement, computed once per problem.
 
-    block_of_obs: IntArray  # (M,) block id of each observation; blocks = (placement, camera) pairs
+    A block is one (placement, camera) pair; observations are sorted by block.
+    """
+
     block_camera: IntArray  # (B,)
     block_placement: IntArray  # (B,)
-    block_starts: IntArray  # (B,) first observation of each block (observations sorted by block)
+    block_starts: IntArray  # (B,) first observation of each block
     placement_block_starts: IntArray  # (P,) first block of each placement
-    pair_first: IntArray  # (Q,) block pairs inside a placement
-    pair_second: IntArray
+    placement_obs_starts: IntArray  # (P,) first observation of each placement
     observations_of_camera: tuple[IntArray, ...]  # per camera, its observation indices
     block_to_camera: scipy.sparse.csr_matrix  # (C, B) indicator
-    pair_to_camera_pair: scipy.sparse.csr_matrix  # (C*C, Q) indicator
 
 
 def _structure(problem: BundleProblem) -> _Structure:
     order_key = problem.placement * problem.n_cameras + problem.camera
     if np.any(np.diff(order_key) < 0):
         raise ValueError("observations must be sorted by placement, then camera")
-    keys, block_starts, block_of_obs = np.unique(order_key, return_index=True, return_inverse=True)
+    keys, block_starts = np.unique(order_key, return_index=True)
     block_camera = keys % problem.n_cameras
     block_placement = keys // problem.n_cameras
     if np.unique(block_placement).size != problem.n_placements:
         raise CalibrationFailedError("a placement has no observation")
     placement_block_starts = np.searchsorted(block_placement, np.arange(problem.n_placements))
-    counts = np.diff(np.append(placement_block_starts, keys.size))
-    firsts, seconds = [], []
-    for count in np.unique(counts):
-        starts = placement_block_starts[counts == count]
-        a, b = np.meshgrid(np.arange(count), np.arange(count), indexing="ij")
-        firsts.append((starts[:, None] + a.ravel()[None, :]).ravel())
-        seconds.append((starts[:, None] + b.ravel()[None, :]).ravel())
-    pair_first, pair_second = np.concatenate(firsts), np.concatenate(seconds)
     c = problem.n_cameras
-
-    def indicator(rows: IntArray, n_rows: int) -> scipy.sparse.csr_matrix:
-        return scipy.sparse.csr_matrix((np.ones(rows.size), (rows, np.arange(rows.size))), shape=(n_rows, rows.size))
-
+    indicator = scipy.sparse.csr_matrix(
+        (np.ones(block_camera.size), (block_camera, np.arange(block_camera.size))), shape=(c, block_camera.size)
+    )
     return _Structure(
-        block_of_obs,
         block_camera,
         block_placement,
         block_starts,
         placement_block_starts,
-        pair_first,
-        pair_second,
+        block_starts[placement_block_starts],
         tuple(np.flatnonzero(problem.camera == i) for i in range(c)),
-        indicator(block_camera, c),
-        indicator(block_camera[pair_first] * c + block_camera[pair_second], c * c),
+        indicator,
     )
 
 
+def _huber_weights(res: FloatArray, loss_scale: float | None) -> FloatArray:
+    """(M,) IRLS weights of the Huber loss on each observation's 2D residual norm (1 = least squares)."""
+    if loss_scale is None:
+        return np.ones(res.shape[0])
+    norm = np.linalg.norm(res, axis=1)
+    return np.where(norm <= loss_scale, 1.0, loss_scale / np.maximum(norm, 1e-300))
+
+
+def robust_cost(res: FloatArray, loss_scale: float | None) -> float:
+    """Sum of the Huber loss of the 2D residual norms (sum of squares when loss_scale is None)."""
+    squared = np.sum(res**2, axis=1)
+    if loss_scale is None:
+        return float(np.sum(squared))
+    norm = np.sqrt(squared)
+    return float(np.sum(np.where(norm <= loss_scale, squared, 2 * loss_scale * norm - loss_scale**2)))
+
+
 def _normal_equations(
-    res: FloatArray, jc: FloatArray, jp: FloatArray, structure: _Structure, problem: BundleProblem
+    res: FloatArray, jc: FloatArray, jp: FloatArray, weights: FloatArray, structure: _Structure, n_cameras: int
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
-    """U (C,13,13), V (P,5,5), W (B,13,5), gc (C,13), gp (P,5) with g = -J^T r."""
-    n_c, n_p = problem.n_cameras, problem.n_placements
-    u = np.empty((n_c, N_CAMERA_PARAMS, N_CAMERA_PARAMS))
-    gc = np.empty((n_c, N_CAMERA_PARAMS))
-    for c in range(n_c):
+    """U (C,13,13), V (P,5,5), W (B,13,5), gc (C,13), gp (P,5) of the weighted problem, g = -J^T W r."""
+    root = np.sqrt(weights)[:, None, None]
+    jc, jp, res = jc * root, jp * root, res * root[:, :, 0]
+    u = np.empty((n_cameras, N_CAMERA_PARAMS, N_CAMERA_PARAMS))
+    gc = np.empty((n_cameras, N_CAMERA_PARAMS))
+    for c in range(n_cameras):
         rows = jc[structure.observations_of_camera[c]].reshape(-1, N_CAMERA_PARAMS)
         u[c] = rows.T @ rows
         gc[c] = -(rows.T @ res[structure.observations_of_camera[c]].reshape(-1))
-    jc_t = jc.transpose(0, 2, 1)
-    w = np.add.reduceat(jc_t @ jp, structure.block_starts, axis=0)
-    obs_placement_starts = structure.block_starts[structure.placement_block_starts]
-    v = np.add.reduceat(jp.transpose(0, 2, 1) @ jp, obs_placement_starts, axis=0)
-    gp = -np.add.reduceat((jp.transpose(0, 2, 1) @ res[..., None])[..., 0], obs_placement_starts, axis=0)
-    assert v.shape[0] == n_p
+    w = np.add.reduceat(jc.transpose(0, 2, 1) @ jp, structure.block_starts, axis=0)
+    jp_t = jp.transpose(0, 2, 1)
+    v = np.add.reduceat(jp_t @ jp, structure.placement_obs_starts, axis=0)
+    gp = -np.add.reduceat((jp_t @ res[..., None])[..., 0], structure.placement_obs_starts, axis=0)
     return u, v, w, gc, gp
+
+
+def _inverse_and_root(v: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """V^-1 and a factor L with L L^T = V^-1 for (P, 5, 5) symmetric positive definite blocks."""
+    v_inv = np.linalg.inv(v)
+    v_inv = 0.5 * (v_inv + v_inv.transpose(0, 2, 1))
+    try:
+        return v_inv, np.linalg.cholesky(v_inv)
+    except np.linalg.LinAlgError:  # numerically semi-definite: symmetric square root
+        values, vectors = np.linalg.eigh(v_inv)
+        return v_inv, vectors * np.sqrt(np.clip(values, 0.0, None))[:, None, :]
+
+
+#: Placements per chunk when the Schur complement is accumulated (bounds memory to ~C*13*5*chunk doubles).
+_SCHUR_CHUNK = 4000
 
 
 def _reduced_system(
     u: FloatArray,
-    v_inv: FloatArray,
+    v: FloatArray,
     w: FloatArray,
     gc: FloatArray,
     gp: FloatArray,
     structure: _Structure,
     n_cameras: int,
-    chunk: int = 200_000,
-) -> tuple[FloatArray, FloatArray]:
-    """Schur complement S = U - W V^-1 W^T (dense, C*13 square) and its right-hand side."""
-    y = w @ v_inv[structure.block_placement]  # (B, 13, 5)
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Schur complement S = U - W V^-1 W^T (dense, 13C square), its right-hand side and V^-1.
+
+    With L L^T = V_j^-1 and Z_b = W_b L_j, S = U - Z Z^T where Z is the dense
+    (13C x 5P) matrix of the blocks Z_b: one BLAS product per chunk of placements.
+    """
+    v_inv, root = _inverse_and_root(v)
+    z = w @ root[structure.block_placement]  # (B, 13, 5)
     size = n_cameras * N_CAMERA_PARAMS
-    reduced = np.zeros((n_cameras, n_cameras, N_CAMERA_PARAMS, N_CAMERA_PARAMS))
-    for start in range(0, structure.pair_first.size, chunk):
-        first = structure.pair_first[start : start + chunk]
-        second = structure.pair_second[start : start + chunk]
-        products = (y[first] @ w[second].transpose(0, 2, 1)).reshape(first.size, -1)
-        reduced -= (structure.pair_to_camera_pair[:, start : start + chunk] @ products).reshape(reduced.shape)
-    idx = np.arange(n_cameras)
-    reduced[idx, idx] += u
-    s = reduced.transpose(0, 2, 1, 3).reshape(size, size)
-    y_gp = (y @ gp[structure.block_placement][..., None])[..., 0]
-    rhs = (gc - structure.block_to_camera @ y_gp).reshape(size)
-    return s, rhs
+    s = scipy.linalg.block_diag(*u) if n_cameras > 1 else u[0].copy()
+    n_placements = v.shape[0]
+    for first in range(0, n_placements, _SCHUR_CHUNK):
+        last = min(first + _SCHUR_CHUNK, n_placements)
+        blocks = slice(
+            structure.placement_block_starts[first],
+            structure.placement_block_starts[last] if last < n_placements else z.shape[0],
+        )
+        dense = np.zeros((n_cameras, N_CAMERA_PARAMS, last - first, N_PLACEMENT_PARAMS))
+        dense[structure.block_camera[blocks], :, structure.block_placement[blocks] - first, :] = z[blocks]
+        dense = dense.reshape(size, -1)
+        s -= dense @ dense.T
+    # rhs = gc - sum_b W_b V_j^-1 gp_j = gc - sum_b Z_b (L_j^T gp_j)
+    projected = (root.transpose(0, 2, 1) @ gp[..., None])[..., 0]  # (P, 5)
+    per_block = (z @ projected[structure.block_placement][..., None])[..., 0]  # (B, 13)
+    rhs = (gc - structure.block_to_camera @ per_block).reshape(size)
+    return s, rhs, v_inv
 
 
 def _back_substitute(
@@ -332,6 +360,7 @@ def bundle_adjust(
     problem: BundleProblem,
     free: NDArray[np.bool_],
     *,
+    loss_scale: float | None = None,
     max_iterations: int = 100,
     tolerance: float = 1e-8,
 ) -> BundleResult:
@@ -341,28 +370,31 @@ def bundle_adjust(
         state: initial values (Step 3 result, placements from triangulation).
         problem: the observations, sorted by placement then camera.
         free: (C, 13) which camera parameters are estimated (see :func:`default_free_mask`).
+        loss_scale: Huber threshold on each observation's 2D residual (px), or None for least
+            squares. The robust problem is solved by iteratively reweighted least squares.
         max_iterations: LM iteration cap.
-        tolerance: stop when the relative cost decrease or the relative step falls below it.
+        tolerance: stop when the relative decrease of the cost falls below it.
 
     Returns:
         The optimised state, residuals and parameter uncertainties.
     """
     structure = _structure(problem)
+    n_cameras = problem.n_cameras
     free_flat = free.reshape(-1)
     lam = 1e-4
     res, jc, jp = _linearise(state, problem)
     if not np.all(np.isfinite(res)):
         raise CalibrationFailedError("the bundle adjustment starts from non-finite reprojections")
-    cost = float(np.sum(res**2))
+    cost = robust_cost(res, loss_scale)
     iterations, converged = 0, False
     while iterations < max_iterations and not converged:
         iterations += 1
-        u, v, w, gc, gp = _normal_equations(res, jc, jp, structure, problem)
+        weights = _huber_weights(res, loss_scale)
+        u, v, w, gc, gp = _normal_equations(res, jc, jp, weights, structure, n_cameras)
         accepted = False
         for _ in range(30):
-            v_inv = np.linalg.inv(_damp(v, lam))
-            s, rhs = _reduced_system(_damp(u, lam), v_inv, w, gc, gp, structure, problem.n_cameras)
-            delta_c = _solve_free(s, rhs, free_flat).reshape(problem.n_cameras, N_CAMERA_PARAMS)
+            s, rhs, v_inv = _reduced_system(_damp(u, lam), _damp(v, lam), w, gc, gp, structure, n_cameras)
+            delta_c = _solve_free(s, rhs, free_flat).reshape(n_cameras, N_CAMERA_PARAMS)
             delta_p = _back_substitute(delta_c, v_inv, w, gp, structure)
             try:
                 candidate = _apply_step(state, delta_c, delta_p)
@@ -371,27 +403,28 @@ def bundle_adjust(
                 continue
             # Jacobians come with the trial residuals: steps are rarely rejected near a solution.
             new_res, new_jc, new_jp = _linearise(candidate, problem)
-            new_cost = float(np.sum(new_res**2)) if np.all(np.isfinite(new_res)) else np.inf
+            new_cost = robust_cost(new_res, loss_scale) if np.all(np.isfinite(new_res)) else np.inf
             if new_cost < cost:
                 accepted = True
                 relative_decrease = (cost - new_cost) / max(cost, 1e-300)
                 state, cost = candidate, new_cost
                 lam = max(lam / 5.0, 1e-12)
                 res, jc, jp = new_res, new_jc, new_jp
-                step_small = np.max(np.abs(delta_c)) < tolerance and np.max(np.abs(delta_p)) < tolerance * 1e3
-                converged = relative_decrease < tolerance or step_small
+                converged = relative_decrease < tolerance
                 break
             lam *= 10.0
         if not accepted:
             converged = True  # no decrease possible: at a minimum to machine precision
-    u, v, w, gc, gp = _normal_equations(res, jc, jp, structure, problem)
-    covariance, sigma, dof = _camera_covariance(res, u, v, w, gc, gp, structure, problem, free_flat)
-    camera_std = np.sqrt(np.clip(np.diag(covariance), 0.0, None)).reshape(problem.n_cameras, N_CAMERA_PARAMS)
+    weights = _huber_weights(res, loss_scale)
+    u, v, w, gc, gp = _normal_equations(res, jc, jp, weights, structure, n_cameras)
+    covariance, sigma, dof = _camera_covariance(res, weights, u, v, w, gc, gp, structure, problem, free_flat)
+    camera_std = np.sqrt(np.clip(np.diag(covariance), 0.0, None)).reshape(n_cameras, N_CAMERA_PARAMS)
     return BundleResult(state, res, iterations, converged, camera_std, covariance, sigma, dof)
 
 
 def _camera_covariance(
     res: FloatArray,
+    weights: FloatArray,
     u: FloatArray,
     v: FloatArray,
     w: FloatArray,
@@ -404,15 +437,9 @@ def _camera_covariance(
     """Marginal covariance of the camera parameters: sigma^2 * S^-1 (S = Schur complement of J^T J)."""
     m = res.size
     p = int(free_flat.sum()) + N_PLACEMENT_PARAMS * problem.n_placements
-    sigma2 = float(np.sum(res**2)) / max(m - p, 1)
-    v_inv = np.linalg.pinv(v)
-    s, _ = _reduced_system(u, v_inv, w, gc, gp, structure, problem.n_cameras)
+    sigma2 = float(np.sum(weights[:, None] * res**2)) / max(m - p, 1)
+    s, _, _ = _reduced_system(u, _damp(v, 0.0), w, gc, gp, structure, problem.n_cameras)
     covariance = np.zeros_like(s)
     sub = s[np.ix_(free_flat, free_flat)]
     covariance[np.ix_(free_flat, free_flat)] = np.linalg.pinv(sub, hermitian=True) * sigma2
     return covariance, float(np.sqrt(sigma2)), (m, p)
-
-
-def with_placements(state: BundleState, wand_a: FloatArray, wand_direction: FloatArray) -> BundleState:
-    """A copy of ``state`` with other placements."""
-    return replace(state, wand_a=wand_a, wand_direction=wand_direction)
