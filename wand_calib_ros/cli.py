@@ -23,7 +23,7 @@ from wand_calib_ros.errors import WandCalibError
 from wand_calib_ros.io.observations_csv import read_observations, write_observations
 from wand_calib_ros.io.result_yaml import camera_entry, read_result, write_camera_infos, write_result, write_yaml
 from wand_calib_ros.io.rig_yaml import load_rig, save_rig
-from wand_calib_ros.sim.scenarios import SCENARIOS, image_placements, sample_placements
+from wand_calib_ros.sim.scenarios import SCENARIOS, image_placements, sample_placements, simulate
 
 log = logging.getLogger("wand_calib_ros")
 
@@ -147,10 +147,10 @@ def _simulate(args: argparse.Namespace) -> int:
         raise WandCalibError("--noise must be >= 0")
     scenario = factory(**kwargs)
     rng = np.random.default_rng(args.seed)
-    wand_a, direction = sample_placements(scenario, scenario.n_placements, rng)
-    data = image_placements(scenario, wand_a, direction, args.noise, rng)
-    held_a, held_d = sample_placements(scenario, HELDOUT_PLACEMENTS, rng)
-    heldout = image_placements(scenario, held_a, held_d, args.noise, rng, first_frame=1_000_000)
+    data = simulate(scenario, args.noise, rng)
+    heldout = image_placements(
+        scenario, *sample_placements(scenario, HELDOUT_PLACEMENTS, rng), args.noise, rng, first_frame=1_000_000
+    )
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
     save_rig(scenario.rig, out / "cameras.yaml")

@@ -90,7 +90,7 @@ def test_reduced_distortion_model_is_no_worse_than_the_full_model_on_average() -
     # Fixing insignificant k3..k5 must not cost accuracy against a truth-started BA with all of them free.
     totals_mine: dict[str, float] = {}
     totals_full: dict[str, float] = {}
-    for seed in (1, 2, 3):
+    for seed in range(1, 9):  # an average: single draws go either way
         scenario, data, held = scenario_data("paper", seed)
         result = calibrate(scenario.rig, data.observations)
         ordered = [result.camera(c.spec.name) for c in scenario.cameras]

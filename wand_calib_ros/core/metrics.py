@@ -42,7 +42,7 @@ def camera_errors(model: CameraModel, pose: Pose, true_model: CameraModel, true_
         focal_mm=abs(float(model.k[0] - true_model.k[0])),
         principal_point_px=float(np.linalg.norm(model.principal_point - true_model.principal_point)),
         rotation_deg=rotation_error_deg(true_pose.rotation, pose.rotation),
-        translation=translation_error(true_pose.translation, pose.translation) if t_norm > 0 else float("nan"),
+        translation=translation_error(true_pose.translation, pose.translation) if t_norm > 1e-6 else float("nan"),
     )
 
 

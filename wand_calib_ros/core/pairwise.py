@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 from wand_calib_ros.core.camera_model import CameraModel, unproject
 from wand_calib_ros.core.errors import CoreError, DegenerateDataError, InsufficientDataError
 from wand_calib_ros.core.essential import RelativePose, epipolar_angles, relative_pose
-from wand_calib_ros.core.intrinsics_init import LensCandidate, initial_model, lens_candidates
+from wand_calib_ros.core.intrinsics_init import initial_model, lens_candidates
 from wand_calib_ros.core.result import LensTrial
 from wand_calib_ros.core.rig import CameraSpec, WandSpec
 from wand_calib_ros.core.wand_lm import WandFit, optimise_wand_lengths
@@ -91,24 +91,28 @@ def _spread_subset(n: int, size: int) -> NDArray[np.bool_]:
     return mask
 
 
+#: A camera's possible starts: (name of the start, its intrinsics).
+Start = tuple[str, CameraModel]
+
+
+def camera_starts(spec: CameraSpec, known: tuple[str, CameraModel] | None = None) -> list[Start]:
+    """Step 1 starts of one camera: each plausible projection, or an already calibrated model."""
+    if known is not None:
+        return [known]
+    return [(c.projection, initial_model(spec, c)) for c in lens_candidates(spec)]
+
+
 def _step2(
-    specs: tuple[CameraSpec, CameraSpec],
-    candidates: tuple[LensCandidate, LensCandidate],
-    uv0: FloatArray,
-    uv1: FloatArray,
-    wand: WandSpec,
-    options: PairOptions,
-) -> tuple[tuple[CameraModel, CameraModel], RelativePose]:
-    models = (initial_model(specs[0], candidates[0]), initial_model(specs[1], candidates[1]))
+    models: tuple[CameraModel, CameraModel], uv0: FloatArray, uv1: FloatArray, wand: WandSpec, options: PairOptions
+) -> RelativePose:
     focal_px = min(float(np.min(m.focal_px)) for m in models)
-    step2 = relative_pose(
+    return relative_pose(
         unproject(models[0], uv0),
         unproject(models[1], uv1),
         wand.L,
         threshold_rad=options.ransac_threshold_px / focal_px,
         rng=np.random.default_rng(options.seed),
     )
-    return models, step2
 
 
 def initialise_pair(
@@ -117,6 +121,8 @@ def initialise_pair(
     uv1: FloatArray,
     wand: WandSpec,
     options: PairOptions = PairOptions(),
+    *,
+    known: tuple[tuple[str, CameraModel] | None, tuple[str, CameraModel] | None] = (None, None),
 ) -> PairInitialisation:
     """Steps 1-3 for two cameras on the placements both see completely.
 
@@ -125,6 +131,8 @@ def initialise_pair(
         uv0, uv1: (N, 3, 2) pixels of A, B, C in each camera.
         wand: wand lengths.
         options: settings.
+        known: per camera, a (projection name, intrinsics) start from an earlier pair that
+            replaces its Step 1 candidates (multi-camera chains).
 
     Raises:
         InsufficientDataError: fewer than ``options.min_placements`` placements.
@@ -141,11 +149,12 @@ def initialise_pair(
     screening = _spread_subset(n, options.screening_placements)
     s0, s1 = uv0[screening], uv1[screening]
     trials: list[LensTrial] = []
-    best: tuple[WandFit, tuple[LensCandidate, LensCandidate], NDArray[np.bool_]] | None = None
-    for combo in itertools.product(lens_candidates(specs[0]), lens_candidates(specs[1])):
-        names = (combo[0].projection, combo[1].projection)
+    best: tuple[WandFit, tuple[str, str], NDArray[np.bool_]] | None = None
+    for start0, start1 in itertools.product(camera_starts(specs[0], known[0]), camera_starts(specs[1], known[1])):
+        names = (start0[0], start1[0])
+        models = (start0[1], start1[1])
         try:
-            models, step2 = _step2(specs, combo, s0, s1, wand, options)
+            step2 = _step2(models, s0, s1, wand, options)
             agree = step2.inliers.reshape(-1, 3).all(axis=1)
             fit = optimise_wand_lengths(
                 models,
@@ -165,14 +174,16 @@ def initialise_pair(
         if best is None or fit.rms_mm < best[0].rms_mm:
             # Placements of the whole recording that agree with this start's epipolar geometry.
             agree_all = _epipolar_agreement(models, step2.essential, uv0, uv1, options)
-            best = (fit, combo, agree_all)
+            best = (fit, names, agree_all)
     if best is None:
         reasons = "; ".join(f"{'/'.join(t.projections)}: {t.failure}" for t in trials)
-        raise DegenerateDataError(f"no lens start gives a relative pose ({reasons})")
-    screened, combo, agree_all = best
+        raise DegenerateDataError(
+            f"cameras '{specs[0].name}' and '{specs[1].name}': no lens start gives a relative pose ({reasons})"
+        )
+    screened, names, agree_all = best
     use = _spread_subset(n, options.step3_placements) & agree_all
     fit = optimise_wand_lengths(screened.models, screened.pose, uv0[use], uv1[use], wand)
-    return PairInitialisation(fit, (combo[0].projection, combo[1].projection), tuple(trials))
+    return PairInitialisation(fit, names, tuple(trials))
 
 
 def _epipolar_agreement(

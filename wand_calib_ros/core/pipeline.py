@@ -5,14 +5,13 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass, field
 
-import numpy as np
-
 from wand_calib_ros.core.errors import InsufficientDataError
-from wand_calib_ros.core.geometry import Pose
-from wand_calib_ros.core.pairwise import PairOptions, initialise_pair
+from wand_calib_ros.core.multi_camera import initialise_rig
+from wand_calib_ros.core.pairwise import PairOptions
 from wand_calib_ros.core.refine import refine_calibration
 from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.core.rig import RigSpec, WandObservations
+from wand_calib_ros.core.vision_graph import build_vision_graph
 
 log = logging.getLogger(__name__)
 
@@ -22,7 +21,8 @@ class CalibrationOptions:
     """User-facing settings of :func:`calibrate`.
 
     Attributes:
-        reference_camera: name of the camera whose frame is the reference (default: the first).
+        reference_camera: name of the camera whose frame is the reference (default: the one that
+            shares the most placements with the others; the first on a tie).
         pair: settings of the pairwise initialisation (Steps 1-3).
     """
 
@@ -35,6 +35,12 @@ def calibrate(
 ) -> CalibrationResult:
     """Calibrate intrinsics and extrinsics of the rig's cameras from wand observations.
 
+    Two cameras follow Section III-A of the paper; more cameras are initialised
+    through the vision graph (Section III-B) and refined by one global bundle
+    adjustment. Placements must be seen completely (all three wand points) by at
+    least two cameras; the initialisation uses complete views only, the bundle
+    adjustment every point seen.
+
     Args:
         rig: wand and camera descriptions.
         observations: image points; cameras are matched by name.
@@ -44,39 +50,31 @@ def calibrate(
         WandCalibError subclasses with a message naming the problem.
     """
     names = rig.camera_names
+    if len(names) < 2:
+        raise InsufficientDataError(f"a wand calibration needs at least two cameras; the rig has {len(names)}")
     for name in names:
         if name not in observations.camera_names:
             raise InsufficientDataError(f"camera '{name}' has no observations")
     obs = observations.select_cameras(names)
-    if len(names) != 2:
-        raise InsufficientDataError(
-            f"this version calibrates exactly two cameras; the rig has {len(names)} ({', '.join(names)})"
-        )
-    reference = names.index(options.reference_camera) if options.reference_camera else 0
-    if options.reference_camera and options.reference_camera not in names:
-        raise InsufficientDataError(f"reference camera '{options.reference_camera}' is not in the rig")
-    other = 1 - reference
     complete = obs.complete
-    both = complete[:, reference] & complete[:, other]
-    uv = obs.uv[both]
-    log.info("%d placements seen completely by %s and %s", both.sum(), names[reference], names[other])
-    init = initialise_pair(
-        (rig.cameras[reference], rig.cameras[other]), uv[:, reference], uv[:, other], rig.wand, options.pair
+    usable = complete.sum(axis=1) >= 2  # a placement seen by one camera only constrains nothing
+    uv = obs.uv[usable]  # partial views stay: the bundle adjustment uses every point seen
+    log.info("%d of %d frames show the whole wand to at least two cameras", usable.sum(), complete.shape[0])
+    graph = build_vision_graph(
+        names, complete[usable], reference=options.reference_camera, min_shared=options.pair.min_placements
     )
-    models = [None, None]
-    models[reference], models[other] = init.fit.models
-    poses = [Pose.identity(), Pose.identity()]
-    poses[other] = init.fit.pose
-    projections = ["", ""]
-    projections[reference], projections[other] = init.projections
-    # Placements seen completely by one camera only constrain nothing and are left out.
-    usable = complete.sum(axis=1) >= 2
+    log.info(
+        "reference camera %s; pairs calibrated: %s",
+        names[graph.reference],
+        ", ".join(f"{names[a]}-{names[b]}" for a, b in graph.edges),
+    )
+    init = initialise_rig(rig, uv, graph, options.pair)
     return refine_calibration(
         rig,
-        np.where(complete[usable][..., None, None], obs.uv[usable], np.nan),
-        (models[0], models[1]),
-        (poses[0], poses[1]),
-        reference=reference,
-        initial_projections=(projections[0], projections[1]),
+        uv,
+        init.models,
+        init.poses,
+        reference=graph.reference,
+        initial_projections=init.projections,
         lens_trials=init.trials,
     )

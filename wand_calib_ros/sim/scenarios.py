@@ -43,6 +43,10 @@ class Scenario:
         cameras: true cameras (cameras[0] is the reference, pose identity).
         volume: (2, 3) min and max corner of the wand-centre volume, reference frame, mm.
         n_placements: placements to generate.
+        min_views: placements must be seen completely by at least this many cameras
+            (None: by every camera).
+        led_cone_deg: half-angle of the LEDs' emission cone around the wand's facing
+            direction (None: visible from everywhere).
     """
 
     name: str
@@ -50,6 +54,8 @@ class Scenario:
     cameras: tuple[TrueCamera, ...]
     volume: FloatArray
     n_placements: int
+    min_views: int | None = None
+    led_cone_deg: float | None = None
 
     @property
     def rig(self) -> RigSpec:
@@ -65,12 +71,14 @@ class SimulatedData:
         wand_a: (P, 3) true A per placement, reference frame, mm.
         wand_direction: (P, 3) true unit A->C direction.
         noise_px: standard deviation of the pixel noise.
+        facing: (P, 3) unit direction the LEDs face (matters with an emission cone).
     """
 
     observations: WandObservations
     wand_a: FloatArray
     wand_direction: FloatArray
     noise_px: float
+    facing: FloatArray
 
 
 def fit_radial(projection: str | Callable[[FloatArray], FloatArray], focal_mm: float, max_angle: float) -> FloatArray:
@@ -171,10 +179,82 @@ def mixed_pair_scenario(*, n_placements: int = 300) -> Scenario:
     return Scenario("mixed", WandSpec(400.0, 200.0), cameras, volume, n_placements)
 
 
+def paper_three_camera_scenario(**kwargs: float | tuple[float, float]) -> Scenario:
+    """The paper's three-fisheye simulation (camera 2 at Euler (57.3, 57.3, 57.3) deg, T = [-1200, -200, 700] mm)."""
+    scenario = paper_fisheye_scenario(n_cameras=3, **kwargs)  # type: ignore[arg-type]
+    return Scenario("paper3", scenario.wand, scenario.cameras, scenario.volume, scenario.n_placements)
+
+
+def _look_at(centre: FloatArray, target: FloatArray, down: FloatArray) -> Pose:
+    """Pose of a camera at ``centre`` looking at ``target`` with image y along ``down``."""
+    z = (target - centre) / np.linalg.norm(target - centre)
+    x = np.cross(down, z)
+    x /= np.linalg.norm(x)
+    rotation = np.stack([x, np.cross(z, x), z])
+    return Pose(rotation, -rotation @ centre)
+
+
+def _relative_to_first(poses: list[Pose]) -> list[Pose]:
+    """Re-express world poses so the first camera is the reference (X_cam = R X_ref + T)."""
+    first = poses[0]
+    inverse = Pose(first.rotation.T, -first.rotation.T @ first.translation)
+    return [pose.compose(inverse) for pose in poses]
+
+
+def ring_scenario(*, n_placements: int = 600, radius_mm: float = 2500.0, cone_deg: float = 60.0) -> Scenario:
+    """Six cameras on a ring around a 2 m cube, fisheye and conventional alternating.
+
+    The LEDs shine into a cone of ``cone_deg`` around a random facing direction, so
+    opposite cameras never see the same placement: the vision graph is a ring
+    without a common field of view.
+    """
+    world_centres = [
+        np.array([radius_mm * np.sin(a), 0.0, -radius_mm * np.cos(a)]) for a in np.radians(np.arange(6) * 60.0)
+    ]
+    world_poses = [_look_at(c, np.zeros(3), np.array([0.0, 1.0, 0.0])) for c in world_centres]
+    poses = _relative_to_first(world_poses)
+    cameras = []
+    for i, pose in enumerate(poses):
+        name = f"cam{i}"
+        principal = (336.0 + 3 * i, 241.0 - 2 * i)
+        cameras.append(
+            _fisheye_camera(name, pose, principal) if i % 2 == 0 else _conventional_camera(name, pose, principal)
+        )
+    # The 2 m cube around the ring centre, in camera 0's frame (camera 0 looks at the centre along +z).
+    centre = world_poses[0].apply(np.zeros(3))
+    volume = np.stack([centre - 1000.0, centre + 1000.0])
+    return Scenario("ring6", WandSpec(400.0, 200.0), tuple(cameras), volume, n_placements, 2, cone_deg)
+
+
+def mocap_scenario(*, n_cameras: int = 16, n_placements: int = 10_000, cone_deg: float = 75.0) -> Scenario:
+    """A motion-capture rig: 1280x1024 cameras with 6 mm lenses on two rings around a 4 x 4 x 2 m volume."""
+    world_poses = []
+    for i in range(n_cameras):
+        angle = 2 * np.pi * i / n_cameras
+        height = -2600.0 if i % 2 == 0 else -1800.0  # y is down: cameras 1.8-2.6 m above the floor centre
+        centre = np.array([5000.0 * np.sin(angle), height, -5000.0 * np.cos(angle)])
+        world_poses.append(_look_at(centre, np.array([0.0, -600.0, 0.0]), np.array([0.0, 1.0, 0.0])))
+    poses = _relative_to_first(world_poses)
+    cameras = []
+    for i, pose in enumerate(poses):
+        spec = CameraSpec(f"cam{i:02d}", (1280, 1024), (4.8, 4.8), 6.0, 35.0)
+        k = fit_radial(_barrel_perspective, 6.1 + 0.02 * (i % 5), np.radians(38.0))
+        principal = (640.0 + 4 * ((i * 7) % 5) - 8, 512.0 + 3 * ((i * 3) % 5) - 6)
+        cameras.append(TrueCamera(spec, CameraModel(k, spec.m, principal, spec.image_size), pose, np.radians(38.0)))
+    first = world_poses[0]
+    corners = np.array([[x, y, z] for x in (-2000.0, 2000.0) for y in (-2000.0, 0.0) for z in (-2000.0, 2000.0)])
+    in_first = first.apply(corners)
+    volume = np.stack([in_first.min(axis=0), in_first.max(axis=0)])
+    return Scenario("mocap16", WandSpec(400.0, 200.0), tuple(cameras), volume, n_placements, 2, cone_deg)
+
+
 SCENARIOS: dict[str, Callable[..., Scenario]] = {
     "paper": paper_fisheye_scenario,
+    "paper3": paper_three_camera_scenario,
     "conventional": conventional_pair_scenario,
     "mixed": mixed_pair_scenario,
+    "ring6": ring_scenario,
+    "mocap16": mocap_scenario,
 }
 
 
@@ -188,59 +268,78 @@ def visible(camera: TrueCamera, points: FloatArray) -> NDArray[np.bool_]:
     return inside & (theta <= camera.true_max_view_angle) & (np.linalg.norm(in_cam, axis=-1) > 1.0)
 
 
-def sample_placements(scenario: Scenario, n: int, rng: np.random.Generator) -> tuple[FloatArray, FloatArray]:
-    """n wand placements that every camera sees completely.
+def _wand_points(scenario: Scenario, wand_a: FloatArray, direction: FloatArray) -> FloatArray:
+    return wand_a[:, None, :] + scenario.wand.offsets[None, :, None] * direction[:, None, :]
 
-    The wand centre is uniform in the scenario's volume and its direction
-    uniform on the sphere; placements not seen whole by all cameras are redrawn.
+
+def visibility(scenario: Scenario, wand_a: FloatArray, direction: FloatArray, facing: FloatArray) -> NDArray[np.bool_]:
+    """(P, C, 3) which camera sees which LED: on the sensor and, with a cone, within the LEDs' beam."""
+    points = _wand_points(scenario, wand_a, direction)
+    seen = np.stack([visible(camera, points) for camera in scenario.cameras], axis=1)
+    if scenario.led_cone_deg is not None:
+        for c, camera in enumerate(scenario.cameras):
+            to_camera = camera.pose.center - points  # (P, 3, 3)
+            cosine = np.einsum("pki,pi->pk", to_camera, facing) / np.linalg.norm(to_camera, axis=-1)
+            seen[:, c] &= cosine >= np.cos(np.radians(scenario.led_cone_deg))
+    return seen
+
+
+def sample_placements(
+    scenario: Scenario, n: int, rng: np.random.Generator
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """n wand placements seen completely by enough cameras (``scenario.min_views``, default all).
+
+    The wand centre is uniform in the scenario's volume, its direction and the
+    LEDs' facing direction uniform on the sphere; other placements are redrawn.
 
     Returns:
-        (A (n, 3), direction (n, 3)) in the reference frame.
+        (A (n, 3), direction (n, 3), facing (n, 3)) in the reference frame.
     """
-    a_list, d_list, count = [], [], 0
+    needed = len(scenario.cameras) if scenario.min_views is None else scenario.min_views
+    chunks: list[tuple[FloatArray, FloatArray, FloatArray]] = []
+    count = 0
     for _ in range(1000):
         batch = max(4 * n, 100)
         centre = rng.uniform(scenario.volume[0], scenario.volume[1], size=(batch, 3))
         direction = rng.normal(size=(batch, 3))
         direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+        facing = rng.normal(size=(batch, 3))
+        facing /= np.linalg.norm(facing, axis=1, keepdims=True)
         a = centre - 0.5 * scenario.wand.L * direction
-        points = a[:, None, :] + scenario.wand.offsets[None, :, None] * direction[:, None, :]
-        ok = np.ones(batch, dtype=bool)
-        for camera in scenario.cameras:
-            ok &= visible(camera, points).all(axis=1)
-        a_list.append(a[ok])
-        d_list.append(direction[ok])
+        ok = visibility(scenario, a, direction, facing).all(axis=2).sum(axis=1) >= needed
+        chunks.append((a[ok], direction[ok], facing[ok]))
         count += int(ok.sum())
         if count >= n:
             break
     else:  # pragma: no cover - scenario definitions are checked by tests
         raise RuntimeError(f"scenario {scenario.name}: cameras rarely see the volume together")
-    return np.concatenate(a_list)[:n], np.concatenate(d_list)[:n]
+    return tuple(np.concatenate([c[i] for c in chunks])[:n] for i in range(3))  # type: ignore[return-value]
 
 
 def image_placements(
     scenario: Scenario,
     wand_a: FloatArray,
     direction: FloatArray,
+    facing: FloatArray,
     noise_px: float,
     rng: np.random.Generator,
     *,
     first_frame: int = 0,
 ) -> SimulatedData:
     """Project placements into every camera and add Gaussian noise (NaN where not visible)."""
-    points = wand_a[:, None, :] + scenario.wand.offsets[None, :, None] * direction[:, None, :]
+    points = _wand_points(scenario, wand_a, direction)
+    seen = visibility(scenario, wand_a, direction, facing)
     uv = np.full((wand_a.shape[0], len(scenario.cameras), 3, 2), np.nan)
     for i, camera in enumerate(scenario.cameras):
-        seen = visible(camera, points)
         projected = project(camera.model, camera.pose.apply(points))
-        uv[:, i] = np.where(seen[..., None], projected, np.nan)
+        uv[:, i] = np.where(seen[:, i, :, None], projected, np.nan)
     uv = uv + rng.normal(scale=noise_px, size=uv.shape) if noise_px > 0 else uv
     frames = np.arange(first_frame, first_frame + wand_a.shape[0])
     names = tuple(c.spec.name for c in scenario.cameras)
-    return SimulatedData(WandObservations(frames, names, uv), wand_a, direction, noise_px)
+    return SimulatedData(WandObservations(frames, names, uv), wand_a, direction, noise_px, facing)
 
 
 def simulate(scenario: Scenario, noise_px: float, rng: np.random.Generator, n: int | None = None) -> SimulatedData:
     """Sample ``n`` (default: the scenario's count) placements and image them with noise."""
-    wand_a, direction = sample_placements(scenario, scenario.n_placements if n is None else n, rng)
-    return image_placements(scenario, wand_a, direction, noise_px, rng)
+    wand_a, direction, facing = sample_placements(scenario, scenario.n_placements if n is None else n, rng)
+    return image_placements(scenario, wand_a, direction, facing, noise_px, rng)

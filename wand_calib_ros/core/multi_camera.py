@@ -1,0 +1,87 @@
+"""Step 1 of Section III-B: initial intrinsics and poses of every camera from chained pairs.
+
+Only the pairs on the shortest paths of the vision graph are calibrated (Steps
+1-3 of the two-camera method). Poses are chained along each path with
+R_ik = R_jk R_ij, T_ik = R_jk T_ij + T_jk (paper eq. transfer). A camera's
+intrinsics come from the calibrated pair in which it shares the most
+placements; a camera already calibrated in an earlier pair starts its later
+pairs from those intrinsics instead of re-trying every lens projection.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wand_calib_ros.core.camera_model import CameraModel
+from wand_calib_ros.core.geometry import Pose
+from wand_calib_ros.core.pairwise import PairOptions, initialise_pair
+from wand_calib_ros.core.result import LensTrial
+from wand_calib_ros.core.rig import RigSpec
+from wand_calib_ros.core.vision_graph import VisionGraph
+
+FloatArray = NDArray[np.float64]
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, eq=False)
+class RigInitialisation:
+    """Initial values for the global bundle adjustment.
+
+    Attributes:
+        models: per camera intrinsics (rig order).
+        poses: per camera pose in the reference camera's frame.
+        projections: per camera, the Step 1 projection its start came from.
+        trials: the lens starts tried on every calibrated pair.
+    """
+
+    models: tuple[CameraModel, ...]
+    poses: tuple[Pose, ...]
+    projections: tuple[str, ...]
+    trials: tuple[LensTrial, ...]
+
+
+def initialise_rig(
+    rig: RigSpec, uv: FloatArray, graph: VisionGraph, options: PairOptions = PairOptions()
+) -> RigInitialisation:
+    """Calibrate the vision graph's tree edges pairwise and chain them from the reference.
+
+    Args:
+        rig: the rig description (cameras in the order of ``uv``'s axis 1).
+        uv: (P, C, 3, 2) pixels, NaN where not seen.
+        graph: the vision graph with the pairs to calibrate.
+        options: settings of the pairwise calibrations.
+    """
+    complete = np.all(np.isfinite(uv), axis=(2, 3))
+    n_cameras = len(rig.cameras)
+    poses: list[Pose | None] = [None] * n_cameras
+    poses[graph.reference] = Pose.identity()
+    starts: list[tuple[str, CameraModel] | None] = [None] * n_cameras
+    support = np.zeros(n_cameras, dtype=np.int64)  # placements behind each camera's current intrinsics
+    trials: list[LensTrial] = []
+    for parent, child in graph.edges:
+        both = complete[:, parent] & complete[:, child]
+        log.info("pair %s-%s: %d common placements", rig.cameras[parent].name, rig.cameras[child].name, both.sum())
+        init = initialise_pair(
+            (rig.cameras[parent], rig.cameras[child]),
+            uv[both, parent],
+            uv[both, child],
+            rig.wand,
+            options,
+            known=(starts[parent], starts[child]),
+        )
+        trials.extend(init.trials)
+        parent_pose = poses[parent]
+        assert parent_pose is not None  # edges are ordered parents first
+        poses[child] = init.fit.pose.compose(parent_pose)
+        for camera, model, projection in zip((parent, child), init.fit.models, init.projections, strict=True):
+            if int(both.sum()) > support[camera]:
+                starts[camera] = (projection, model)
+                support[camera] = int(both.sum())
+    models = tuple(s[1] for s in starts if s is not None)
+    projections = tuple(s[0] for s in starts if s is not None)
+    assert len(models) == n_cameras and all(p is not None for p in poses)
+    return RigInitialisation(models, tuple(p for p in poses if p is not None), projections, tuple(trials))
