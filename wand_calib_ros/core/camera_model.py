@@ -160,9 +160,10 @@ def turns_over_in_image(model: CameraModel, max_view_angle: float) -> bool:
 def inverse_radius(k: FloatArray, r: FloatArray, *, tol: float = 1e-13) -> FloatArray:
     """theta with r(theta) = r on the monotonic branch [0, monotonic_limit(k)].
 
-    Safeguarded Newton iteration (bisection whenever a step leaves the bracket),
-    vectorised over any shape. Radii beyond the largest one the model reaches
-    give NaN: such pixels cannot be explained by the model.
+    Newton's method from theta = r / k1, kept inside the branch; elements it does
+    not settle in a few steps finish with a bracketed (bisection-safeguarded)
+    Newton iteration. Vectorised over any shape. Radii beyond the largest one the
+    model reaches give NaN: such pixels cannot be explained by the model.
 
     Args:
         k: (5,) radial coefficients, mm.
@@ -174,10 +175,24 @@ def inverse_radius(k: FloatArray, r: FloatArray, *, tol: float = 1e-13) -> Float
     r_max = float(radius(k, np.array(limit)))
     outside = ~(r <= r_max)  # also catches NaN
     target = np.where(outside, 0.0, r)
+    theta = np.clip(target / k[0], 0.0, limit)
+    for _ in range(8):
+        step = (radius(k, theta) - target) / np.maximum(radius_derivative(k, theta), 1e-300)
+        theta = np.clip(theta - step, 0.0, limit)
+        if np.max(np.abs(step), initial=0.0) <= tol:
+            return np.where(outside, np.nan, theta)
+    slow = np.abs(radius(k, theta) - target) > tol * np.maximum(radius_derivative(k, theta), 1e-3)
+    if np.any(slow):
+        theta[slow] = _bracketed_inverse(k, target[slow], limit, tol)
+    return np.where(outside, np.nan, theta)
+
+
+def _bracketed_inverse(k: FloatArray, target: FloatArray, limit: float, tol: float) -> FloatArray:
+    """Safeguarded Newton iteration on [0, limit] (bisection whenever a step leaves the bracket)."""
     lo = np.zeros_like(target)
     hi = np.full_like(target, limit)
-    theta = np.clip(target / k[0], 0.0, limit)
-    for _ in range(100):
+    theta = 0.5 * (lo + hi)
+    for _ in range(200):
         f = radius(k, theta) - target
         lo = np.where(f <= 0, theta, lo)
         hi = np.where(f > 0, theta, hi)
@@ -190,7 +205,7 @@ def inverse_radius(k: FloatArray, r: FloatArray, *, tol: float = 1e-13) -> Float
         theta = new
         if done:
             break
-    return np.where(outside, np.nan, theta)
+    return theta
 
 
 def _split_points(points: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -292,6 +307,24 @@ def project_with_jacobian_arrays(
     return ProjectionJacobian(uv, d_point, d_intrinsics)
 
 
+def _unproject_parts(
+    model: CameraModel, uv: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+    """theta, rho, cos(phi), sin(phi), sin(theta), cos(theta) of pixels (shared by the unprojections)."""
+    uv = np.asarray(uv, dtype=np.float64)
+    if uv.ndim < 1 or uv.shape[-1] != 2:
+        raise ValueError(f"uv must have shape (..., 2), got {uv.shape}")
+    x = (uv[..., 0] - model.principal_point[0]) / model.m[0]
+    y = (uv[..., 1] - model.principal_point[1]) / model.m[1]
+    rho = np.hypot(x, y)
+    theta = inverse_radius(model.k, rho)
+    positive = rho > 0
+    safe = np.where(positive, rho, 1.0)
+    cos_phi = np.where(positive, x / safe, 1.0)
+    sin_phi = np.where(positive, y / safe, 0.0)
+    return theta, rho, cos_phi, sin_phi, np.sin(theta), np.cos(theta)
+
+
 def unproject(model: CameraModel, uv: FloatArray) -> FloatArray:
     """Unit bearing vectors of pixels (the inverse of :func:`project`).
 
@@ -303,17 +336,8 @@ def unproject(model: CameraModel, uv: FloatArray) -> FloatArray:
         (..., 3) unit vectors in the camera frame; NaN for pixels the model
         cannot reach (beyond the radius where r(theta) stops increasing).
     """
-    uv = np.asarray(uv, dtype=np.float64)
-    if uv.ndim < 1 or uv.shape[-1] != 2:
-        raise ValueError(f"uv must have shape (..., 2), got {uv.shape}")
-    xy = (uv - model.principal_point) / model.m
-    r = np.hypot(xy[..., 0], xy[..., 1])
-    theta = inverse_radius(model.k, r)
-    safe_r = np.where(r > 0, r, 1.0)
-    cos_phi = np.where(r > 0, xy[..., 0] / safe_r, 1.0)
-    sin_phi = np.where(r > 0, xy[..., 1] / safe_r, 0.0)
-    sin_theta = np.sin(theta)
-    return np.stack([sin_theta * cos_phi, sin_theta * sin_phi, np.cos(theta)], axis=-1)
+    _, _, cos_phi, sin_phi, sin_theta, cos_theta = _unproject_parts(model, uv)
+    return np.stack([sin_theta * cos_phi, sin_theta * sin_phi, cos_theta], axis=-1)
 
 
 def unproject_with_jacobian(model: CameraModel, uv: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -324,16 +348,10 @@ def unproject_with_jacobian(model: CameraModel, uv: FloatArray) -> tuple[FloatAr
         derivatives with respect to k1..k5, u0, v0 (implicit differentiation of
         r(theta) = rho).
     """
-    bearings = unproject(model, uv)
-    xy = (np.asarray(uv, dtype=np.float64) - model.principal_point) / model.m
-    rho = np.hypot(xy[:, 0], xy[:, 1])
-    theta = np.arctan2(np.hypot(bearings[:, 0], bearings[:, 1]), bearings[:, 2])
-    safe_rho = np.where(rho > 0, rho, 1.0)
-    cos_phi = np.where(rho > 0, xy[:, 0] / safe_rho, 1.0)
-    sin_phi = np.where(rho > 0, xy[:, 1] / safe_rho, 0.0)
-    sin_theta, cos_theta = np.sin(theta), np.cos(theta)
+    theta, rho, cos_phi, sin_phi, sin_theta, cos_theta = _unproject_parts(model, uv)
+    bearings = np.stack([sin_theta * cos_phi, sin_theta * sin_phi, cos_theta], axis=-1)
     # sin(theta)/rho -> 1/k1 at the centre.
-    sin_over_rho = np.where(rho > 0, sin_theta / safe_rho, 1.0 / model.k[0])
+    sin_over_rho = np.where(rho > 0, sin_theta / np.where(rho > 0, rho, 1.0), 1.0 / model.k[0])
     d_theta_d_rho = 1.0 / radius_derivative(model.k, theta)
     dm_dtheta = np.stack([cos_theta * cos_phi, cos_theta * sin_phi, -sin_theta], axis=-1)
     dm_dphi_over_sin = np.stack([-sin_phi, cos_phi, np.zeros_like(rho)], axis=-1)  # dm/dphi / sin(theta)

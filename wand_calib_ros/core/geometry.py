@@ -175,14 +175,15 @@ def triangulation_jacobian(
     """
     n, n_views = rays.shape[:2]
     offsets = np.broadcast_to(centres, (n, n_views, 3)) - points[:, None, :]  # e_v
-    along = np.einsum("nvi,nvi->nv", rays, offsets)  # w . e
-    d_along = np.einsum("nvik,nvi->nvk", d_rays, offsets)  # dw . e
-    projector = np.eye(3) - rays[..., :, None] * rays[..., None, :]
+    along = np.sum(rays * offsets, axis=-1)  # w . e
+    d_along = (offsets[..., None, :] @ d_rays)[..., 0, :]  # dw . e
+    outer = rays[..., :, None] * rays[..., None, :]
+    projector = np.eye(3) - outer
     rhs = -(d_rays * along[..., None, None] + rays[..., :, None] * d_along[..., None, :])
-    rhs = rhs + np.einsum("nvij,nvjk->nvik", projector, np.broadcast_to(d_centres, rhs.shape))
-    adjugate, det = _adjugate_sym3(n_views * np.eye(3) - np.einsum("nvi,nvj->nij", rays, rays))
+    rhs = rhs + projector @ d_centres
+    adjugate, det = _adjugate_sym3(n_views * np.eye(3) - outer.sum(axis=1))
     with np.errstate(divide="ignore", invalid="ignore"):
-        return np.einsum("nij,njk->nik", adjugate, rhs.sum(axis=1)) / det[:, None, None]
+        return (adjugate @ rhs.sum(axis=1)) / det[:, None, None]
 
 
 def wand_directions(a: FloatArray, c: FloatArray) -> FloatArray:

@@ -2,13 +2,13 @@
 
 Every plausible Step 1 start (one classic projection per camera) goes through
 Step 2 (essential matrix) and a screening run of Step 3 (wand-length LM) on a
-subset of placements; the combination with the lowest wand-length RMS wins and
-is refined by Step 3 on all placements.
+subset of placements, paired with the other camera's best start; the
+combination with the lowest wand-length RMS wins and is refined by Step 3 on a
+larger spread of placements.
 """
 
 from __future__ import annotations
 
-import itertools
 import logging
 from dataclasses import dataclass
 
@@ -43,9 +43,9 @@ class PairOptions:
     """
 
     ransac_threshold_px: float = 10.0
-    screening_placements: int = 40
-    screening_evaluations: int = 30
-    step3_placements: int = 120
+    screening_placements: int = 30
+    screening_evaluations: int = 12
+    step3_placements: int = 100
     min_placements: int = 15
     seed: int = 0
 
@@ -149,38 +149,51 @@ def initialise_pair(
     screening = _spread_subset(n, options.screening_placements)
     s0, s1 = uv0[screening], uv1[screening]
     trials: list[LensTrial] = []
-    best: tuple[WandFit, tuple[str, str], NDArray[np.bool_]] | None = None
-    for start0, start1 in itertools.product(camera_starts(specs[0], known[0]), camera_starts(specs[1], known[1])):
+    tried: dict[tuple[str, str], tuple[WandFit, NDArray[np.bool_]] | None] = {}
+
+    def attempt(start0: Start, start1: Start) -> float:
+        """Steps 2-3 (screening) for one pair of starts; returns its wand-length RMS (inf on failure)."""
         names = (start0[0], start1[0])
-        models = (start0[1], start1[1])
-        try:
-            step2 = _step2(models, s0, s1, wand, options)
-            agree = step2.inliers.reshape(-1, 3).all(axis=1)
-            fit = optimise_wand_lengths(
-                models,
-                step2.pose,
-                s0[agree],
-                s1[agree],
-                wand,
-                max_evaluations=options.screening_evaluations,
-                tolerance=1e-4,
-            )
-        except CoreError as error:
-            trials.append(LensTrial(names, float("nan"), str(error)))
-            log.info("lens start %s: failed (%s)", "/".join(names), error)
-            continue
-        trials.append(LensTrial(names, fit.rms_mm))
-        log.info("lens start %s: wand-length RMS %.3f mm", "/".join(names), fit.rms_mm)
-        if best is None or fit.rms_mm < best[0].rms_mm:
-            # Placements of the whole recording that agree with this start's epipolar geometry.
-            agree_all = _epipolar_agreement(models, step2.essential, uv0, uv1, options)
-            best = (fit, names, agree_all)
+        if names not in tried:
+            models = (start0[1], start1[1])
+            try:
+                step2 = _step2(models, s0, s1, wand, options)
+                agree = step2.inliers.reshape(-1, 3).all(axis=1)
+                fit = optimise_wand_lengths(
+                    models,
+                    step2.pose,
+                    s0[agree],
+                    s1[agree],
+                    wand,
+                    max_evaluations=options.screening_evaluations,
+                    tolerance=1e-4,
+                )
+            except CoreError as error:
+                trials.append(LensTrial(names, float("nan"), str(error)))
+                log.info("lens start %s: failed (%s)", "/".join(names), error)
+                tried[names] = None
+            else:
+                trials.append(LensTrial(names, fit.rms_mm))
+                log.info("lens start %s: wand-length RMS %.3f mm", "/".join(names), fit.rms_mm)
+                # Placements of the whole recording that agree with this start's epipolar geometry.
+                tried[names] = (fit, _epipolar_agreement(models, step2.essential, uv0, uv1, options))
+        outcome = tried[names]
+        return np.inf if outcome is None else outcome[0].rms_mm
+
+    # Each camera's candidates are tried with the other camera at its best start so far
+    # (first camera 1's, then camera 0's): every plausible projection of each camera goes
+    # through Steps 2-3, in |C0| + |C1| - 1 runs instead of |C0| x |C1|.
+    starts0, starts1 = camera_starts(specs[0], known[0]), camera_starts(specs[1], known[1])
+    best1 = min(starts1, key=lambda start: attempt(starts0[0], start))
+    best0 = min(starts0, key=lambda start: attempt(start, best1))
+    names = (best0[0], best1[0])
+    best = tried[names]
     if best is None:
         reasons = "; ".join(f"{'/'.join(t.projections)}: {t.failure}" for t in trials)
         raise DegenerateDataError(
             f"cameras '{specs[0].name}' and '{specs[1].name}': no lens start gives a relative pose ({reasons})"
         )
-    screened, names, agree_all = best
+    screened, agree_all = best
     use = _spread_subset(n, options.step3_placements) & agree_all
     fit = optimise_wand_lengths(screened.models, screened.pose, uv0[use], uv1[use], wand)
     return PairInitialisation(fit, names, tuple(trials))

@@ -20,6 +20,7 @@ from wand_calib_ros.core.bundle_adjustment import (
     BundleState,
     bundle_adjust,
     default_free_mask,
+    residuals,
 )
 from wand_calib_ros.core.camera_model import (
     CameraModel,
@@ -43,6 +44,10 @@ GATE_FRACTION = 0.01
 GATE_SIGMAS = 5.0
 #: A set-aside placement is re-admitted when none of its residuals exceeds this many sigma.
 READMIT_SIGMAS = 4.0
+#: Huber threshold of the robust pass, in robust sigmas.
+HUBER_SIGMAS = 2.0
+#: A camera view with a point further than this many robust sigmas from its reprojection is an outlier.
+VIEW_GATE_SIGMAS = 5.0
 #: The highest free radial coefficient is fixed to zero while |k| / std(k) is below this (Wald test).
 SIGNIFICANCE = 2.0
 #: Uncertainty of r(theta) at the widest observed angle (px) above which a camera gets a warning.
@@ -139,47 +144,119 @@ def refine_calibration(
         min_placements: fewest placements the bundle adjustment accepts.
     """
     wand = rig.wand
+    n_cameras = len(rig.cameras)
+    full = default_free_mask(n_cameras, reference)
     models = tuple(m.with_intrinsic_vector(np.r_[m.k[:2], 0.0, 0.0, 0.0, m.principal_point]) for m in models)
     points = triangulate_placements(models, poses, uv)
     errors = ac_length_errors(points, wand)
     threshold = gate_threshold(errors, wand)
-    keep = np.isfinite(errors) & (np.abs(errors) <= threshold)
-    log.info("gate |AC| within %.1f mm: %d placements kept, %d set aside", threshold, keep.sum(), (~keep).sum())
-    if keep.sum() < min_placements:
-        raise InsufficientDataError(
-            f"only {int(keep.sum())} placements reconstruct to the wand length within {threshold:.1f} mm "
-            f"after initialisation; need at least {min_placements}"
-        )
-    initial = BundleState(models, poses, points[keep, 0], wand_directions(points[keep, 0], points[keep, 2]))
-    warnings: list[str] = []
-    result, fixed = _adjust_with_model_selection(rig, uv[keep], initial, reference)
-    admitted, placements = _readmit(rig, uv[~keep], result, _free_mask(len(models), reference, fixed))
-    uv_used = uv[keep]
+    keep = np.flatnonzero(np.isfinite(errors) & (np.abs(errors) <= threshold))
+    log.info("gate |AC| within %.1f mm: %d placements kept, %d set aside", threshold, keep.size, len(uv) - keep.size)
+    _require(keep.size, min_placements, f"reconstruct to the wand length within {threshold:.1f} mm")
+    state = BundleState(models, poses, points[keep, 0], wand_directions(points[keep, 0], points[keep, 2]))
+
+    # 1. Robust adjustment (Huber), then views with a point off by more than VIEW_GATE_SIGMAS are rejected.
+    robust, sigma = _robust_adjustment(state, BundleProblem.from_dense(wand, uv[keep]), full)
+    clean, rejected = gate_views(uv[keep], robust.residuals, VIEW_GATE_SIGMAS * sigma)
+    still = _enough_views(clean)
+    log.info("robust pass: sigma %.3f px, %d views rejected, %d placements left", sigma, rejected.sum(), still.sum())
+    _require(int(still.sum()), min_placements, "keep two clean views after outlier rejection")
+    used, uv_used = keep[still], clean[still]
+    state = _subset(robust.state, still)
+
+    # 2. Least squares on the clean data, dropping the distortion terms the data do not support.
+    result, fixed = _adjust_with_model_selection(rig, uv_used, state, reference)
+    free = _free_mask(n_cameras, reference, fixed)
+
+    # 3. Placements set aside so far come back with their clean views if they fit the solution.
+    aside = np.setdiff1d(np.arange(len(uv)), used)
+    admitted, admitted_uv, admitted_state = _readmit(rig, uv[aside], result)
     if admitted.any():
-        log.info("%d placements set aside by the gate agree with the solution: re-admitted", admitted.sum())
-        back = np.flatnonzero(~keep)[admitted]
-        uv_used = np.concatenate([uv_used, uv[back]])
-        keep[back] = True
+        log.info("%d placements set aside earlier fit the solution: re-admitted", admitted.sum())
+        used = np.concatenate([used, aside[admitted]])
+        uv_used = np.concatenate([uv_used, admitted_uv])
         state = BundleState(
             result.state.models,
             result.state.poses,
-            np.concatenate([result.state.wand_a, placements.wand_a[admitted]]),
-            np.concatenate([result.state.wand_direction, placements.wand_direction[admitted]]),
+            np.concatenate([result.state.wand_a, admitted_state.wand_a]),
+            np.concatenate([result.state.wand_direction, admitted_state.wand_direction]),
         )
-        result = bundle_adjust(
-            state, BundleProblem.from_dense(wand, uv_used), _free_mask(len(models), reference, fixed)
-        )
+        result = bundle_adjust(state, BundleProblem.from_dense(wand, uv_used), free)
+    warnings: list[str] = []
     for model, spec in zip(result.state.models, rig.cameras, strict=True):
         if turns_over_in_image(model, spec.max_view_angle):
             warnings.append(
                 f"{spec.name}: r(theta) turns over at {np.degrees(monotonic_limit(model.k)):.0f} deg, inside the "
                 f"image and below max_view_angle_deg {spec.max_view_angle_deg:g}: check the rig description"
             )
+    seen = np.any(np.isfinite(uv[used]), axis=(2, 3))
+    rejected_views = (seen & ~np.any(np.isfinite(uv_used), axis=(2, 3))).sum(axis=0)
     problem = BundleProblem.from_dense(wand, uv_used)
-    rejected = int(np.sum(np.isfinite(errors)) - np.sum(keep & np.isfinite(errors)))
     return _assemble(
-        rig, uv_used, problem, result, reference, fixed, initial_projections, lens_trials, rejected, warnings
+        rig,
+        uv_used,
+        problem,
+        result,
+        reference,
+        fixed,
+        initial_projections,
+        lens_trials,
+        len(uv) - used.size,
+        rejected_views,
+        warnings,
     )
+
+
+def _require(count: int, needed: int, what: str) -> None:
+    if count < needed:
+        raise InsufficientDataError(f"only {count} placements {what}; need at least {needed}")
+
+
+def robust_sigma(residuals: FloatArray) -> float:
+    """Per-coordinate noise from the median 2D residual norm (Rayleigh: median = 1.1774 sigma)."""
+    return float(np.median(np.linalg.norm(residuals, axis=1)) / np.sqrt(2 * np.log(2)))
+
+
+def gate_views(uv: FloatArray, residuals: FloatArray, threshold_px: float) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """Remove every camera view with a point whose residual exceeds ``threshold_px``.
+
+    Args:
+        uv: (P, C, 3, 2) pixels of the adjusted placements (NaN where not seen).
+        residuals: (M, 2) residuals of ``BundleProblem.from_dense(wand, uv)``.
+        threshold_px: largest 2D residual a view may have.
+
+    Returns:
+        The pixels with rejected views set to NaN, and the (P, C) mask of rejected views.
+    """
+    placement, camera, _ = np.nonzero(np.all(np.isfinite(uv), axis=-1))
+    worst = np.zeros(uv.shape[:2])
+    np.maximum.at(worst, (placement, camera), np.linalg.norm(residuals, axis=1))
+    rejected = worst > threshold_px
+    return np.where(rejected[..., None, None], np.nan, uv), rejected
+
+
+def _enough_views(uv: FloatArray) -> NDArray[np.bool_]:
+    """(P,) placements seen completely by at least two cameras."""
+    return np.all(np.isfinite(uv), axis=(2, 3)).sum(axis=1) >= 2
+
+
+def _subset(state: BundleState, mask: NDArray[np.bool_]) -> BundleState:
+    return BundleState(state.models, state.poses, state.wand_a[mask], state.wand_direction[mask])
+
+
+def _robust_adjustment(
+    state: BundleState, problem: BundleProblem, free: NDArray[np.bool_]
+) -> tuple[BundleResult, float]:
+    """Huber adjustment with the loss scale from the initial state's robust noise estimate.
+
+    Returns:
+        The result and the robust estimate of the pixel noise: the residuals' robust
+        scale corrected for the degrees of freedom the fit absorbs (sqrt(m / (m - p))).
+    """
+    sigma = robust_sigma(residuals(state, problem))
+    result = bundle_adjust(state, problem, free, loss_scale=HUBER_SIGMAS * sigma)
+    m, p = result.dof
+    return result, robust_sigma(result.residuals) * np.sqrt(m / max(m - p, 1))
 
 
 def _adjust_with_model_selection(
@@ -251,40 +328,53 @@ def _reduce_radial(
     return tuple(fixed_now), model.with_intrinsic_vector(estimate)
 
 
-def _readmit(
-    rig: RigSpec, uv: FloatArray, result: BundleResult, free: NDArray[np.bool_]
-) -> tuple[NDArray[np.bool_], BundleState]:
-    """Which set-aside placements fit the solved cameras (every residual within READMIT_SIGMAS sigma).
+def _readmit(rig: RigSpec, uv: FloatArray, result: BundleResult) -> tuple[NDArray[np.bool_], FloatArray, BundleState]:
+    """Set-aside placements that fit the solved cameras once their outlying views are removed.
 
-    Each placement is triangulated with the final cameras and its five wand
-    parameters are optimised with the cameras held fixed.
+    Each placement is triangulated with the solved cameras, its five wand
+    parameters are fitted robustly with the cameras held fixed, views with a
+    point beyond VIEW_GATE_SIGMAS sigma are dropped, and the placement comes
+    back if two complete views remain and all their points lie within
+    READMIT_SIGMAS sigma.
 
     Returns:
-        (S,) mask over the set-aside placements and their optimised wand parameters.
+        (S,) mask over the set-aside placements, the admitted ones' clean pixels
+        (A, C, 3, 2) and their fitted wand parameters.
     """
-    empty = BundleState(result.state.models, result.state.poses, np.zeros((0, 3)), np.zeros((0, 3)))
-    if uv.shape[0] == 0:
-        return np.zeros(0, dtype=bool), empty
-    points = triangulate_placements(result.state.models, result.state.poses, uv)
-    usable = np.all(np.isfinite(points), axis=(1, 2)) & (np.linalg.norm(points[:, 2] - points[:, 0], axis=1) > 0)
+    models, poses = result.state.models, result.state.poses
     admitted = np.zeros(uv.shape[0], dtype=bool)
-    wand_a = np.full((uv.shape[0], 3), np.nan)
-    direction = np.full((uv.shape[0], 3), np.nan)
+    empty = (admitted, uv[:0], BundleState(models, poses, np.zeros((0, 3)), np.zeros((0, 3))))
+    if uv.shape[0] == 0:
+        return empty
+    points = triangulate_placements(models, poses, uv)
+    usable = np.all(np.isfinite(points), axis=(1, 2)) & (np.linalg.norm(points[:, 2] - points[:, 0], axis=1) > 0)
+    usable &= _enough_views(uv)
     if not usable.any():
-        return admitted, BundleState(result.state.models, result.state.poses, wand_a, direction)
-    start = BundleState(
-        result.state.models,
-        result.state.poses,
-        points[usable, 0],
-        wand_directions(points[usable, 0], points[usable, 2]),
+        return empty
+    index = np.flatnonzero(usable)
+    start = BundleState(models, poses, points[index, 0], wand_directions(points[index, 0], points[index, 2]))
+    fixed_cameras = np.zeros((len(models), N_CAMERA_PARAMS), dtype=bool)
+    fitted = bundle_adjust(
+        start,
+        BundleProblem.from_dense(rig.wand, uv[index]),
+        fixed_cameras,
+        loss_scale=HUBER_SIGMAS * result.sigma,
+        max_iterations=30,
     )
-    problem = BundleProblem.from_dense(rig.wand, uv[usable])
-    fitted = bundle_adjust(start, problem, np.zeros_like(free), max_iterations=20)
+    clean, _ = gate_views(uv[index], fitted.residuals, VIEW_GATE_SIGMAS * result.sigma)
+    ok = _enough_views(clean)
+    if not ok.any():
+        return empty
+    # Refit on the clean views and require every remaining point to fit.
+    refit = bundle_adjust(
+        _subset(fitted.state, ok), BundleProblem.from_dense(rig.wand, clean[ok]), fixed_cameras, max_iterations=30
+    )
+    problem = BundleProblem.from_dense(rig.wand, clean[ok])
     worst = np.zeros(problem.n_placements)
-    np.maximum.at(worst, problem.placement, np.linalg.norm(fitted.residuals, axis=1))
-    admitted[usable] = worst <= READMIT_SIGMAS * result.sigma
-    wand_a[usable], direction[usable] = fitted.state.wand_a, fitted.state.wand_direction
-    return admitted, BundleState(result.state.models, result.state.poses, wand_a, direction)
+    np.maximum.at(worst, problem.placement, np.linalg.norm(refit.residuals, axis=1))
+    good = worst <= READMIT_SIGMAS * result.sigma
+    admitted[index[np.flatnonzero(ok)[good]]] = True
+    return admitted, clean[ok][good], _subset(refit.state, good)
 
 
 def radial_std_px(model: CameraModel, covariance: FloatArray, theta: float) -> float:
@@ -326,6 +416,7 @@ def _assemble(
     initial_projections: tuple[str, ...],
     lens_trials: tuple[LensTrial, ...],
     rejected: int,
+    rejected_views: NDArray[np.int64],
     warnings: list[str],
 ) -> CalibrationResult:
     state = result.state
@@ -337,6 +428,12 @@ def _assemble(
         rms = float(np.sqrt(np.mean(result.residuals[mine] ** 2))) if mine.any() else float("nan")
         std = {name: float(result.camera_std[c, i]) for i, name in enumerate(CAMERA_PARAM_NAMES) if free[c, i]}
         warnings.extend(_coverage_warnings(spec, state.models[c], max_theta[c], result, c))
+        views = int(np.unique(problem.placement[mine]).size)
+        if rejected_views[c]:
+            warnings.append(
+                f"{spec.name}: {rejected_views[c]} of {views + rejected_views[c]} views rejected as outliers "
+                f"(a point more than {VIEW_GATE_SIGMAS:g} sigma = {VIEW_GATE_SIGMAS * result.sigma:.1f} px off)"
+            )
         cameras.append(
             CameraCalibration(
                 spec.name,
@@ -348,6 +445,8 @@ def _assemble(
                 float(np.degrees(max_theta[c])),
                 initial_projections[c],
                 tuple(f"k{i + 1}" for i in sorted(fixed.per_camera[c])),
+                views,
+                int(rejected_views[c]),
             )
         )
     points = triangulate_placements(state.models, state.poses, uv)

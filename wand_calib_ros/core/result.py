@@ -30,6 +30,8 @@ class CameraCalibration:
         max_observed_theta_deg: largest off-axis angle among its observations.
         initial_projection: the classic projection its Step 1 start came from.
         fixed_coefficients: radial coefficients held at zero (e.g. ("k5",)).
+        n_views: placements it contributed to the bundle adjustment.
+        rejected_views: its views (of used placements) rejected as outliers.
     """
 
     name: str
@@ -41,6 +43,8 @@ class CameraCalibration:
     max_observed_theta_deg: float
     initial_projection: str
     fixed_coefficients: tuple[str, ...]
+    n_views: int
+    rejected_views: int
 
 
 @dataclass(frozen=True)

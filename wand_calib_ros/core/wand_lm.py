@@ -120,14 +120,12 @@ class _WandProblem:
         d_rays = np.zeros((rays.shape[0], 2, 3, 14))
         d_centres = np.zeros((2, 3, 14))
         d_rays[:, 0, :, 0:4] = dm0[:, :, _STEP3_INTRINSICS]
-        d_rays[:, 1, :, 4:8] = np.einsum("ji,njk->nik", rotation, dm1[:, :, _STEP3_INTRINSICS])
+        d_rays[:, 1, :, 4:8] = rotation.T @ dm1[:, :, _STEP3_INTRINSICS]
         d_rotation = _rotation_derivatives(x[8:11])  # (3 params, 3, 3)
-        d_rays[:, 1, :, 8:11] = np.einsum("kji,nj->nik", d_rotation, m1)
-        d_centres[1, :, 8:11] = -np.einsum("kji,j->ik", d_rotation, translation)
+        d_rays[:, 1, :, 8:11] = (m1 @ d_rotation).transpose(1, 2, 0)  # (dR_k^T m1)_i = (m1 @ dR_k)_i
+        d_centres[1, :, 8:11] = -(translation @ d_rotation).T
         d_centres[1, :, 11:14] = -rotation.T
-        d_points = triangulation_jacobian(
-            points, rays, centres, d_rays, np.broadcast_to(d_centres, d_rays.shape)
-        ).reshape(n, 3, 3, 14)
+        d_points = triangulation_jacobian(points, rays, centres, d_rays, d_centres).reshape(n, 3, 3, 14)
         points = points.reshape(n, 3, 3)
         residuals = np.empty((n, 3))
         jacobian = np.empty((n, 3, 14))
@@ -136,7 +134,7 @@ class _WandProblem:
             distance = np.linalg.norm(delta, axis=-1)
             residuals[:, column] = self.lengths[column] - distance
             unit = delta / distance[:, None]
-            jacobian[:, column] = -np.einsum("ni,nik->nk", unit, d_points[:, q] - d_points[:, p])
+            jacobian[:, column] = -(unit[:, None, :] @ (d_points[:, q] - d_points[:, p]))[:, 0, :]
         bad = ~np.isfinite(residuals) | ~np.all(np.isfinite(jacobian), axis=-1)
         # A placement that cannot be reconstructed costs as much as a wand of length zero.
         residuals[bad] = self.wand.L

@@ -76,6 +76,8 @@ def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
             {
                 "rms_reprojection_px": float(camera.rms_reprojection_px),
                 "n_observations": int(camera.n_observations),
+                "n_views": int(camera.n_views),
+                "rejected_views": int(camera.rejected_views),
                 "std": {k: float(v) for k, v in camera.parameter_std.items()},
                 "max_observed_theta_deg": float(camera.max_observed_theta_deg),
                 "initial_projection": camera.initial_projection,
