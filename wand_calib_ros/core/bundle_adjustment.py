@@ -160,7 +160,8 @@ def _linearise(
     k, mm, pp, rotations, translations = _camera_arrays(state)
     c = problem.camera
     world = _world_points(state, problem)
-    rotated = np.einsum("mij,mj->mi", rotations[c], world)
+    camera_rotations = rotations[c]
+    rotated = (camera_rotations @ world[..., None])[..., 0]
     projection = project_with_jacobian_arrays(k[c], mm[c], pp[c], rotated + translations[c])
     res = projection.uv - problem.uv
     if not jacobians:
@@ -168,14 +169,14 @@ def _linearise(
     dp = projection.d_point  # (M, 2, 3)
     jc = np.empty((res.shape[0], 2, N_CAMERA_PARAMS))
     jc[:, :, :N_INTRINSIC] = projection.d_intrinsics
-    jc[:, :, N_INTRINSIC : N_INTRINSIC + 3] = -np.einsum("mij,mjk->mik", dp, skew(rotated))
+    jc[:, :, N_INTRINSIC : N_INTRINSIC + 3] = -(dp @ skew(rotated))
     jc[:, :, N_INTRINSIC + 3 :] = dp
-    dp_r = np.einsum("mij,mjk->mik", dp, rotations[c])  # d uv / d world point
+    dp_r = dp @ camera_rotations  # d uv / d world point
     basis = tangent_basis(state.wand_direction)[problem.placement]  # (M, 3, 2)
     offsets = problem.wand.offsets[problem.point]
     jp = np.empty((res.shape[0], 2, N_PLACEMENT_PARAMS))
     jp[:, :, :3] = dp_r
-    jp[:, :, 3:] = offsets[:, None, None] * np.einsum("mij,mjk->mik", dp_r, basis)
+    jp[:, :, 3:] = offsets[:, None, None] * (dp_r @ basis)
     return res, jc, jp
 
 
@@ -196,39 +197,44 @@ class _Structure:
     """Index structure of the Schur complement, computed once per problem.
 
     A block is one (placement, camera) pair; observations are sorted by block.
+    Sums over observations, blocks and placements are products with sparse
+    0/1 indicator matrices (much faster than ``np.add.reduceat`` on 3D arrays).
     """
 
     block_camera: IntArray  # (B,)
     block_placement: IntArray  # (B,)
-    block_starts: IntArray  # (B,) first observation of each block
     placement_block_starts: IntArray  # (P,) first block of each placement
-    placement_obs_starts: IntArray  # (P,) first observation of each placement
     observations_of_camera: tuple[IntArray, ...]  # per camera, its observation indices
-    block_to_camera: scipy.sparse.csr_matrix  # (C, B) indicator
+    obs_to_block: scipy.sparse.csr_matrix  # (B, M)
+    obs_to_placement: scipy.sparse.csr_matrix  # (P, M)
+    block_to_placement: scipy.sparse.csr_matrix  # (P, B)
+    block_to_camera: scipy.sparse.csr_matrix  # (C, B)
+
+
+def _indicator(rows: IntArray, n_rows: int) -> scipy.sparse.csr_matrix:
+    """(n_rows, len(rows)) matrix summing columns into their row."""
+    return scipy.sparse.csr_matrix((np.ones(rows.size), (rows, np.arange(rows.size))), shape=(n_rows, rows.size))
 
 
 def _structure(problem: BundleProblem) -> _Structure:
     order_key = problem.placement * problem.n_cameras + problem.camera
     if np.any(np.diff(order_key) < 0):
         raise ValueError("observations must be sorted by placement, then camera")
-    keys, block_starts = np.unique(order_key, return_index=True)
+    keys, block_of_obs = np.unique(order_key, return_inverse=True)
     block_camera = keys % problem.n_cameras
     block_placement = keys // problem.n_cameras
     if np.unique(block_placement).size != problem.n_placements:
         raise CalibrationFailedError("a placement has no observation")
-    placement_block_starts = np.searchsorted(block_placement, np.arange(problem.n_placements))
-    c = problem.n_cameras
-    indicator = scipy.sparse.csr_matrix(
-        (np.ones(block_camera.size), (block_camera, np.arange(block_camera.size))), shape=(c, block_camera.size)
-    )
+    c, p, b = problem.n_cameras, problem.n_placements, keys.size
     return _Structure(
         block_camera,
         block_placement,
-        block_starts,
-        placement_block_starts,
-        block_starts[placement_block_starts],
+        np.searchsorted(block_placement, np.arange(p)),
         tuple(np.flatnonzero(problem.camera == i) for i in range(c)),
-        indicator,
+        _indicator(block_of_obs, b),
+        _indicator(problem.placement, p),
+        _indicator(block_placement, p),
+        _indicator(block_camera, c),
     )
 
 
@@ -261,10 +267,11 @@ def _normal_equations(
         rows = jc[structure.observations_of_camera[c]].reshape(-1, N_CAMERA_PARAMS)
         u[c] = rows.T @ rows
         gc[c] = -(rows.T @ res[structure.observations_of_camera[c]].reshape(-1))
-    w = np.add.reduceat(jc.transpose(0, 2, 1) @ jp, structure.block_starts, axis=0)
+    m = res.shape[0]
+    w = (structure.obs_to_block @ (jc.transpose(0, 2, 1) @ jp).reshape(m, -1)).reshape(-1, N_CAMERA_PARAMS, 5)
     jp_t = jp.transpose(0, 2, 1)
-    v = np.add.reduceat(jp_t @ jp, structure.placement_obs_starts, axis=0)
-    gp = -np.add.reduceat((jp_t @ res[..., None])[..., 0], structure.placement_obs_starts, axis=0)
+    v = (structure.obs_to_placement @ (jp_t @ jp).reshape(m, -1)).reshape(-1, 5, 5)
+    gp = -(structure.obs_to_placement @ (jp_t @ res[..., None])[..., 0])
     return u, v, w, gc, gp
 
 
@@ -323,7 +330,7 @@ def _back_substitute(
     delta_c: FloatArray, v_inv: FloatArray, w: FloatArray, gp: FloatArray, structure: _Structure
 ) -> FloatArray:
     wt_dc = (w.transpose(0, 2, 1) @ delta_c[structure.block_camera][..., None])[..., 0]  # (B, 5)
-    per_placement = np.add.reduceat(wt_dc, structure.placement_block_starts, axis=0)
+    per_placement = structure.block_to_placement @ wt_dc
     return (v_inv @ (gp - per_placement)[..., None])[..., 0]
 
 

@@ -76,8 +76,8 @@ def initialise_rig(
         trials.extend(init.trials)
         parent_pose = poses[parent]
         assert parent_pose is not None  # edges are ordered parents first
-        poses[child] = init.fit.pose.compose(parent_pose)
-        for camera, model, projection in zip((parent, child), init.fit.models, init.projections, strict=True):
+        poses[child] = init.pose.compose(parent_pose)
+        for camera, model, projection in zip((parent, child), init.models, init.projections, strict=True):
             if int(both.sum()) > support[camera]:
                 starts[camera] = (projection, model)
                 support[camera] = int(both.sum())

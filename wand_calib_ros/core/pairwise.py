@@ -15,10 +15,19 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from wand_calib_ros.core.bundle_adjustment import (
+    BundleProblem,
+    BundleState,
+    bundle_adjust,
+    default_free_mask,
+    residuals,
+)
 from wand_calib_ros.core.camera_model import CameraModel, unproject
 from wand_calib_ros.core.errors import CoreError, DegenerateDataError, InsufficientDataError
 from wand_calib_ros.core.essential import RelativePose, epipolar_angles, relative_pose
+from wand_calib_ros.core.geometry import Pose, wand_directions
 from wand_calib_ros.core.intrinsics_init import initial_model, lens_candidates
+from wand_calib_ros.core.refine import robust_sigma, triangulate_placements
 from wand_calib_ros.core.result import LensTrial
 from wand_calib_ros.core.rig import CameraSpec, WandSpec
 from wand_calib_ros.core.wand_lm import WandFit, optimise_wand_lengths
@@ -52,8 +61,18 @@ class PairOptions:
 
 @dataclass(frozen=True, eq=False)
 class PairInitialisation:
-    """Steps 1-3 result for cameras (0, 1) of a pair."""
+    """Pairwise calibration of cameras (0, 1).
 
+    Attributes:
+        models: intrinsics after the pair's bundle adjustment (k1, k2, principal point).
+        pose: camera 1 relative to camera 0 after it.
+        fit: the Step 3 solution it started from.
+        projections: the Step 1 projection each camera started from.
+        trials: every lens start tried and its Step 3 wand-length RMS.
+    """
+
+    models: tuple[CameraModel, CameraModel]
+    pose: Pose
     fit: WandFit
     projections: tuple[str, str]
     trials: tuple[LensTrial, ...]
@@ -196,7 +215,38 @@ def initialise_pair(
     screened, agree_all = best
     use = _spread_subset(n, options.step3_placements) & agree_all
     fit = optimise_wand_lengths(screened.models, screened.pose, uv0[use], uv1[use], wand)
-    return PairInitialisation(fit, names, tuple(trials))
+    models, pose = _pair_bundle(fit, uv0[use], uv1[use], wand)
+    return PairInitialisation(models, pose, fit, names, tuple(trials))
+
+
+def _pair_bundle(
+    fit: WandFit, uv0: FloatArray, uv1: FloatArray, wand: WandSpec
+) -> tuple[tuple[CameraModel, CameraModel], Pose]:
+    """A robust bundle adjustment of the pair on the Step 3 placements (k1, k2, principal points, pose).
+
+    Step 3 only matches wand lengths, which leaves the rays of the two cameras
+    slightly skew; this makes the pair geometrically consistent before poses
+    are chained through the vision graph.
+    """
+    uv = np.stack([uv0, uv1], axis=1)
+    points = triangulate_placements(fit.models, (Pose.identity(), fit.pose), uv)
+    ok = np.all(np.isfinite(points), axis=(1, 2))
+    if ok.sum() < 3:
+        return fit.models, fit.pose
+    state = BundleState(
+        fit.models, (Pose.identity(), fit.pose), points[ok, 0], wand_directions(points[ok, 0], points[ok, 2])
+    )
+    problem = BundleProblem.from_dense(wand, uv[ok])
+    free = default_free_mask(2)
+    free[:, 2:5] = False
+    try:
+        result = bundle_adjust(
+            state, problem, free, loss_scale=2.0 * robust_sigma(residuals(state, problem)), max_iterations=30
+        )
+    except CoreError:
+        return fit.models, fit.pose
+    models = result.state.models
+    return (models[0], models[1]), result.state.poses[1]
 
 
 def _epipolar_agreement(

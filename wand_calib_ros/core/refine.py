@@ -156,7 +156,11 @@ def refine_calibration(
     state = BundleState(models, poses, points[keep, 0], wand_directions(points[keep, 0], points[keep, 2]))
 
     # 1. Robust adjustment (Huber), then views with a point off by more than VIEW_GATE_SIGMAS are rejected.
-    robust, sigma = _robust_adjustment(state, BundleProblem.from_dense(wand, uv[keep]), full)
+    # k3..k5 stay at zero here: the robust pass only has to find the outliers, and the
+    # low-order model converges in a few iterations even from a rough start.
+    low_order = full.copy()
+    low_order[:, 2:5] = False
+    robust, sigma = _robust_adjustment(state, BundleProblem.from_dense(wand, uv[keep]), low_order)
     clean, rejected = gate_views(uv[keep], robust.residuals, VIEW_GATE_SIGMAS * sigma)
     still = _enough_views(clean)
     log.info("robust pass: sigma %.3f px, %d views rejected, %d placements left", sigma, rejected.sum(), still.sum())
