@@ -259,8 +259,9 @@ def _normal_equations(
     res: FloatArray, jc: FloatArray, jp: FloatArray, weights: FloatArray, structure: _Structure, n_cameras: int
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
     """U (C,13,13), V (P,5,5), W (B,13,5), gc (C,13), gp (P,5) of the weighted problem, g = -J^T W r."""
-    root = np.sqrt(weights)[:, None, None]
-    jc, jp, res = jc * root, jp * root, res * root[:, :, 0]
+    if not np.all(weights == 1.0):
+        root = np.sqrt(weights)[:, None, None]
+        jc, jp, res = jc * root, jp * root, res * root[:, :, 0]
     u = np.empty((n_cameras, N_CAMERA_PARAMS, N_CAMERA_PARAMS))
     gc = np.empty((n_cameras, N_CAMERA_PARAMS))
     for c in range(n_cameras):
@@ -400,8 +401,12 @@ def bundle_adjust(
         u, v, w, gc, gp = _normal_equations(res, jc, jp, weights, structure, n_cameras)
         accepted = False
         for _ in range(30):
-            s, rhs, v_inv = _reduced_system(_damp(u, lam), _damp(v, lam), w, gc, gp, structure, n_cameras)
-            delta_c = _solve_free(s, rhs, free_flat).reshape(n_cameras, N_CAMERA_PARAMS)
+            if free_flat.any():
+                s, rhs, v_inv = _reduced_system(_damp(u, lam), _damp(v, lam), w, gc, gp, structure, n_cameras)
+                delta_c = _solve_free(s, rhs, free_flat).reshape(n_cameras, N_CAMERA_PARAMS)
+            else:  # placements only: independent 5x5 systems
+                v_inv = np.linalg.inv(_damp(v, lam))
+                delta_c = np.zeros((n_cameras, N_CAMERA_PARAMS))
             delta_p = _back_substitute(delta_c, v_inv, w, gp, structure)
             try:
                 candidate = _apply_step(state, delta_c, delta_p)
@@ -445,6 +450,9 @@ def _camera_covariance(
     m = res.size
     p = int(free_flat.sum()) + N_PLACEMENT_PARAMS * problem.n_placements
     sigma2 = float(np.sum(weights[:, None] * res**2)) / max(m - p, 1)
+    size = problem.n_cameras * N_CAMERA_PARAMS
+    if not free_flat.any():
+        return np.zeros((size, size)), float(np.sqrt(sigma2)), (m, p)
     s, _, _ = _reduced_system(u, _damp(v, 0.0), w, gc, gp, structure, problem.n_cameras)
     covariance = np.zeros_like(s)
     sub = s[np.ix_(free_flat, free_flat)]

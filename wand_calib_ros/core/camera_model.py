@@ -85,6 +85,16 @@ class CameraModel:
         return CameraModel(vector[:N_RADIAL], self.m, vector[N_RADIAL:N_INTRINSIC], self.image_size)
 
 
+def _odd_powers(theta: FloatArray) -> FloatArray:
+    """(N, 5) theta, theta^3, ..., theta^9 by repeated multiplication."""
+    out = np.empty((theta.shape[0], N_RADIAL))
+    out[:, 0] = theta
+    t2 = theta * theta
+    for i in range(1, N_RADIAL):
+        out[:, i] = out[:, i - 1] * t2
+    return out
+
+
 def radius(k: FloatArray, theta: FloatArray) -> FloatArray:
     """r(theta) in mm for (5,) coefficients and any-shaped angles in rad."""
     t2 = theta * theta
@@ -297,7 +307,7 @@ def project_with_jacobian_arrays(
     d_point[:, 1, 0] = mv * a_minus_b * cos_phi * sin_phi
     d_point[:, 1, 1] = mv * (b + a_minus_b * sin_phi * sin_phi)
     d_point[:, 1, 2] = mv * dz_common * y
-    powers = theta[:, None] ** (2 * np.arange(N_RADIAL) + 1)  # (N, 5)
+    powers = _odd_powers(theta)  # (N, 5)
     d_intrinsics = np.zeros((n, 2, N_INTRINSIC))
     d_intrinsics[:, 0, :N_RADIAL] = (mu * cos_phi)[:, None] * powers
     d_intrinsics[:, 1, :N_RADIAL] = (mv * sin_phi)[:, None] * powers
@@ -356,7 +366,7 @@ def unproject_with_jacobian(model: CameraModel, uv: FloatArray) -> tuple[FloatAr
     dm_dtheta = np.stack([cos_theta * cos_phi, cos_theta * sin_phi, -sin_theta], axis=-1)
     dm_dphi_over_sin = np.stack([-sin_phi, cos_phi, np.zeros_like(rho)], axis=-1)  # dm/dphi / sin(theta)
     jac = np.empty((bearings.shape[0], 3, N_INTRINSIC))
-    powers = theta[:, None] ** (2 * np.arange(N_RADIAL) + 1)
+    powers = _odd_powers(theta)
     jac[:, :, :N_RADIAL] = dm_dtheta[:, :, None] * (-powers * d_theta_d_rho[:, None])[:, None, :]
     mu, mv = model.m
     # u0: rho changes by -cos(phi)/mu, phi by sin(phi)/(rho mu); v0 likewise.

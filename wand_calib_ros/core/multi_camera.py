@@ -5,22 +5,24 @@ Only the pairs on the shortest paths of the vision graph are calibrated (Steps
 R_ik = R_jk R_ij, T_ik = R_jk T_ij + T_jk (paper eq. transfer). A camera's
 intrinsics come from the calibrated pair in which it shares the most
 placements; a camera already calibrated in an earlier pair starts its later
-pairs from those intrinsics instead of re-trying every lens projection.
+pairs from those intrinsics instead of re-trying every lens projection, and a
+camera with the same data sheet as a calibrated one inherits its projection.
 """
 
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
 from wand_calib_ros.core.camera_model import CameraModel
 from wand_calib_ros.core.geometry import Pose
+from wand_calib_ros.core.intrinsics_init import PROJECTIONS
 from wand_calib_ros.core.pairwise import PairOptions, initialise_pair
 from wand_calib_ros.core.result import LensTrial
-from wand_calib_ros.core.rig import RigSpec
+from wand_calib_ros.core.rig import CameraSpec, RigSpec
 from wand_calib_ros.core.vision_graph import VisionGraph
 
 FloatArray = NDArray[np.float64]
@@ -42,6 +44,22 @@ class RigInitialisation:
     poses: tuple[Pose, ...]
     projections: tuple[str, ...]
     trials: tuple[LensTrial, ...]
+
+
+def _with_lens_of_twin(rig: RigSpec, camera: int, starts: list[tuple[str, CameraModel] | None]) -> CameraSpec:
+    """The camera's description, restricted to the projection already chosen for an identical camera.
+
+    Cameras with the same data sheet (image size, pixel size, nominal focal length,
+    field of view, lens hint) carry the same kind of lens; re-screening every
+    projection for each of them would only cost time.
+    """
+    spec = rig.cameras[camera]
+    if spec.lens in PROJECTIONS:
+        return spec
+    for other, start in zip(rig.cameras, starts, strict=True):
+        if start is not None and replace(other, name=spec.name) == spec:
+            return replace(spec, lens=start[0])
+    return spec
 
 
 def initialise_rig(
@@ -66,7 +84,7 @@ def initialise_rig(
         both = complete[:, parent] & complete[:, child]
         log.info("pair %s-%s: %d common placements", rig.cameras[parent].name, rig.cameras[child].name, both.sum())
         init = initialise_pair(
-            (rig.cameras[parent], rig.cameras[child]),
+            (rig.cameras[parent], _with_lens_of_twin(rig, child, starts)),
             uv[both, parent],
             uv[both, child],
             rig.wand,

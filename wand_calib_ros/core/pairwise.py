@@ -29,7 +29,7 @@ from wand_calib_ros.core.geometry import Pose, wand_directions
 from wand_calib_ros.core.intrinsics_init import initial_model, lens_candidates
 from wand_calib_ros.core.refine import robust_sigma, triangulate_placements
 from wand_calib_ros.core.result import LensTrial
-from wand_calib_ros.core.rig import CameraSpec, WandSpec
+from wand_calib_ros.core.rig import CameraSpec, WandSpec, spread_subset
 from wand_calib_ros.core.wand_lm import WandFit, optimise_wand_lengths
 
 FloatArray = NDArray[np.float64]
@@ -103,13 +103,6 @@ def check_motion(spec: CameraSpec, uv: FloatArray) -> None:
         )
 
 
-def _spread_subset(n: int, size: int) -> NDArray[np.bool_]:
-    """(n,) mask of ``size`` indices spread evenly over the recording."""
-    mask = np.zeros(n, dtype=bool)
-    mask[np.unique(np.linspace(0, n - 1, min(n, size)).round().astype(np.int64))] = True
-    return mask
-
-
 #: A camera's possible starts: (name of the start, its intrinsics).
 Start = tuple[str, CameraModel]
 
@@ -165,7 +158,7 @@ def initialise_pair(
         )
     for spec, uv in zip(specs, (uv0, uv1), strict=True):
         check_motion(spec, uv)
-    screening = _spread_subset(n, options.screening_placements)
+    screening = spread_subset(n, options.screening_placements)
     s0, s1 = uv0[screening], uv1[screening]
     trials: list[LensTrial] = []
     tried: dict[tuple[str, str], tuple[WandFit, NDArray[np.bool_]] | None] = {}
@@ -213,7 +206,7 @@ def initialise_pair(
             f"cameras '{specs[0].name}' and '{specs[1].name}': no lens start gives a relative pose ({reasons})"
         )
     screened, agree_all = best
-    use = _spread_subset(n, options.step3_placements) & agree_all
+    use = np.intersect1d(spread_subset(n, options.step3_placements), np.flatnonzero(agree_all))
     fit = optimise_wand_lengths(screened.models, screened.pose, uv0[use], uv1[use], wand)
     models, pose = _pair_bundle(fit, uv0[use], uv1[use], wand)
     return PairInitialisation(models, pose, fit, names, tuple(trials))

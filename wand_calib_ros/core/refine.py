@@ -33,7 +33,7 @@ from wand_calib_ros.core.camera_model import (
 from wand_calib_ros.core.errors import InsufficientDataError
 from wand_calib_ros.core.geometry import Pose, triangulate, wand_directions
 from wand_calib_ros.core.result import CalibrationResult, CameraCalibration, LensTrial
-from wand_calib_ros.core.rig import CameraSpec, RigSpec, WandSpec
+from wand_calib_ros.core.rig import CameraSpec, RigSpec, WandSpec, spread_subset
 
 FloatArray = NDArray[np.float64]
 log = logging.getLogger(__name__)
@@ -42,8 +42,8 @@ log = logging.getLogger(__name__)
 GATE_FRACTION = 0.01
 #: ... unless that is within this many robust standard deviations of the |AC| errors (high noise).
 GATE_SIGMAS = 5.0
-#: A set-aside placement is re-admitted when none of its residuals exceeds this many sigma.
-READMIT_SIGMAS = 4.0
+#: Outliers and the distortion model are decided on at most this many placements (spread over the recording).
+COARSE_PLACEMENTS = 1500
 #: Huber threshold of the robust pass, in robust sigmas.
 HUBER_SIGMAS = 2.0
 #: A camera view with a point further than this many robust sigmas from its reprojection is an outlier.
@@ -153,6 +153,9 @@ def refine_calibration(
     keep = np.flatnonzero(np.isfinite(errors) & (np.abs(errors) <= threshold))
     log.info("gate |AC| within %.1f mm: %d placements kept, %d set aside", threshold, keep.size, len(uv) - keep.size)
     _require(keep.size, min_placements, f"reconstruct to the wand length within {threshold:.1f} mm")
+    # Coarse to fine: outliers and the distortion model are settled on a spread subset; the
+    # other placements join through the re-admission below and the final adjustment uses all.
+    keep = keep[spread_subset(keep.size, COARSE_PLACEMENTS)]
     state = BundleState(models, poses, points[keep, 0], wand_directions(points[keep, 0], points[keep, 2]))
 
     # 1. Robust adjustment (Huber), then views with a point off by more than VIEW_GATE_SIGMAS are rejected.
@@ -176,7 +179,7 @@ def refine_calibration(
     aside = np.setdiff1d(np.arange(len(uv)), used)
     admitted, admitted_uv, admitted_state = _readmit(rig, uv[aside], result)
     if admitted.any():
-        log.info("%d placements set aside earlier fit the solution: re-admitted", admitted.sum())
+        log.info("%d more placements fit the solution: admitted", admitted.sum())
         used = np.concatenate([used, aside[admitted]])
         uv_used = np.concatenate([uv_used, admitted_uv])
         state = BundleState(
@@ -333,16 +336,15 @@ def _reduce_radial(
 
 
 def _readmit(rig: RigSpec, uv: FloatArray, result: BundleResult) -> tuple[NDArray[np.bool_], FloatArray, BundleState]:
-    """Set-aside placements that fit the solved cameras once their outlying views are removed.
+    """Placements outside the adjustment that fit the solved cameras once their outlying views are removed.
 
     Each placement is triangulated with the solved cameras, its five wand
-    parameters are fitted robustly with the cameras held fixed, views with a
-    point beyond VIEW_GATE_SIGMAS sigma are dropped, and the placement comes
-    back if two complete views remain and all their points lie within
-    READMIT_SIGMAS sigma.
+    parameters are fitted robustly (Huber) with the cameras held fixed, views
+    with a point beyond VIEW_GATE_SIGMAS sigma are dropped, and the placement
+    comes in if two complete views remain.
 
     Returns:
-        (S,) mask over the set-aside placements, the admitted ones' clean pixels
+        (S,) mask over the given placements, the admitted ones' clean pixels
         (A, C, 3, 2) and their fitted wand parameters.
     """
     models, poses = result.state.models, result.state.poses
@@ -357,28 +359,17 @@ def _readmit(rig: RigSpec, uv: FloatArray, result: BundleResult) -> tuple[NDArra
         return empty
     index = np.flatnonzero(usable)
     start = BundleState(models, poses, points[index, 0], wand_directions(points[index, 0], points[index, 2]))
-    fixed_cameras = np.zeros((len(models), N_CAMERA_PARAMS), dtype=bool)
     fitted = bundle_adjust(
         start,
         BundleProblem.from_dense(rig.wand, uv[index]),
-        fixed_cameras,
+        np.zeros((len(models), N_CAMERA_PARAMS), dtype=bool),
         loss_scale=HUBER_SIGMAS * result.sigma,
-        max_iterations=30,
+        max_iterations=10,
     )
     clean, _ = gate_views(uv[index], fitted.residuals, VIEW_GATE_SIGMAS * result.sigma)
     ok = _enough_views(clean)
-    if not ok.any():
-        return empty
-    # Refit on the clean views and require every remaining point to fit.
-    refit = bundle_adjust(
-        _subset(fitted.state, ok), BundleProblem.from_dense(rig.wand, clean[ok]), fixed_cameras, max_iterations=30
-    )
-    problem = BundleProblem.from_dense(rig.wand, clean[ok])
-    worst = np.zeros(problem.n_placements)
-    np.maximum.at(worst, problem.placement, np.linalg.norm(refit.residuals, axis=1))
-    good = worst <= READMIT_SIGMAS * result.sigma
-    admitted[index[np.flatnonzero(ok)[good]]] = True
-    return admitted, clean[ok][good], _subset(refit.state, good)
+    admitted[index[ok]] = True
+    return admitted, clean[ok], _subset(fitted.state, ok)
 
 
 def radial_std_px(model: CameraModel, covariance: FloatArray, theta: float) -> float:

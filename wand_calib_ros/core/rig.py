@@ -139,3 +139,8 @@ class WandObservations:
         """A copy with only the named cameras, in that order."""
         index = [self.camera_index(n) for n in names]
         return WandObservations(self.frames, names, self.uv[:, index])
+
+
+def spread_subset(n: int, size: int) -> NDArray[np.int64]:
+    """Indices of ``size`` items spread evenly over ``n`` (all of them when n <= size)."""
+    return np.unique(np.linspace(0, n - 1, min(n, size)).round().astype(np.int64))
