@@ -154,9 +154,9 @@ def residuals(state: BundleState, problem: BundleProblem) -> FloatArray:
 
 
 def _linearise(
-    state: BundleState, problem: BundleProblem, *, jacobians: bool = True
+    state: BundleState, problem: BundleProblem, *, jacobians: bool = True, cameras: bool = True
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Residuals (M, 2), camera Jacobians (M, 2, 13) and placement Jacobians (M, 2, 5)."""
+    """Residuals (M, 2), camera Jacobians (M, 2, 13; empty unless ``cameras``) and placement Jacobians (M, 2, 5)."""
     k, mm, pp, rotations, translations = _camera_arrays(state)
     c = problem.camera
     world = _world_points(state, problem)
@@ -167,10 +167,12 @@ def _linearise(
     if not jacobians:
         return res, np.empty(0), np.empty(0)
     dp = projection.d_point  # (M, 2, 3)
-    jc = np.empty((res.shape[0], 2, N_CAMERA_PARAMS))
-    jc[:, :, :N_INTRINSIC] = projection.d_intrinsics
-    jc[:, :, N_INTRINSIC : N_INTRINSIC + 3] = -(dp @ skew(rotated))
-    jc[:, :, N_INTRINSIC + 3 :] = dp
+    jc = np.empty((0, 2, N_CAMERA_PARAMS))
+    if cameras:
+        jc = np.empty((res.shape[0], 2, N_CAMERA_PARAMS))
+        jc[:, :, :N_INTRINSIC] = projection.d_intrinsics
+        jc[:, :, N_INTRINSIC : N_INTRINSIC + 3] = -(dp @ skew(rotated))
+        jc[:, :, N_INTRINSIC + 3 :] = dp
     dp_r = dp @ camera_rotations  # d uv / d world point
     basis = tangent_basis(state.wand_direction)[problem.placement]  # (M, 3, 2)
     offsets = problem.wand.offsets[problem.point]
@@ -261,18 +263,20 @@ def _normal_equations(
     """U (C,13,13), V (P,5,5), W (B,13,5), gc (C,13), gp (P,5) of the weighted problem, g = -J^T W r."""
     if not np.all(weights == 1.0):
         root = np.sqrt(weights)[:, None, None]
-        jc, jp, res = jc * root, jp * root, res * root[:, :, 0]
+        jc, jp, res = jc * root[: jc.shape[0]], jp * root, res * root[:, :, 0]
+    m = res.shape[0]
+    jp_t = jp.transpose(0, 2, 1)
+    v = (structure.obs_to_placement @ (jp_t @ jp).reshape(m, -1)).reshape(-1, 5, 5)
+    gp = -(structure.obs_to_placement @ (jp_t @ res[..., None])[..., 0])
+    if jc.shape[0] == 0:  # placements only
+        return np.empty((0,)), v, np.empty((0,)), np.empty((0,)), gp
     u = np.empty((n_cameras, N_CAMERA_PARAMS, N_CAMERA_PARAMS))
     gc = np.empty((n_cameras, N_CAMERA_PARAMS))
     for c in range(n_cameras):
         rows = jc[structure.observations_of_camera[c]].reshape(-1, N_CAMERA_PARAMS)
         u[c] = rows.T @ rows
         gc[c] = -(rows.T @ res[structure.observations_of_camera[c]].reshape(-1))
-    m = res.shape[0]
     w = (structure.obs_to_block @ (jc.transpose(0, 2, 1) @ jp).reshape(m, -1)).reshape(-1, N_CAMERA_PARAMS, 5)
-    jp_t = jp.transpose(0, 2, 1)
-    v = (structure.obs_to_placement @ (jp_t @ jp).reshape(m, -1)).reshape(-1, 5, 5)
-    gp = -(structure.obs_to_placement @ (jp_t @ res[..., None])[..., 0])
     return u, v, w, gc, gp
 
 
@@ -389,8 +393,9 @@ def bundle_adjust(
     structure = _structure(problem)
     n_cameras = problem.n_cameras
     free_flat = free.reshape(-1)
+    cameras = bool(free_flat.any())
     lam = 1e-4
-    res, jc, jp = _linearise(state, problem)
+    res, jc, jp = _linearise(state, problem, cameras=cameras)
     if not np.all(np.isfinite(res)):
         raise CalibrationFailedError("the bundle adjustment starts from non-finite reprojections")
     cost = robust_cost(res, loss_scale)
@@ -401,20 +406,20 @@ def bundle_adjust(
         u, v, w, gc, gp = _normal_equations(res, jc, jp, weights, structure, n_cameras)
         accepted = False
         for _ in range(30):
-            if free_flat.any():
+            if cameras:
                 s, rhs, v_inv = _reduced_system(_damp(u, lam), _damp(v, lam), w, gc, gp, structure, n_cameras)
                 delta_c = _solve_free(s, rhs, free_flat).reshape(n_cameras, N_CAMERA_PARAMS)
+                delta_p = _back_substitute(delta_c, v_inv, w, gp, structure)
             else:  # placements only: independent 5x5 systems
-                v_inv = np.linalg.inv(_damp(v, lam))
                 delta_c = np.zeros((n_cameras, N_CAMERA_PARAMS))
-            delta_p = _back_substitute(delta_c, v_inv, w, gp, structure)
+                delta_p = np.linalg.solve(_damp(v, lam), gp[..., None])[..., 0]
             try:
                 candidate = _apply_step(state, delta_c, delta_p)
             except ModelError:  # e.g. k1 <= 0: not a camera, reject the step
                 lam *= 10.0
                 continue
             # Jacobians come with the trial residuals: steps are rarely rejected near a solution.
-            new_res, new_jc, new_jp = _linearise(candidate, problem)
+            new_res, new_jc, new_jp = _linearise(candidate, problem, cameras=cameras)
             new_cost = robust_cost(new_res, loss_scale) if np.all(np.isfinite(new_res)) else np.inf
             if new_cost < cost:
                 accepted = True
@@ -428,33 +433,14 @@ def bundle_adjust(
         if not accepted:
             converged = True  # no decrease possible: at a minimum to machine precision
     weights = _huber_weights(res, loss_scale)
-    u, v, w, gc, gp = _normal_equations(res, jc, jp, weights, structure, n_cameras)
-    covariance, sigma, dof = _camera_covariance(res, weights, u, v, w, gc, gp, structure, problem, free_flat)
+    m, p = res.size, int(free_flat.sum()) + N_PLACEMENT_PARAMS * problem.n_placements
+    sigma = float(np.sqrt(np.sum(weights[:, None] * res**2) / max(m - p, 1)))
+    size = n_cameras * N_CAMERA_PARAMS
+    covariance = np.zeros((size, size))
+    if cameras:
+        u, v, w, gc, gp = _normal_equations(res, jc, jp, weights, structure, n_cameras)
+        s, _, _ = _reduced_system(u, _damp(v, 0.0), w, gc, gp, structure, n_cameras)
+        covariance[np.ix_(free_flat, free_flat)] = np.linalg.pinv(s[np.ix_(free_flat, free_flat)], hermitian=True)
+        covariance *= sigma**2
     camera_std = np.sqrt(np.clip(np.diag(covariance), 0.0, None)).reshape(n_cameras, N_CAMERA_PARAMS)
-    return BundleResult(state, res, iterations, converged, camera_std, covariance, sigma, dof)
-
-
-def _camera_covariance(
-    res: FloatArray,
-    weights: FloatArray,
-    u: FloatArray,
-    v: FloatArray,
-    w: FloatArray,
-    gc: FloatArray,
-    gp: FloatArray,
-    structure: _Structure,
-    problem: BundleProblem,
-    free_flat: NDArray[np.bool_],
-) -> tuple[FloatArray, float, tuple[int, int]]:
-    """Marginal covariance of the camera parameters: sigma^2 * S^-1 (S = Schur complement of J^T J)."""
-    m = res.size
-    p = int(free_flat.sum()) + N_PLACEMENT_PARAMS * problem.n_placements
-    sigma2 = float(np.sum(weights[:, None] * res**2)) / max(m - p, 1)
-    size = problem.n_cameras * N_CAMERA_PARAMS
-    if not free_flat.any():
-        return np.zeros((size, size)), float(np.sqrt(sigma2)), (m, p)
-    s, _, _ = _reduced_system(u, _damp(v, 0.0), w, gc, gp, structure, problem.n_cameras)
-    covariance = np.zeros_like(s)
-    sub = s[np.ix_(free_flat, free_flat)]
-    covariance[np.ix_(free_flat, free_flat)] = np.linalg.pinv(sub, hermitian=True) * sigma2
-    return covariance, float(np.sqrt(sigma2)), (m, p)
+    return BundleResult(state, res, iterations, converged, camera_std, covariance, sigma, (m, p))
