@@ -30,7 +30,7 @@ from wand_calib_ros.core.camera_model import (
     turns_over_in_image,
     unproject,
 )
-from wand_calib_ros.core.errors import InsufficientDataError
+from wand_calib_ros.core.errors import DegenerateDataError, InsufficientDataError
 from wand_calib_ros.core.geometry import Pose, triangulate, wand_directions
 from wand_calib_ros.core.result import CalibrationResult, CameraCalibration, LensTrial
 from wand_calib_ros.core.rig import CameraSpec, RigSpec, WandSpec, spread_subset
@@ -42,6 +42,15 @@ log = logging.getLogger(__name__)
 GATE_FRACTION = 0.01
 #: ... unless that is within this many robust standard deviations of the |AC| errors (high noise).
 GATE_SIGMAS = 5.0
+#: Wand points whose second (third) principal spread is below this fraction of the first lie on a line (plane).
+DEGENERATE_SPREAD = 0.03
+#: Relative focal-length and principal-point (fraction of the image width) standard deviations that make
+#: a calibration meaningless.
+MAX_FOCAL_STD = 0.05
+MAX_CENTRE_STD = 0.1
+#: Image coverage: grid cells per side and the fraction that should see the wand.
+COVERAGE_GRID = 8
+MIN_COVERAGE = 0.25
 #: Outliers and the distortion model are decided on at most this many placements (spread over the recording).
 COARSE_PLACEMENTS = 1500
 #: Huber threshold of the robust pass, in robust sigmas.
@@ -189,6 +198,8 @@ def refine_calibration(
             np.concatenate([result.state.wand_direction, admitted_state.wand_direction]),
         )
         result = bundle_adjust(state, BundleProblem.from_dense(wand, uv_used), free)
+    check_geometry(result.state.points(wand))
+    check_uncertainty(rig, result)
     warnings: list[str] = []
     for model, spec in zip(result.state.models, rig.cameras, strict=True):
         if turns_over_in_image(model, spec.max_view_angle):
@@ -378,11 +389,66 @@ def radial_std_px(model: CameraModel, covariance: FloatArray, theta: float) -> f
     return float(np.sqrt(max(gradient @ covariance @ gradient, 0.0)))
 
 
+def check_geometry(points: FloatArray) -> None:
+    """Refuse wand motion that cannot determine a calibration.
+
+    Args:
+        points: (P, 3, 3) wand points A, B, C of the adjusted placements, mm.
+
+    Raises:
+        DegenerateDataError: every wand point lies on (nearly) one line or one plane.
+    """
+    flat = points.reshape(-1, 3)
+    spread = np.linalg.svd(flat - flat.mean(axis=0), compute_uv=False) / np.sqrt(flat.shape[0])
+    if spread[1] < DEGENERATE_SPREAD * spread[0]:
+        raise DegenerateDataError(
+            f"the wand moved along a single line (spread {spread[0]:.0f} mm along it, {spread[1]:.0f} mm across): "
+            "move and turn it through the whole volume"
+        )
+    if spread[2] < DEGENERATE_SPREAD * spread[0]:
+        raise DegenerateDataError(
+            f"the wand moved only in a plane ({spread[2]:.0f} mm thick over {spread[0]:.0f} mm): the calibration "
+            "is not determined; move it towards and away from the cameras too"
+        )
+
+
+def check_uncertainty(rig: RigSpec, result: BundleResult) -> None:
+    """Refuse a solution whose focal lengths or principal points the data do not determine.
+
+    Raises:
+        DegenerateDataError: naming the camera and its uncertainties.
+    """
+    for c, (spec, model) in enumerate(zip(rig.cameras, result.state.models, strict=True)):
+        focal = result.camera_std[c, 0] / model.k[0]
+        centre = float(np.max(result.camera_std[c, 5:7]))
+        if focal > MAX_FOCAL_STD or centre > MAX_CENTRE_STD * spec.image_size[0]:
+            raise DegenerateDataError(
+                f"camera '{spec.name}': the data do not determine its intrinsics (focal length +-{100 * focal:.0f} %, "
+                f"principal point +-{centre:.0f} px); wave the wand through more of its view, nearer and farther"
+            )
+
+
 def _coverage_warnings(
-    spec: CameraSpec, model: CameraModel, max_theta: float, result: BundleResult, camera: int
+    spec: CameraSpec, model: CameraModel, max_theta: float, result: BundleResult, camera: int, uv: FloatArray
 ) -> list[str]:
-    """Plain-language warnings about the distortion curve of one camera."""
+    """Plain-language warnings about what one camera's data leave weak.
+
+    Args:
+        uv: (P, 3, 2) the camera's points in the adjustment (NaN where not seen).
+    """
     out = []
+    points = uv.reshape(-1, 2)
+    points = points[np.all(np.isfinite(points), axis=1)]
+    width, height = spec.image_size
+    cells = np.unique(
+        np.clip((points / [width, height] * COVERAGE_GRID).astype(np.int64), 0, COVERAGE_GRID - 1), axis=0
+    )
+    covered = cells.shape[0] / COVERAGE_GRID**2
+    if covered < MIN_COVERAGE:
+        out.append(
+            f"{spec.name}: the wand covered only {100 * covered:.0f} % of the image ({COVERAGE_GRID}x{COVERAGE_GRID} "
+            "cells); wave it through the rest of the view"
+        )
     block = slice(camera * N_CAMERA_PARAMS, camera * N_CAMERA_PARAMS + 5)
     band = radial_std_px(model, result.camera_covariance[block, block], max_theta)
     if band > WEAK_CURVE_PX:
@@ -422,7 +488,7 @@ def _assemble(
         mine = problem.camera == c
         rms = float(np.sqrt(np.mean(result.residuals[mine] ** 2))) if mine.any() else float("nan")
         std = {name: float(result.camera_std[c, i]) for i, name in enumerate(CAMERA_PARAM_NAMES) if free[c, i]}
-        warnings.extend(_coverage_warnings(spec, state.models[c], max_theta[c], result, c))
+        warnings.extend(_coverage_warnings(spec, state.models[c], max_theta[c], result, c, uv[:, c]))
         views = int(np.unique(problem.placement[mine]).size)
         if rejected_views[c]:
             warnings.append(

@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
 from wand_calib_ros.core.camera_model import CameraModel, unproject, unproject_with_jacobian
+from wand_calib_ros.core.errors import CalibrationFailedError
 from wand_calib_ros.core.geometry import Pose, rotation_from_rotvec, triangulate, triangulation_jacobian
 from wand_calib_ros.core.rig import WandSpec
 
@@ -44,7 +45,8 @@ class WandFit:
     @property
     def rms_mm(self) -> float:
         """RMS of all wand-length errors, mm (NaN placements ignored)."""
-        return float(np.sqrt(np.nanmean(self.length_errors**2)))
+        finite = self.length_errors[np.isfinite(self.length_errors)]
+        return float(np.sqrt(np.mean(finite**2))) if finite.size else float("inf")
 
 
 def reconstruct_wands(
@@ -189,6 +191,8 @@ def optimise_wand_lengths(
         xtol=tolerance,
     )
     log.debug("step 3: %d evaluations, status %d", solution.nfev, solution.status)
+    if solution.x[0] <= 0 or solution.x[4] <= 0:
+        raise CalibrationFailedError("Step 3 diverged (a focal length became negative): the data do not fix the scale")
     fitted, fitted_pose = _unpack(solution.x, models)
     errors = wand_length_errors(reconstruct_wands(fitted, fitted_pose, uv0, uv1), wand)
     return WandFit(fitted, fitted_pose, errors)
