@@ -23,7 +23,9 @@ from wand_calib_ros.errors import WandCalibError
 from wand_calib_ros.io.observations_csv import read_observations, write_observations
 from wand_calib_ros.io.result_yaml import camera_entry, read_result, write_camera_infos, write_result, write_yaml
 from wand_calib_ros.io.rig_yaml import load_rig, save_rig
+from wand_calib_ros.sim.outliers import corrupt
 from wand_calib_ros.sim.scenarios import SCENARIOS, image_placements, sample_placements, simulate
+from wand_calib_ros.sim.sweeps import paper_sweeps
 
 log = logging.getLogger("wand_calib_ros")
 
@@ -47,6 +49,17 @@ def _parser() -> argparse.ArgumentParser:
     cal.add_argument("--reference", help="reference camera name (default: the first in cameras.yaml)")
     cal.add_argument("--seed", type=int, default=0, help="seed of the RANSAC sampler (default 0)")
     cal.add_argument("--truth", type=Path, help="truth YAML (from 'simulate') to compare the result with")
+    cal.add_argument(
+        "--max-placements",
+        type=int,
+        help="use at most this many placements, spread over the recording (a time budget for large rigs)",
+    )
+
+    sweep = commands.add_parser("sweep", help="reproduce the paper's Figs. 4-6 (CSV and PNG)")
+    sweep.add_argument("--out", required=True, type=Path, help="directory for fig4-6 CSV and PNG files")
+    sweep.add_argument("--runs", type=int, default=10, help="simulations per sweep value (default 10, as the paper)")
+    sweep.add_argument("--seed", type=int, default=0, help="base random seed (default 0)")
+    sweep.add_argument("--quick", action="store_true", help="only the first, middle and last value of each sweep")
 
     sim = commands.add_parser("simulate", help="write a synthetic rig with known truth")
     sim.add_argument("scenario", choices=sorted(SCENARIOS), help="rig to simulate")
@@ -54,6 +67,12 @@ def _parser() -> argparse.ArgumentParser:
     sim.add_argument("--noise", type=float, default=1.0, help="pixel noise standard deviation (default 1.0)")
     sim.add_argument("--out", required=True, type=Path, help="directory to write into")
     sim.add_argument("--placements", type=int, help="number of wand placements (scenario default if omitted)")
+    sim.add_argument(
+        "--outliers",
+        type=float,
+        default=0.0,
+        help="fraction of complete camera views to corrupt (A/C swap, spurious blob, 20 px error)",
+    )
     sim.add_argument("--true-focal", type=float, help="paper scenario: true focal length in mm (default 2.0)")
     sim.add_argument(
         "--principal-point",
@@ -115,7 +134,11 @@ def _calibrate(args: argparse.Namespace) -> int:
     rig = load_rig(args.cameras)
     observations = read_observations(args.observations, rig.camera_names)
     log.info("read %d frames of %d cameras from %s", observations.uv.shape[0], len(rig.cameras), args.observations)
-    options = CalibrationOptions(reference_camera=args.reference, pair=PairOptions(seed=args.seed))
+    if args.max_placements is not None and args.max_placements < 2:
+        raise WandCalibError("--max-placements must be at least 2")
+    options = CalibrationOptions(
+        reference_camera=args.reference, pair=PairOptions(seed=args.seed), max_placements=args.max_placements
+    )
     result = calibrate(rig, observations, options)
     args.output.parent.mkdir(parents=True, exist_ok=True)
     write_result(result, args.output)
@@ -145,22 +168,29 @@ def _simulate(args: argparse.Namespace) -> int:
         kwargs["n_placements"] = args.placements
     if not (args.noise >= 0):
         raise WandCalibError("--noise must be >= 0")
+    if not (0 <= args.outliers < 1):
+        raise WandCalibError("--outliers must be a fraction in [0, 1)")
     scenario = factory(**kwargs)
     rng = np.random.default_rng(args.seed)
     data = simulate(scenario, args.noise, rng)
+    observations = data.observations
+    if args.outliers > 0:
+        sizes = tuple(c.spec.image_size for c in scenario.cameras)
+        observations = corrupt(observations, args.outliers, sizes, rng).observations
     heldout = image_placements(
         scenario, *sample_placements(scenario, HELDOUT_PLACEMENTS, rng), args.noise, rng, first_frame=1_000_000
     )
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
     save_rig(scenario.rig, out / "cameras.yaml")
-    write_observations(data.observations, out / "observations.csv")
+    write_observations(observations, out / "observations.csv")
     write_observations(heldout.observations, out / "heldout.csv")
     truth = {
         "reference_camera": scenario.cameras[0].spec.name,
         "scenario": scenario.name,
         "seed": args.seed,
         "noise_px": float(args.noise),
+        "outlier_fraction": float(args.outliers),
         "cameras": {c.spec.name: camera_entry(c.model, c.pose) for c in scenario.cameras},
     }
     write_yaml(truth, out / "truth.yaml")
@@ -171,13 +201,22 @@ def _simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _sweep(args: argparse.Namespace) -> int:
+    if args.runs < 1:
+        raise WandCalibError("--runs must be positive")
+    for path in paper_sweeps(args.out, runs=args.runs, seed=args.seed, quick=args.quick):
+        print(f"wrote {path}")
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``wand-calib``."""
     args = _parser().parse_args(argv)
     level = logging.DEBUG if args.verbose else logging.WARNING if args.quiet else logging.INFO
     logging.basicConfig(level=level, format="wand-calib: %(message)s", stream=sys.stderr)
     try:
-        return _calibrate(args) if args.command == "calibrate" else _simulate(args)
+        commands = {"calibrate": _calibrate, "simulate": _simulate, "sweep": _sweep}
+        return commands[args.command](args)
     except WandCalibError as error:
         print(f"wand-calib: error: {error}", file=sys.stderr)
         return 2

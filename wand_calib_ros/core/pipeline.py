@@ -5,12 +5,14 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from wand_calib_ros.core.errors import InsufficientDataError
 from wand_calib_ros.core.multi_camera import initialise_rig
 from wand_calib_ros.core.pairwise import PairOptions
 from wand_calib_ros.core.refine import refine_calibration
 from wand_calib_ros.core.result import CalibrationResult
-from wand_calib_ros.core.rig import RigSpec, WandObservations
+from wand_calib_ros.core.rig import RigSpec, WandObservations, spread_subset
 from wand_calib_ros.core.vision_graph import build_vision_graph
 
 log = logging.getLogger(__name__)
@@ -24,10 +26,13 @@ class CalibrationOptions:
         reference_camera: name of the camera whose frame is the reference (default: the one that
             shares the most placements with the others; the first on a tie).
         pair: settings of the pairwise initialisation (Steps 1-3).
+        max_placements: use at most this many placements, spread evenly over the recording
+            (consecutive frames of a slowly waved wand are redundant): a time budget.
     """
 
     reference_camera: str | None = None
     pair: PairOptions = field(default_factory=PairOptions)
+    max_placements: int | None = None
 
 
 def calibrate(
@@ -57,9 +62,12 @@ def calibrate(
             raise InsufficientDataError(f"camera '{name}' has no observations")
     obs = observations.select_cameras(names)
     complete = obs.complete
-    usable = complete.sum(axis=1) >= 2  # a placement seen by one camera only constrains nothing
+    usable = np.flatnonzero(complete.sum(axis=1) >= 2)  # a placement seen by one camera only constrains nothing
+    if options.max_placements is not None and usable.size > options.max_placements:
+        log.info("using %d of %d placements (max_placements)", options.max_placements, usable.size)
+        usable = usable[spread_subset(usable.size, options.max_placements)]
     uv = obs.uv[usable]  # partial views stay: the bundle adjustment uses every point seen
-    log.info("%d of %d frames show the whole wand to at least two cameras", usable.sum(), complete.shape[0])
+    log.info("%d of %d frames show the whole wand to at least two cameras", usable.size, complete.shape[0])
     graph = build_vision_graph(
         names, complete[usable], reference=options.reference_camera, min_shared=options.pair.min_placements
     )

@@ -53,6 +53,8 @@ COVERAGE_GRID = 8
 MIN_COVERAGE = 0.25
 #: Outliers and the distortion model are decided on at most this many placements (spread over the recording).
 COARSE_PLACEMENTS = 1500
+#: Floor of the robust noise estimate, px (detections are never better than this).
+MIN_SIGMA_PX = 0.02
 #: Huber threshold of the robust pass, in robust sigmas.
 HUBER_SIGMAS = 2.0
 #: A camera view with a point further than this many robust sigmas from its reprojection is an outlier.
@@ -231,8 +233,11 @@ def _require(count: int, needed: int, what: str) -> None:
 
 
 def robust_sigma(residuals: FloatArray) -> float:
-    """Per-coordinate noise from the median 2D residual norm (Rayleigh: median = 1.1774 sigma)."""
-    return float(np.median(np.linalg.norm(residuals, axis=1)) / np.sqrt(2 * np.log(2)))
+    """Per-coordinate noise from the median 2D residual norm (Rayleigh: median = 1.1774 sigma).
+
+    Never below MIN_SIGMA_PX, so noise-free data do not make every view an outlier.
+    """
+    return max(float(np.median(np.linalg.norm(residuals, axis=1)) / np.sqrt(2 * np.log(2))), MIN_SIGMA_PX)
 
 
 def gate_views(uv: FloatArray, residuals: FloatArray, threshold_px: float) -> tuple[FloatArray, NDArray[np.bool_]]:
@@ -374,10 +379,10 @@ def _readmit(rig: RigSpec, uv: FloatArray, result: BundleResult) -> tuple[NDArra
         start,
         BundleProblem.from_dense(rig.wand, uv[index]),
         np.zeros((len(models), N_CAMERA_PARAMS), dtype=bool),
-        loss_scale=HUBER_SIGMAS * result.sigma,
+        loss_scale=HUBER_SIGMAS * max(result.sigma, MIN_SIGMA_PX),
         max_iterations=10,
     )
-    clean, _ = gate_views(uv[index], fitted.residuals, VIEW_GATE_SIGMAS * result.sigma)
+    clean, _ = gate_views(uv[index], fitted.residuals, VIEW_GATE_SIGMAS * max(result.sigma, MIN_SIGMA_PX))
     ok = _enough_views(clean)
     admitted[index[ok]] = True
     return admitted, clean[ok], _subset(fitted.state, ok)
