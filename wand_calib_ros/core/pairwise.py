@@ -1,10 +1,11 @@
 """Steps 1-3 of the paper for one camera pair, with the lens chosen by the data.
 
 Every plausible Step 1 start (one classic projection per camera) goes through
-Step 2 (essential matrix) and a screening run of Step 3 (wand-length LM) on a
-subset of placements, paired with the other camera's best start; the
-combination with the lowest wand-length RMS wins and is refined by Step 3 on a
-larger spread of placements.
+Step 2 (essential matrix) and Step 3 (wand-length LM) on a spread subset of the
+placements, paired with the other camera's best start; the combination with the
+lowest wand-length RMS wins. A robust bundle adjustment of the pair (k1, k2,
+principal points, pose) on more placements then makes the pair geometrically
+consistent, since Step 3 matches wand lengths only.
 """
 
 from __future__ import annotations
@@ -43,10 +44,11 @@ class PairOptions:
     Attributes:
         ransac_threshold_px: RANSAC inlier threshold, as pixels at the nominal focal length
             (generous: the Step 1 intrinsics can be off by 20 % and 50 px).
-        screening_placements: placements used to rank the lens candidates in Step 3.
-        screening_evaluations: residual evaluations allowed per candidate while screening.
-        step3_placements: placements (spread over the recording) in the winner's Step 3;
-            Step 3 only initialises the bundle adjustment, which uses every placement.
+        screening_placements: placements (spread over the recording) on which every lens start goes
+            through Steps 2-3; the winner's Step 3 solution is the pair's initialisation.
+        screening_evaluations: residual evaluations allowed per start in Step 3.
+        pair_placements: placements (spread over the recording, agreeing with the winner's epipolar
+            geometry) in the pair's bundle adjustment, which makes the pair consistent before chaining.
         min_placements: fewest placements both cameras must see completely.
         seed: seed of the RANSAC sampler.
     """
@@ -54,7 +56,7 @@ class PairOptions:
     ransac_threshold_px: float = 10.0
     screening_placements: int = 30
     screening_evaluations: int = 12
-    step3_placements: int = 100
+    pair_placements: int = 100
     min_placements: int = 15
     seed: int = 0
 
@@ -214,10 +216,11 @@ def initialise_pair(
             f"cameras '{specs[0].name}' and '{specs[1].name}': no lens start gives a relative pose ({reasons})"
         )
     screened, agree_all = best
-    use = np.intersect1d(spread_subset(n, options.step3_placements), np.flatnonzero(agree_all))
-    fit = optimise_wand_lengths(screened.models, screened.pose, uv0[use], uv1[use], wand)
-    models, pose = _pair_bundle(fit, uv0[use], uv1[use], wand)
-    return PairInitialisation(models, pose, fit, names, tuple(trials))
+    # The winner's Step 3 (on the screening placements) seeds a bundle adjustment of the pair
+    # on a larger spread of the placements that agree with its epipolar geometry.
+    use = np.intersect1d(spread_subset(n, options.pair_placements), np.flatnonzero(agree_all))
+    models, pose = _pair_bundle(screened, uv0[use], uv1[use], wand)
+    return PairInitialisation(models, pose, screened, names, tuple(trials))
 
 
 def _pair_bundle(
@@ -242,7 +245,7 @@ def _pair_bundle(
     free[:, 2:5] = False
     try:
         result = bundle_adjust(
-            state, problem, free, loss_scale=2.0 * robust_sigma(residuals(state, problem)), max_iterations=30
+            state, problem, free, loss_scale=2.0 * robust_sigma(residuals(state, problem)), tolerance=1e-5
         )
     except CoreError:
         return fit.models, fit.pose

@@ -277,7 +277,8 @@ def _robust_adjustment(
         scale corrected for the degrees of freedom the fit absorbs (sqrt(m / (m - p))).
     """
     sigma = robust_sigma(residuals(state, problem))
-    result = bundle_adjust(state, problem, free, loss_scale=HUBER_SIGMAS * sigma)
+    # Only outliers are decided here: a loose tolerance is enough, the least-squares passes finish the job.
+    result = bundle_adjust(state, problem, free, loss_scale=HUBER_SIGMAS * sigma, tolerance=1e-5)
     m, p = result.dof
     return result, robust_sigma(result.residuals) * np.sqrt(m / max(m - p, 1))
 
