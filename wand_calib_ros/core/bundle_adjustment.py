@@ -17,6 +17,7 @@ placement (the structure the Schur complement needs is computed once).
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,6 +35,7 @@ from wand_calib_ros.core.geometry import Pose, rotation_from_rotvec, skew, tange
 from wand_calib_ros.core.rig import WandSpec
 
 FloatArray = NDArray[np.float64]
+log = logging.getLogger(__name__)
 IntArray = NDArray[np.int64]
 
 #: Parameters per camera: k1..k5, u0, v0, rotation (3), translation (3).
@@ -394,7 +396,7 @@ def bundle_adjust(
     n_cameras = problem.n_cameras
     free_flat = free.reshape(-1)
     cameras = bool(free_flat.any())
-    lam = 1e-4
+    lam = 1e-6
     res, jc, jp = _linearise(state, problem, cameras=cameras)
     if not np.all(np.isfinite(res)):
         raise CalibrationFailedError("the bundle adjustment starts from non-finite reprojections")
@@ -424,8 +426,15 @@ def bundle_adjust(
             if new_cost < cost:
                 accepted = True
                 relative_decrease = (cost - new_cost) / max(cost, 1e-300)
+                log.debug(
+                    "LM iteration %d: cost %.6g, relative decrease %.3g, lambda %.1e",
+                    iterations,
+                    new_cost,
+                    relative_decrease,
+                    lam,
+                )
                 state, cost = candidate, new_cost
-                lam = max(lam / 5.0, 1e-12)
+                lam = max(lam / 10.0, 1e-12)
                 res, jc, jp = new_res, new_jc, new_jp
                 converged = relative_decrease < tolerance
                 break

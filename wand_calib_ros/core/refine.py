@@ -382,6 +382,7 @@ def _readmit(rig: RigSpec, uv: FloatArray, result: BundleResult) -> tuple[NDArra
         np.zeros((len(models), N_CAMERA_PARAMS), dtype=bool),
         loss_scale=HUBER_SIGMAS * max(result.sigma, MIN_SIGMA_PX),
         max_iterations=10,
+        tolerance=1e-5,  # only deciding which views fit; the final adjustment refines everything
     )
     clean, _ = gate_views(uv[index], fitted.residuals, VIEW_GATE_SIGMAS * max(result.sigma, MIN_SIGMA_PX))
     ok = _enough_views(clean)
