@@ -155,3 +155,22 @@ def test_console_script_runs_as_a_separate_process(simulated: Path, tmp_path: Pa
     assert completed.returncode == 2
     assert completed.stderr.strip().splitlines()[-1].startswith("wand-calib: error:")
     assert "Traceback" not in completed.stderr
+
+
+def test_multi_camera_rig_with_outliers_end_to_end(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    sim = tmp_path / "ring"
+    assert main(["-q", "simulate", "ring6", "--seed", "2", "--outliers", "0.03", "--out", str(sim)]) == 0
+    assert _calibrate(sim, tmp_path, "--truth", str(sim / "truth.yaml")) == 0
+    printed = capsys.readouterr().out
+    assert "calibrated 6 cameras" in printed and "rejected as outliers" in printed
+    result = yaml.safe_load((tmp_path / "result.yaml").read_text())
+    assert len(result["cameras"]) == 6
+    assert sum(c["rejected_views"] for c in result["cameras"].values()) > 0
+    truth = yaml.safe_load((sim / "truth.yaml").read_text())
+    assert truth["outlier_fraction"] == 0.03
+
+
+def test_max_placements_subsamples(simulated: Path, tmp_path: Path) -> None:
+    assert _calibrate(simulated, tmp_path, "--max-placements", "120") == 0
+    result = yaml.safe_load((tmp_path / "result.yaml").read_text())
+    assert result["metrics"]["placements_used"] <= 120

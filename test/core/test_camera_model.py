@@ -148,3 +148,15 @@ def test_invalid_models_and_shapes_are_rejected() -> None:
         project(model, np.zeros((4, 2)))
     with pytest.raises(ValueError, match="shape"):
         unproject(model, np.zeros((4, 3)))
+
+
+def test_inverse_radius_keeps_shape_and_handles_radii_near_the_turning_point() -> None:
+    k = np.array([2.0, -0.2, 0.0, 0.0, 0.0])
+    scalar = inverse_radius(k, np.array(1.0))
+    assert scalar.shape == () and radius(k, scalar) == pytest.approx(1.0, abs=1e-13)
+    limit = monotonic_limit(k)
+    r_max = float(radius(k, np.array(limit)))
+    near = r_max * (1 - np.logspace(-12, -3, 10))  # Newton is slow where dr/dtheta -> 0
+    theta = inverse_radius(k, near.reshape(2, 5))
+    assert theta.shape == (2, 5)
+    assert np.allclose(radius(k, theta).ravel(), near, atol=1e-12)

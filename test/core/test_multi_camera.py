@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from rigs import fixed_of, scenario_data, truth_bundle
@@ -18,6 +20,7 @@ from wand_calib_ros.sim.scenarios import (
     SimulatedData,
     image_placements,
     paper_fisheye_scenario,
+    simulate,
     visibility,
 )
 
@@ -148,3 +151,11 @@ def test_wand_sliding_along_its_axis_is_degenerate() -> None:
     data = image_placements(scenario, a, direction, np.tile([0.0, 0.0, -1.0], (200, 1)), 0.5, rng)
     with pytest.raises(DegenerateDataError, match="one line"):
         calibrate(scenario.rig, data.observations)
+
+
+def test_camera_seeing_little_of_its_image_is_warned_about() -> None:
+    # The wand stays in a 300 mm cube 1.5 m in front of camera 0: a small patch of its image.
+    scenario = replace(paper_fisheye_scenario(), volume=np.array([[-150.0, -150.0, 1350.0], [150.0, 150.0, 1650.0]]))
+    data = simulate(scenario, 0.5, np.random.default_rng(5))
+    result = calibrate(scenario.rig, data.observations)
+    assert any(w.startswith("cam0: the wand covered only") for w in result.warnings), result.warnings

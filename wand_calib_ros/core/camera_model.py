@@ -181,6 +181,8 @@ def inverse_radius(k: FloatArray, r: FloatArray, *, tol: float = 1e-13) -> Float
         tol: absolute tolerance on theta (rad).
     """
     r = np.asarray(r, dtype=np.float64)
+    shape = r.shape
+    r = r.reshape(-1)
     limit = monotonic_limit(k)
     r_max = float(radius(k, np.array(limit)))
     outside = ~(r <= r_max)  # also catches NaN
@@ -190,11 +192,12 @@ def inverse_radius(k: FloatArray, r: FloatArray, *, tol: float = 1e-13) -> Float
         step = (radius(k, theta) - target) / np.maximum(radius_derivative(k, theta), 1e-300)
         theta = np.clip(theta - step, 0.0, limit)
         if np.max(np.abs(step), initial=0.0) <= tol:
-            return np.where(outside, np.nan, theta)
-    slow = np.abs(radius(k, theta) - target) > tol * np.maximum(radius_derivative(k, theta), 1e-3)
-    if np.any(slow):
-        theta[slow] = _bracketed_inverse(k, target[slow], limit, tol)
-    return np.where(outside, np.nan, theta)
+            break
+    else:
+        slow = np.abs(radius(k, theta) - target) > tol * np.maximum(radius_derivative(k, theta), 1e-3)
+        if np.any(slow):
+            theta[slow] = _bracketed_inverse(k, target[slow], limit, tol)
+    return np.where(outside, np.nan, theta).reshape(shape)
 
 
 def _bracketed_inverse(k: FloatArray, target: FloatArray, limit: float, tol: float) -> FloatArray:
