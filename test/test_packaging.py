@@ -29,6 +29,7 @@ def test_plain_pip_install_puts_the_console_script_and_ament_resources_in_place(
             "--quiet",
             "--no-deps",
             "--no-build-isolation",
+            "--ignore-installed",  # leave the development install of this venv alone
             "--prefix",
             str(prefix),
             str(source),
