@@ -13,6 +13,9 @@ from wand_calib_ros.core.bundle_adjustment import (
     bundle_adjust,
     default_free_mask,
 )
+from wand_calib_ros.core.camera_model import CameraModel
+from wand_calib_ros.core.geometry import Pose
+from wand_calib_ros.core.metrics import camera_errors, heldout_wand_rms, rereference
 from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.sim.scenarios import SCENARIOS, Scenario, SimulatedData, simulate
 
@@ -55,3 +58,29 @@ def truth_bundle(
 def fixed_of(result: CalibrationResult, scenario: Scenario) -> tuple[tuple[str, ...], ...]:
     """The pipeline's fixed coefficients in the scenario's camera order."""
     return tuple(result.camera(c.spec.name).fixed_coefficients for c in scenario.cameras)
+
+
+def in_truth_frame(result: CalibrationResult, scenario: Scenario) -> tuple[list[CameraModel], list[Pose]]:
+    """The result's cameras in scenario order, poses re-expressed in camera 0's frame like the truth."""
+    names = [c.spec.name for c in scenario.cameras]
+    poses = rereference({n: result.camera(n).pose for n in names}, names[0])
+    return [result.camera(n).model for n in names], [poses[n] for n in names]
+
+
+def errors_against_truth(
+    scenario: Scenario,
+    held: SimulatedData,
+    models: list[CameraModel] | tuple[CameraModel, ...],
+    poses: list[Pose] | tuple[Pose, ...],
+) -> dict[str, float]:
+    """Per camera focal and principal-point errors (px), E_r and E_t, and the held-out D_RMS (mm)."""
+    out: dict[str, float] = {}
+    for c, camera in enumerate(scenario.cameras):
+        e = camera_errors(models[c], poses[c], camera.model, camera.pose)
+        out[f"{camera.spec.name} focal"] = e.focal_px
+        out[f"{camera.spec.name} principal point"] = e.principal_point_px
+        if c > 0:
+            out[f"{camera.spec.name} E_r"] = e.rotation_deg
+            out[f"{camera.spec.name} E_t"] = e.translation
+    out["D_RMS"] = heldout_wand_rms(tuple(models), tuple(poses), held.observations.uv, scenario.wand)
+    return out

@@ -6,12 +6,11 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from rigs import fixed_of, scenario_data, truth_bundle
+from rigs import errors_against_truth, fixed_of, in_truth_frame, scenario_data, truth_bundle
 
 from wand_calib_ros.core.errors import DegenerateDataError, InsufficientDataError
-from wand_calib_ros.core.metrics import camera_errors, heldout_wand_rms, rereference
+from wand_calib_ros.core.metrics import heldout_wand_rms, rereference
 from wand_calib_ros.core.pipeline import calibrate
-from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.core.rig import WandObservations
 from wand_calib_ros.core.vision_graph import DisconnectedRigError
 from wand_calib_ros.sim.outliers import corrupt
@@ -27,34 +26,14 @@ from wand_calib_ros.sim.scenarios import (
 RATIO = 1.15
 
 
-def _errors(scenario: Scenario, held: SimulatedData, models, poses) -> dict[str, float]:  # type: ignore[no-untyped-def]
-    out: dict[str, float] = {}
-    for c, camera in enumerate(scenario.cameras):
-        e = camera_errors(models[c], poses[c], camera.model, camera.pose)
-        out[f"{camera.spec.name} focal"] = e.focal_px
-        out[f"{camera.spec.name} principal point"] = e.principal_point_px
-        if c > 0:
-            out[f"{camera.spec.name} E_r"] = e.rotation_deg
-            out[f"{camera.spec.name} E_t"] = e.translation
-    out["D_RMS"] = heldout_wand_rms(tuple(models), tuple(poses), held.observations.uv, scenario.wand)
-    return out
-
-
-def _in_truth_frame(result: CalibrationResult, scenario: Scenario) -> tuple[list, list]:  # type: ignore[type-arg]
-    """The result's cameras in scenario order, poses re-expressed in camera 0's frame like the truth."""
-    names = [c.spec.name for c in scenario.cameras]
-    poses = rereference({n: result.camera(n).pose for n in names}, names[0])
-    return [result.camera(n).model for n in names], [poses[n] for n in names]
-
-
 @pytest.mark.parametrize(("name", "seed"), [("paper3", 1), ("paper3", 2), ("ring6", 1)])
 def test_reaches_the_truth_started_bundle_adjustment(name: str, seed: int) -> None:
     scenario, data, held = scenario_data(name, seed)
     result = calibrate(scenario.rig, data.observations)
-    models, poses = _in_truth_frame(result, scenario)
-    mine = _errors(scenario, held, models, poses)
+    models, poses = in_truth_frame(result, scenario)
+    mine = errors_against_truth(scenario, held, models, poses)
     reference = truth_bundle(scenario, data, fixed_of(result, scenario))
-    best = _errors(scenario, held, reference.state.models, reference.state.poses)
+    best = errors_against_truth(scenario, held, reference.state.models, reference.state.poses)
     for key, value in mine.items():
         assert value <= RATIO * best[key] + 1e-4, f"{key}: pipeline {value:.5g} vs truth BA {best[key]:.5g}"
     assert result.sigma_px == pytest.approx(1.0, rel=0.05)
@@ -87,8 +66,8 @@ def test_a_few_percent_of_corrupted_views_do_not_move_the_result(name: str) -> N
     damaged = corrupt(data.observations, 0.03, sizes, np.random.default_rng(7))
     clean = calibrate(scenario.rig, data.observations)
     robust = calibrate(scenario.rig, damaged.observations)
-    clean_models, clean_poses = _in_truth_frame(clean, scenario)
-    robust_models, robust_poses = _in_truth_frame(robust, scenario)
+    clean_models, clean_poses = in_truth_frame(clean, scenario)
+    robust_models, robust_poses = in_truth_frame(robust, scenario)
     d_clean = heldout_wand_rms(tuple(clean_models), tuple(clean_poses), held.observations.uv, scenario.wand)
     d_robust = heldout_wand_rms(tuple(robust_models), tuple(robust_poses), held.observations.uv, scenario.wand)
     assert d_robust <= RATIO * d_clean

@@ -10,37 +10,21 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from rigs import fixed_of, scenario_data, truth_bundle
+from rigs import errors_against_truth, fixed_of, in_truth_frame, scenario_data, truth_bundle
 
 from wand_calib_ros.core.errors import DegenerateDataError, InsufficientDataError
-from wand_calib_ros.core.metrics import camera_errors, heldout_wand_rms
 from wand_calib_ros.core.pipeline import calibrate
 from wand_calib_ros.core.rig import WandObservations
-from wand_calib_ros.sim.scenarios import Scenario, SimulatedData
 
 RATIO = 1.15
-
-
-def _errors(scenario: Scenario, held: SimulatedData, models, poses) -> dict[str, float]:  # type: ignore[no-untyped-def]
-    out: dict[str, float] = {}
-    for c, camera in enumerate(scenario.cameras):
-        e = camera_errors(models[c], poses[c], camera.model, camera.pose)
-        out[f"{camera.spec.name} focal"] = e.focal_px
-        out[f"{camera.spec.name} principal point"] = e.principal_point_px
-        if c > 0:
-            out[f"{camera.spec.name} E_r"] = e.rotation_deg
-            out[f"{camera.spec.name} E_t"] = e.translation
-    out["D_RMS"] = heldout_wand_rms(tuple(models), tuple(poses), held.observations.uv, scenario.wand)
-    return out
 
 
 def _compare(name: str, seed: int, **kwargs: float | tuple[float, float]) -> tuple[dict, dict, object]:  # type: ignore[type-arg]
     scenario, data, held = scenario_data(name, seed, **kwargs)
     result = calibrate(scenario.rig, data.observations)
-    ordered = [result.camera(c.spec.name) for c in scenario.cameras]
-    mine = _errors(scenario, held, [c.model for c in ordered], [c.pose for c in ordered])
+    mine = errors_against_truth(scenario, held, *in_truth_frame(result, scenario))
     reference = truth_bundle(scenario, data, fixed_of(result, scenario))
-    best = _errors(scenario, held, reference.state.models, reference.state.poses)
+    best = errors_against_truth(scenario, held, reference.state.models, reference.state.poses)
     return mine, best, result
 
 
@@ -93,11 +77,10 @@ def test_reduced_distortion_model_is_no_worse_than_the_full_model_on_average() -
     for seed in range(1, 9):  # an average: single draws go either way
         scenario, data, held = scenario_data("paper", seed)
         result = calibrate(scenario.rig, data.observations)
-        ordered = [result.camera(c.spec.name) for c in scenario.cameras]
         full = truth_bundle(scenario, data)
-        for key, value in _errors(scenario, held, [c.model for c in ordered], [c.pose for c in ordered]).items():
+        for key, value in errors_against_truth(scenario, held, *in_truth_frame(result, scenario)).items():
             totals_mine[key] = totals_mine.get(key, 0.0) + value**2
-        for key, value in _errors(scenario, held, full.state.models, full.state.poses).items():
+        for key, value in errors_against_truth(scenario, held, full.state.models, full.state.poses).items():
             totals_full[key] = totals_full.get(key, 0.0) + value**2
     for key in totals_mine:
         assert np.sqrt(totals_mine[key]) <= RATIO * np.sqrt(totals_full[key]), key
