@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from wand_calib_ros.core.diagnostics import clock_offsets, clock_warnings
 from wand_calib_ros.core.errors import InsufficientDataError
 from wand_calib_ros.core.multi_camera import initialise_rig
 from wand_calib_ros.core.pairwise import PairOptions
@@ -77,7 +78,7 @@ def calibrate(
         ", ".join(f"{names[a]}-{names[b]}" for a, b in graph.edges),
     )
     init = initialise_rig(rig, uv, graph, options.pair)
-    return refine_calibration(
+    result = refine_calibration(
         rig,
         uv,
         init.models,
@@ -86,3 +87,5 @@ def calibrate(
         initial_projections=init.projections,
         lens_trials=init.trials,
     )
+    offsets = clock_offsets(result, obs)
+    return replace(result, clock_offsets=offsets, warnings=result.warnings + tuple(clock_warnings(offsets)))

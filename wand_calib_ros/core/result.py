@@ -56,6 +56,27 @@ class LensTrial:
     failure: str | None = None
 
 
+@dataclass(frozen=True)
+class ClockOffset:
+    """Estimated timing error of one camera relative to the others.
+
+    Attributes:
+        camera: camera name.
+        offset_frames: dt in frames (positive: the camera sees the wand late).
+        correlation: |correlation| between residuals and image velocity (1 = pure timing error).
+        rms_px: RMS of the leave-one-out residuals (per coordinate), px.
+        rms_corrected_px: the same after removing dt * velocity.
+        points: points used (frames with both neighbours present).
+    """
+
+    camera: str
+    offset_frames: float
+    correlation: float
+    rms_px: float
+    rms_corrected_px: float
+    points: int
+
+
 @dataclass(frozen=True, eq=False)
 class CalibrationResult:
     """A complete calibration.
@@ -75,6 +96,7 @@ class CalibrationResult:
         iterations: bundle adjustment iterations.
         lens_trials: Step 1 candidates tried and their Step 3 wand-length RMS.
         warnings: plain-language remarks on weakly determined parameters.
+        clock_offsets: per camera timing diagnostics (empty when frames are not a time series).
     """
 
     reference_camera: str
@@ -90,6 +112,7 @@ class CalibrationResult:
     iterations: int
     lens_trials: tuple[LensTrial, ...]
     warnings: tuple[str, ...]
+    clock_offsets: tuple[ClockOffset, ...] = ()
 
     def camera(self, name: str) -> CameraCalibration:
         for camera in self.cameras:

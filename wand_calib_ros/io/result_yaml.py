@@ -75,6 +75,7 @@ def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
         entry.update(
             {
                 "rms_reprojection_px": float(camera.rms_reprojection_px),
+                "rms_reprojection_2d_px": float(np.sqrt(2.0) * camera.rms_reprojection_px),
                 "n_observations": int(camera.n_observations),
                 "n_views": int(camera.n_views),
                 "rejected_views": int(camera.rejected_views),
@@ -106,6 +107,16 @@ def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
             | ({"failure": t.failure} if t.failure else {})
             for t in result.lens_trials
         ],
+        "clock_offsets": {
+            o.camera: {
+                "offset_frames": float(o.offset_frames),
+                "correlation": float(o.correlation),
+                "rms_px": float(o.rms_px),
+                "rms_corrected_px": float(o.rms_corrected_px),
+                "points": int(o.points),
+            }
+            for o in result.clock_offsets
+        },
         "warnings": list(result.warnings),
     }
 
