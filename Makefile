@@ -1,5 +1,5 @@
 # wand_calib_ros: the two entry points of the README.
-#   make demo  - create .venv, install, simulate the paper's two-fisheye rig and calibrate it
+#   make demo  - create .venv, install, simulate the paper's two-fisheye rig, calibrate it, write the report
 #   make test  - create .venv, install with test tools, run ruff and the test suite
 PYTHON ?= python3
 VENV := .venv
@@ -24,6 +24,8 @@ demo: setup
 	$(BIN)/wand-calib calibrate --cameras $(DEMO_DIR)/cameras.yaml \
 		--observations $(DEMO_DIR)/observations.csv --output $(DEMO_DIR)/result.yaml \
 		--camera-info-dir $(DEMO_DIR)/camera_info --truth $(DEMO_DIR)/truth.yaml
+	$(BIN)/wand-calib -q report --result $(DEMO_DIR)/result.yaml --cameras $(DEMO_DIR)/cameras.yaml \
+		--observations $(DEMO_DIR)/observations.csv --out $(DEMO_DIR)/report
 
 lint: setup
 	$(BIN)/ruff check .

@@ -55,6 +55,12 @@ def _parser() -> argparse.ArgumentParser:
         help="use at most this many placements, spread over the recording (a time budget for large rigs)",
     )
 
+    rep = commands.add_parser("report", help="write an HTML calibration report with figures")
+    rep.add_argument("--result", required=True, type=Path, help="result YAML of 'calibrate'")
+    rep.add_argument("--observations", required=True, type=Path, help="observations CSV it was computed from")
+    rep.add_argument("--cameras", required=True, type=Path, help="rig description (cameras.yaml)")
+    rep.add_argument("--out", required=True, type=Path, help="directory for index.html and the PNG figures")
+
     sweep = commands.add_parser("sweep", help="reproduce the paper's Figs. 4-6 (CSV and PNG)")
     sweep.add_argument("--out", required=True, type=Path, help="directory for fig4-6 CSV and PNG files")
     sweep.add_argument("--runs", type=int, default=10, help="simulations per sweep value (default 10, as the paper)")
@@ -201,6 +207,16 @@ def _simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _report(args: argparse.Namespace) -> int:
+    from wand_calib_ros.report.html import write_report  # matplotlib only when a report is asked for
+
+    rig = load_rig(args.cameras)
+    observations = read_observations(args.observations, rig.camera_names)
+    path = write_report(rig, observations, args.result, args.out)
+    print(f"report: {path}")
+    return 0
+
+
 def _sweep(args: argparse.Namespace) -> int:
     if args.runs < 1:
         raise WandCalibError("--runs must be positive")
@@ -215,7 +231,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     level = logging.DEBUG if args.verbose else logging.WARNING if args.quiet else logging.INFO
     logging.basicConfig(level=level, format="wand-calib: %(message)s", stream=sys.stderr)
     try:
-        commands = {"calibrate": _calibrate, "simulate": _simulate, "sweep": _sweep}
+        commands = {"calibrate": _calibrate, "simulate": _simulate, "sweep": _sweep, "report": _report}
         return commands[args.command](args)
     except WandCalibError as error:
         print(f"wand-calib: error: {error}", file=sys.stderr)

@@ -515,6 +515,9 @@ def _assemble(
                 tuple(f"k{i + 1}" for i in sorted(fixed.per_camera[c])),
                 views,
                 int(rejected_views[c]),
+                result.camera_covariance[
+                    c * N_CAMERA_PARAMS : c * N_CAMERA_PARAMS + 5, c * N_CAMERA_PARAMS : c * N_CAMERA_PARAMS + 5
+                ].copy(),
             )
         )
     points = triangulate_placements(state.models, state.poses, uv)

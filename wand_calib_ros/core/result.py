@@ -32,6 +32,7 @@ class CameraCalibration:
         fixed_coefficients: radial coefficients held at zero (e.g. ("k5",)).
         n_views: placements it contributed to the bundle adjustment.
         rejected_views: its views (of used placements) rejected as outliers.
+        radial_covariance: (5, 5) covariance of k1..k5 (mm^2; zero rows for fixed coefficients).
     """
 
     name: str
@@ -45,6 +46,7 @@ class CameraCalibration:
     fixed_coefficients: tuple[str, ...]
     n_views: int
     rejected_views: int
+    radial_covariance: FloatArray
 
 
 @dataclass(frozen=True)

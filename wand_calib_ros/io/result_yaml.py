@@ -80,6 +80,7 @@ def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
                 "n_views": int(camera.n_views),
                 "rejected_views": int(camera.rejected_views),
                 "std": {k: float(v) for k, v in camera.parameter_std.items()},
+                "radial_covariance": _floats(camera.radial_covariance),
                 "max_observed_theta_deg": float(camera.max_observed_theta_deg),
                 "initial_projection": camera.initial_projection,
                 "fixed_coefficients": list(camera.fixed_coefficients),

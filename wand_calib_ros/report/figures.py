@@ -1,0 +1,207 @@
+"""The report's figures (matplotlib, headless): one function per figure, ReportData in, Figure out."""
+
+from __future__ import annotations
+
+import math
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt
+import networkx as nx
+import numpy as np
+from matplotlib.figure import Figure
+
+from wand_calib_ros.core.camera_model import radius
+from wand_calib_ros.core.intrinsics_init import PROJECTIONS
+from wand_calib_ros.report.analysis import ReportData
+
+
+def _grid(n: int, size: float = 3.6) -> tuple[Figure, np.ndarray]:
+    cols = min(n, 4)
+    rows = math.ceil(n / cols)
+    figure, axes = plt.subplots(rows, cols, figsize=(size * cols, size * rows), squeeze=False)
+    for axis in axes.ravel()[n:]:
+        axis.set_visible(False)
+    return figure, axes.ravel()
+
+
+def residual_histograms(data: ReportData) -> Figure:
+    """Per camera histogram of the 2D residual norms."""
+    figure, axes = _grid(len(data.names))
+    for axis, name, camera in zip(axes, data.names, data.cameras, strict=False):
+        norms = np.linalg.norm(camera.residuals, axis=1)
+        norms = norms[np.isfinite(norms)]
+        axis.hist(norms, bins=40, color="tab:blue")
+        rms = float(np.sqrt(np.mean(norms**2))) if norms.size else float("nan")
+        axis.set_title(f"{name}: |residual|, RMS {rms:.2f} px")
+        axis.set_xlabel("px")
+    figure.tight_layout()
+    return figure
+
+
+def residual_vectors(data: ReportData) -> Figure:
+    """Per camera residual vectors drawn at their image positions (magnified)."""
+    figure, axes = _grid(len(data.names), size=4.2)
+    for axis, name, camera, spec in zip(axes, data.names, data.cameras, data.rig.cameras, strict=False):
+        width, height = spec.image_size
+        norms = np.linalg.norm(camera.residuals, axis=1)
+        scale = 0.05 * width / max(float(np.nanpercentile(norms, 95)) if norms.size else 1.0, 1e-6)
+        step = max(1, camera.uv.shape[0] // 1500)
+        uv, r = camera.uv[::step], camera.residuals[::step]
+        axis.quiver(
+            uv[:, 0],
+            uv[:, 1],
+            r[:, 0] * scale,
+            r[:, 1] * scale,
+            angles="xy",
+            scale_units="xy",
+            scale=1,
+            width=0.003,
+            color="tab:red",
+        )
+        axis.set_xlim(0, width)
+        axis.set_ylim(height, 0)
+        axis.set_aspect("equal")
+        axis.set_title(f"{name}: residuals x{scale:.0f}")
+    figure.tight_layout()
+    return figure
+
+
+def coverage(data: ReportData) -> Figure:
+    """Per camera heat map of the observed points over the image and histogram over theta."""
+    n = len(data.names)
+    figure, axes = plt.subplots(2, n, figsize=(3.6 * n, 6.4), squeeze=False)
+    for c, (name, camera, spec) in enumerate(zip(data.names, data.cameras, data.rig.cameras, strict=True)):
+        width, height = spec.image_size
+        axis = axes[0, c]
+        axis.hist2d(
+            camera.uv[:, 0],
+            camera.uv[:, 1],
+            bins=[16, max(4, round(16 * height / width))],
+            range=[[0, width], [0, height]],
+            cmap="viridis",
+        )
+        axis.set_ylim(height, 0)
+        axis.set_aspect("equal")
+        axis.set_title(f"{name}: image coverage")
+        axis = axes[1, c]
+        axis.hist(np.degrees(camera.theta), bins=30, range=(0, spec.max_view_angle_deg), color="tab:green")
+        axis.set_xlabel("theta (deg)")
+        axis.set_title(f"{name}: view-angle coverage")
+    figure.tight_layout()
+    return figure
+
+
+def distortion_curves(data: ReportData) -> Figure:
+    """Per camera fitted r(theta) in px with its 2-sigma band, against the five classic projections."""
+    n = len(data.names)
+    figure, axes = plt.subplots(2, n, figsize=(3.8 * n, 6.8), squeeze=False)
+    for c, (name, model, spec, camera) in enumerate(
+        zip(data.names, data.models, data.rig.cameras, data.cameras, strict=True)
+    ):
+        theta = np.linspace(0.0, spec.max_view_angle, 200)
+        scale = float(np.max(model.m))
+        fitted = scale * radius(model.k, theta)
+        entry = data.document["cameras"][name]
+        covariance = np.array(
+            entry.get("radial_covariance", np.diag([entry["std"].get(f"k{i + 1}", 0.0) ** 2 for i in range(5)]))
+        )
+        powers = theta[:, None] ** (2 * np.arange(5) + 1)
+        band = 2 * scale * np.sqrt(np.clip(np.einsum("ni,ij,nj->n", powers, covariance, powers), 0, None))
+        top, bottom = axes[0, c], axes[1, c]
+        for label, function in PROJECTIONS.items():
+            with np.errstate(over="ignore", invalid="ignore"):
+                curve = scale * function(spec.nominal_focal_mm, theta)
+            curve = np.where(curve < 3 * fitted.max(), curve, np.nan)
+            top.plot(np.degrees(theta), curve, "--", linewidth=1, label=f"{label} (nominal f)")
+        top.plot(np.degrees(theta), fitted, "k", linewidth=2, label="fitted")
+        top.fill_between(np.degrees(theta), fitted - band, fitted + band, color="k", alpha=0.2)
+        top.set_title(f"{name}: r(theta)")
+        top.set_ylabel("px")
+        top.legend(fontsize=6)
+        seen = float(np.degrees(np.nanmax(camera.theta))) if camera.theta.size else 0.0
+        bottom.plot(np.degrees(theta), band / 2, "k")
+        bottom.axvspan(seen, spec.max_view_angle_deg, color="tab:orange", alpha=0.2, label="not observed")
+        bottom.set_title(f"{name}: 1-sigma uncertainty of r")
+        bottom.set_xlabel("theta (deg)")
+        bottom.set_ylabel("px")
+        bottom.set_yscale("log")
+        bottom.legend(fontsize=7)
+    figure.tight_layout()
+    return figure
+
+
+def wand_lengths(data: ReportData) -> Figure:
+    """Histogram of |AC| - L of the linearly triangulated placements."""
+    figure, axis = plt.subplots(figsize=(6, 3.6))
+    errors = data.ac_lengths - data.rig.wand.L
+    axis.hist(errors, bins=50, color="tab:purple")
+    axis.set_title(f"|AC| - L: mean {np.mean(errors):+.2f} mm, std {np.std(errors):.2f} mm ({errors.size} placements)")
+    axis.set_xlabel("mm")
+    figure.tight_layout()
+    return figure
+
+
+def rig_3d(data: ReportData) -> Figure:
+    """The cameras (frustums) and the wand placements in the reference frame."""
+    figure = plt.figure(figsize=(7, 6))
+    axis = figure.add_subplot(projection="3d")
+    step = max(1, data.wand_points.shape[0] // 300)
+    for wand in data.wand_points[::step]:
+        axis.plot(wand[[0, 2], 0], wand[[0, 2], 1], wand[[0, 2], 2], color="tab:gray", linewidth=0.5)
+    extent = float(np.ptp(data.wand_points.reshape(-1, 3), axis=0).max()) if data.wand_points.size else 1000.0
+    for name, model, pose, spec in zip(data.names, data.models, data.poses, data.rig.cameras, strict=True):
+        centre = pose.center
+        width, height = spec.image_size
+        corners = np.array([[0, 0], [width, 0], [width, height], [0, height], [0, 0]], dtype=float)
+        rays = np.column_stack([(corners - model.principal_point) / model.focal_px, np.ones(5)])
+        ends = centre + 0.15 * extent * rays @ pose.rotation  # R^T applied to each ray
+        for end in ends[:4]:
+            axis.plot(*np.column_stack([centre, end]), color="tab:blue", linewidth=0.8)
+        axis.plot(ends[:, 0], ends[:, 1], ends[:, 2], color="tab:blue", linewidth=0.8)
+        axis.text(*centre, name, fontsize=8)
+    axis.set_xlabel("x (mm)")
+    axis.set_ylabel("y (mm)")
+    axis.set_zlabel("z (mm)")
+    axis.set_title(f"rig in {data.reference}'s frame")
+    figure.tight_layout()
+    return figure
+
+
+def vision_graph(data: ReportData) -> Figure:
+    """Cameras joined by the placements they share (M_ij); the paths used in bold."""
+    figure, axis = plt.subplots(figsize=(6, 5.5))
+    graph = nx.Graph()
+    graph.add_nodes_from(data.names)
+    n = len(data.names)
+    for i in range(n):
+        for j in range(i + 1, n):
+            if data.shared[i, j] > 0:
+                graph.add_edge(data.names[i], data.names[j], weight=int(data.shared[i, j]))
+    layout = nx.circular_layout(graph)
+    used = set()
+    if data.graph is not None:
+        used = {frozenset((data.names[a], data.names[b])) for a, b in data.graph.edges}
+    widths = [3.0 if frozenset(e) in used else 0.8 for e in graph.edges]
+    colours = ["tab:red" if frozenset(e) in used else "tab:gray" for e in graph.edges]
+    nx.draw_networkx(graph, layout, ax=axis, width=widths, edge_color=colours, node_color="tab:cyan", font_size=8)
+    nx.draw_networkx_edge_labels(
+        graph, layout, edge_labels=nx.get_edge_attributes(graph, "weight"), ax=axis, font_size=7
+    )
+    axis.set_title(f"vision graph (M_ij; bold: pairs calibrated from {data.reference})")
+    axis.axis("off")
+    figure.tight_layout()
+    return figure
+
+
+FIGURES = {
+    "residual_histograms": residual_histograms,
+    "residual_vectors": residual_vectors,
+    "coverage": coverage,
+    "distortion": distortion_curves,
+    "wand_lengths": wand_lengths,
+    "rig_3d": rig_3d,
+    "vision_graph": vision_graph,
+}

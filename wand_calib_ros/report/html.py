@@ -1,0 +1,109 @@
+"""The calibration report: one self-contained HTML page (PNG figures embedded) plus the PNG files."""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import logging
+from pathlib import Path
+
+import matplotlib.pyplot as plt
+
+from wand_calib_ros.core.rig import RigSpec, WandObservations
+from wand_calib_ros.report.analysis import ReportData, prepare
+from wand_calib_ros.report.figures import FIGURES
+
+log = logging.getLogger(__name__)
+
+_CAPTIONS = {
+    "residual_histograms": "Reprojection residuals per camera (2D norm).",
+    "residual_vectors": "Residual vectors over each image, magnified: a pattern (not noise) means a model or "
+    "timing error.",
+    "coverage": "Where the wand was seen: image area and off-axis angle. The distortion is only known where data are.",
+    "distortion": "Fitted r(theta) with its 2-sigma band against the five classic projections at the nominal focal "
+    "length; below, the 1-sigma uncertainty of the image radius (shaded: angles never observed).",
+    "wand_lengths": "Wand length |AC| of every placement triangulated linearly with the calibration.",
+    "rig_3d": "Camera frustums and wand placements in the reference camera's frame.",
+    "vision_graph": "Placements shared by camera pairs (M_ij) and the pairs used to chain the initial poses.",
+}
+
+_STYLE = """
+body { font-family: sans-serif; max-width: 1200px; margin: 2em auto; color: #222; }
+table { border-collapse: collapse; font-size: 0.85em; }
+td, th { border: 1px solid #ccc; padding: 3px 6px; text-align: right; }
+th { background: #eee; }
+.warn { color: #a40; }
+img { max-width: 100%; }
+"""
+
+
+def _parameter_table(data: ReportData) -> str:
+    columns = ("k1", "k2", "k3", "k4", "k5", "u0", "v0", "rx", "ry", "rz", "tx", "ty", "tz")
+    head = "".join(f"<th>{c}</th>" for c in ("camera", *columns, "RMS (px)", "views", "rejected"))
+    rows = []
+    for name, model, pose in zip(data.names, data.models, data.poses, strict=True):
+        entry = data.document["cameras"][name]
+        std = entry.get("std", {})
+        values = [*model.k, *model.principal_point, *pose.rotvec, *pose.translation]
+        cells = []
+        for column, value in zip(columns, values, strict=True):
+            sigma = f" &plusmn; {std[column]:.3g}" if column in std else (" (fixed)" if column.startswith("k") else "")
+            cells.append(f"<td>{value:.5g}{sigma}</td>")
+        rows.append(
+            f"<tr><td>{html.escape(name)}</td>{''.join(cells)}<td>{entry.get('rms_reprojection_px', float('nan')):.3f}"
+            f"</td><td>{entry.get('n_views', '')}</td><td>{entry.get('rejected_views', '')}</td></tr>"
+        )
+    return f"<table><tr>{head}</tr>{''.join(rows)}</table>"
+
+
+def _metrics(data: ReportData) -> str:
+    metrics = data.document.get("metrics", {})
+    items = "".join(
+        f"<li>{html.escape(str(k))}: {html.escape(f'{v:.4g}' if isinstance(v, float) else str(v))}</li>"
+        for k, v in metrics.items()
+    )
+    return f"<ul>{items}</ul>"
+
+
+def write_report(rig: RigSpec, observations: WandObservations, result_path: Path, out: Path) -> Path:
+    """Write ``out/index.html`` (self-contained) and one PNG per figure; returns the HTML path."""
+    data = prepare(rig, observations, result_path)
+    out.mkdir(parents=True, exist_ok=True)
+    sections = []
+    for name, make in FIGURES.items():
+        figure = make(data)
+        buffer = io.BytesIO()
+        figure.savefig(buffer, format="png", dpi=80)
+        plt.close(figure)
+        png = buffer.getvalue()
+        (out / f"{name}.png").write_bytes(png)
+        encoded = base64.b64encode(png).decode("ascii")
+        sections.append(
+            f"<h2>{name.replace('_', ' ')}</h2><p>{html.escape(_CAPTIONS[name])}</p>"
+            f'<img alt="{name}" src="data:image/png;base64,{encoded}">'
+        )
+    warnings = data.document.get("warnings", [])
+    warning_html = (
+        "<ul>" + "".join(f'<li class="warn">{html.escape(w)}</li>' for w in warnings) + "</ul>"
+        if warnings
+        else "<p>No warnings.</p>"
+    )
+    conventions = data.document.get("conventions", {})
+    page = f"""<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>wand_calib_ros calibration report</title>
+<style>{_STYLE}</style></head><body>
+<h1>Calibration report</h1>
+<p>{len(data.names)} cameras, reference camera <b>{html.escape(data.reference)}</b>; result file
+{html.escape(str(result_path))}. {html.escape(conventions.get("frames", ""))}.
+{html.escape(conventions.get("equivalence", ""))}.</p>
+<h2>Warnings</h2>{warning_html}
+<h2>Parameters (&plusmn; one standard deviation)</h2>{_parameter_table(data)}
+<h2>Metrics</h2>{_metrics(data)}
+{"".join(sections)}
+</body></html>
+"""
+    path = out / "index.html"
+    path.write_text(page)
+    log.info("report written to %s", path)
+    return path
