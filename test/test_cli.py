@@ -174,3 +174,60 @@ def test_max_placements_subsamples(simulated: Path, tmp_path: Path) -> None:
     assert _calibrate(simulated, tmp_path, "--max-placements", "120") == 0
     result = yaml.safe_load((tmp_path / "result.yaml").read_text())
     assert result["metrics"]["placements_used"] <= 120
+
+
+def test_render_detect_calibrate_from_a_bag(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    out = tmp_path / "rec"
+    assert main(["-q", "render", "paper", "--frames", "150", "--seed", "2", "--out", str(out)]) == 0
+    assert (
+        main(
+            ["-q", "detect", str(out / "bag"), "--cameras", str(out / "cameras.yaml"), "--output", str(out / "obs.csv")]
+        )
+        == 0
+    )
+    printed = capsys.readouterr().out
+    assert "cam0: 150 images" in printed
+    detected = read_observations(out / "obs.csv", ("cam0", "cam1"))
+    drawn = read_observations(out / "drawn.csv", ("cam0", "cam1"))
+    rows = np.searchsorted(drawn.frames, detected.frames)  # frame ids number the time slots
+    both = detected.complete & drawn.complete[rows]
+    errors = np.linalg.norm(detected.uv - drawn.uv[rows], axis=-1)[both]
+    assert (errors > 3).mean() <= 0.005, np.sort(errors)[-10:]  # labels
+    assert np.sqrt(np.mean(errors[errors <= 3] ** 2) / 2) < 0.15  # centres
+    code = main(
+        [
+            "-q",
+            "calibrate",
+            "--cameras",
+            str(out / "cameras.yaml"),
+            "--observations",
+            str(out / "obs.csv"),
+            "--output",
+            str(tmp_path / "result.yaml"),
+        ]
+    )
+    assert code == 0
+    result = yaml.safe_load((tmp_path / "result.yaml").read_text())
+    truth = yaml.safe_load((out / "truth.yaml").read_text())
+    for name in ("cam0", "cam1"):
+        pp = np.array(result["cameras"][name]["principal_point"])
+        assert np.linalg.norm(pp - truth["cameras"][name]["principal_point"]) < 1.0  # 0.04 px detection noise
+
+
+def test_detect_on_a_bag_without_the_topics_is_one_clear_line(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    out = tmp_path / "rec"
+    assert main(["-q", "render", "paper", "--frames", "5", "--out", str(out)]) == 0
+    code = main(
+        [
+            "-q",
+            "detect",
+            str(out / "bag"),
+            "--cameras",
+            str(out / "cameras.yaml"),
+            "--output",
+            str(out / "obs.csv"),
+            "--topic",
+            "/{camera}/color",
+        ]
+    )
+    _expect_one_line_error(capsys, code, "none of the image topics", "/cam0/image_raw")

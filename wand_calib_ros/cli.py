@@ -19,6 +19,7 @@ from wand_calib_ros.core.metrics import camera_errors, heldout_wand_rms, rerefer
 from wand_calib_ros.core.pairwise import PairOptions
 from wand_calib_ros.core.pipeline import CalibrationOptions, calibrate
 from wand_calib_ros.core.result import CalibrationResult
+from wand_calib_ros.core.rig import WandObservations
 from wand_calib_ros.errors import WandCalibError
 from wand_calib_ros.io.observations_csv import read_observations, write_observations
 from wand_calib_ros.io.result_yaml import camera_entry, read_result, write_camera_infos, write_result, write_yaml
@@ -54,6 +55,23 @@ def _parser() -> argparse.ArgumentParser:
         type=int,
         help="use at most this many placements, spread over the recording (a time budget for large rigs)",
     )
+
+    ren = commands.add_parser("render", help="render a scenario's waved wand into a rosbag2 of images")
+    ren.add_argument("scenario", choices=sorted(SCENARIOS), help="rig to simulate")
+    ren.add_argument("--out", required=True, type=Path, help="directory: bag/, cameras.yaml, truth.yaml, drawn.csv")
+    ren.add_argument("--frames", type=int, default=300, help="frames per camera (default 300)")
+    ren.add_argument("--fps", type=float, default=30.0, help="frame rate (default 30)")
+    ren.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    ren.add_argument("--reflections", type=float, default=0.0, help="probability of a spurious spot per image")
+    ren.add_argument("--occlusions", type=float, default=0.0, help="probability that an LED is hidden")
+    ren.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap", help="rosbag2 storage (default mcap)")
+
+    det = commands.add_parser("detect", help="detect the wand in a rosbag2 of camera images")
+    det.add_argument("bag", type=Path, help="rosbag2 directory (mcap or sqlite3)")
+    det.add_argument("--cameras", required=True, type=Path, help="rig description (cameras.yaml)")
+    det.add_argument("--output", required=True, type=Path, help="observations CSV to write")
+    det.add_argument("--topic", default="/{camera}/image_raw", help="topic pattern (default /{camera}/image_raw)")
+    det.add_argument("--sync-tolerance-ms", type=float, default=5.0, help="images this close in time form a frame")
 
     rep = commands.add_parser("report", help="write an HTML calibration report with figures")
     rep.add_argument("--result", required=True, type=Path, help="result YAML of 'calibrate'")
@@ -207,6 +225,53 @@ def _simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _render(args: argparse.Namespace) -> int:
+    from wand_calib_ros.io.bags import write_image_bag
+    from wand_calib_ros.sim.render import RenderOptions, render_recording
+
+    if args.frames < 1 or not (args.fps > 0):
+        raise WandCalibError("--frames and --fps must be positive")
+    scenario = SCENARIOS[args.scenario]()
+    rng = np.random.default_rng(args.seed)
+    options = RenderOptions(reflection_rate=args.reflections, occlusion_rate=args.occlusions)
+    recording = render_recording(scenario, args.frames, args.fps, options, rng)
+    out: Path = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    if (out / "bag").exists():
+        raise WandCalibError(f"{out / 'bag'} exists already; choose another --out")
+    write_image_bag(out / "bag", recording.frames, scenario.rig.camera_names, storage=args.storage)
+    save_rig(scenario.rig, out / "cameras.yaml")
+    names = tuple(c.spec.name for c in scenario.cameras)
+    write_observations(WandObservations(np.arange(args.frames), names, recording.drawn), out / "drawn.csv")
+    truth = {
+        "reference_camera": names[0],
+        "scenario": scenario.name,
+        "cameras": {c.spec.name: camera_entry(c.model, c.pose) for c in scenario.cameras},
+    }
+    write_yaml(truth, out / "truth.yaml")
+    print(f"rendered {args.frames} frames x {len(names)} cameras -> {out / 'bag'} ({args.storage})")
+    return 0
+
+
+def _detect(args: argparse.Namespace) -> int:
+    from wand_calib_ros.detection.recording import detect_recording
+    from wand_calib_ros.io.bags import read_image_frames
+
+    rig = load_rig(args.cameras)
+    topics = {name: args.topic.format(camera=name) for name in rig.camera_names}
+    started = time.perf_counter()
+    observations, stats = detect_recording(
+        read_image_frames(args.bag, topics), rig, tolerance_ns=int(args.sync_tolerance_ms * 1e6)
+    )
+    args.output.parent.mkdir(parents=True, exist_ok=True)
+    write_observations(observations, args.output)
+    print(f"detected the wand in {args.bag} -> {args.output} ({time.perf_counter() - started:.1f} s)")
+    for name, counts in stats.items():
+        reasons = ", ".join(f"{reason} {n}" for reason, n in sorted(counts.rejected.items())) or "none"
+        print(f"  {name}: {counts.images} images, {counts.detected} with the wand; rejected: {reasons}")
+    return 0
+
+
 def _report(args: argparse.Namespace) -> int:
     from wand_calib_ros.report.html import write_report  # matplotlib only when a report is asked for
 
@@ -231,7 +296,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     level = logging.DEBUG if args.verbose else logging.WARNING if args.quiet else logging.INFO
     logging.basicConfig(level=level, format="wand-calib: %(message)s", stream=sys.stderr)
     try:
-        commands = {"calibrate": _calibrate, "simulate": _simulate, "sweep": _sweep, "report": _report}
+        commands = {
+            "calibrate": _calibrate,
+            "simulate": _simulate,
+            "sweep": _sweep,
+            "report": _report,
+            "detect": _detect,
+            "render": _render,
+        }
         return commands[args.command](args)
     except WandCalibError as error:
         print(f"wand-calib: error: {error}", file=sys.stderr)

@@ -1,0 +1,64 @@
+"""Blob extraction: sub-pixel centres, encodings, and images without a wand."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from wand_calib_ros.detection.blobs import find_blobs, to_gray
+from wand_calib_ros.detection.errors import ImageError
+from wand_calib_ros.sim.render import RenderOptions, render_image
+
+
+def _spots(rng: np.random.Generator, n: int = 3) -> np.ndarray:
+    return np.column_stack([rng.uniform(40, 600, n), rng.uniform(40, 440, n)])
+
+
+def test_centres_are_sub_pixel_accurate_at_realistic_noise() -> None:
+    rng = np.random.default_rng(0)
+    errors = []
+    for _ in range(200):
+        spots = _spots(rng)
+        if np.min([np.linalg.norm(a - b) for i, a in enumerate(spots) for b in spots[i + 1 :]]) < 20:
+            continue
+        blobs = find_blobs(to_gray(render_image((640, 480), spots, RenderOptions(), rng), "mono8"))
+        assert blobs.centres.shape == (3, 2)
+        for spot in spots:
+            errors.append(np.min(np.linalg.norm(blobs.centres - spot, axis=1)))
+    assert np.sqrt(np.mean(np.square(errors))) < 0.15
+
+
+@pytest.mark.parametrize("encoding", ["mono16", "bgr8", "rgb8", "bayer_rggb8"])
+def test_other_encodings_give_the_same_centres(encoding: str) -> None:
+    rng = np.random.default_rng(1)
+    spots = np.array([[100.3, 200.7], [300.5, 220.2], [500.1, 240.9]])
+    mono = render_image((640, 480), spots, RenderOptions(read_noise=0.0), rng)
+    if encoding == "mono16":
+        image = mono.astype(np.uint16) * 256
+    elif encoding == "bayer_rggb8":
+        image = mono  # a grey scene looks the same through any Bayer pattern
+    else:
+        image = cv2.cvtColor(mono, cv2.COLOR_GRAY2BGR)
+    saturation = 65535.0 if encoding == "mono16" else 255.0
+    blobs = find_blobs(to_gray(image, encoding), saturation=saturation)
+    assert blobs.centres.shape == (3, 2)
+    reference = find_blobs(to_gray(mono, "mono8")).centres
+    assert np.allclose(np.sort(blobs.centres, axis=0), np.sort(reference, axis=0), atol=0.3)
+
+
+def test_noise_only_and_saturated_images_give_no_wand_blobs() -> None:
+    rng = np.random.default_rng(2)
+    noise = np.clip(rng.normal(20, 3, size=(480, 640)), 0, 255).astype(np.uint8)
+    assert find_blobs(to_gray(noise, "mono8")).centres.shape[0] == 0
+    white = np.full((480, 640), 255, dtype=np.uint8)
+    assert find_blobs(to_gray(white, "mono8")).centres.shape[0] == 0
+
+
+def test_unusable_images_raise_image_errors() -> None:
+    with pytest.raises(ImageError, match="unsupported image encoding 'yuv422'"):
+        to_gray(np.zeros((4, 4), np.uint8), "yuv422")
+    with pytest.raises(ImageError, match="does not match encoding 'bgr8'"):
+        to_gray(np.zeros((4, 4), np.uint8), "bgr8")
+    with pytest.raises(ImageError, match="empty image"):
+        to_gray(np.zeros((0, 0), np.uint8), "mono8")

@@ -1,0 +1,72 @@
+"""Wand identification and label tracking on rendered recordings with known truth."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from wand_calib_ros.detection.blobs import Blobs
+from wand_calib_ros.detection.recording import detect_recording, track_labels
+from wand_calib_ros.detection.wand import WandDetection, WandOptions, identify_wand
+from wand_calib_ros.io.bags import ImageFrame
+from wand_calib_ros.sim.render import RenderOptions, render_recording
+from wand_calib_ros.sim.scenarios import paper_fisheye_scenario
+
+
+def _blobs(points: list[list[float]]) -> Blobs:
+    n = len(points)
+    return Blobs(np.array(points, dtype=float), np.ones(n, np.int64), np.ones(n), np.zeros(n, bool))
+
+
+def test_collinear_triple_is_labelled_by_the_longer_side() -> None:
+    detection = identify_wand(_blobs([[300, 100], [100, 100], [233.4, 100.2], [50, 400]]), WandOptions(ratio=2.0))
+    assert detection.reason is None
+    # B is the middle point; A is the end farther from it (|AB| = L1 > L2 = |BC|)
+    assert np.allclose(detection.points, [[100, 100], [233.4, 100.2], [300, 100]])
+    assert not detection.ambiguous and abs(detection.image_ratio - 2.0) < 0.01
+
+
+def test_no_wand_reasons() -> None:
+    assert identify_wand(_blobs([])).reason == "no_blobs"
+    assert identify_wand(_blobs([[1, 1], [50, 50]])).reason == "too_few_blobs"
+    assert identify_wand(_blobs([[0, 0], [100, 0], [50, 60]])).reason == "not_collinear"
+    two_wands = [[0, 0], [200, 0], [300, 0], [0, 300], [200, 300], [300, 300]]
+    assert identify_wand(_blobs(two_wands)).reason == "competing_triples"
+
+
+def test_ambiguous_labels_are_settled_by_neighbouring_frames() -> None:
+    clear = WandDetection(np.array([[0.0, 0], [20, 0], [30, 0]]), 1.0, None, False, 2.0)  # ratio 2: trusted
+    ambiguous = WandDetection(np.array([[31.0, 0], [16, 0], [1, 0]]), 1.0, None, True, 1.0)
+    labelled = track_labels([(0, ambiguous), (33_000_000, clear), (66_000_000, ambiguous)])
+    assert np.allclose(labelled[0][0], [1, 0]) and np.allclose(labelled[2][0], [1, 0])
+    far = track_labels([(0, ambiguous), (10**9, clear)])
+    assert far[0] is None
+
+
+def test_rendered_recording_meets_the_detection_targets() -> None:
+    scenario = paper_fisheye_scenario()
+    rng = np.random.default_rng(3)
+    recording = render_recording(scenario, 240, 30.0, RenderOptions(), rng)
+    frames = [ImageFrame(camera, stamp, image, "mono8") for camera, stamp, image in recording.frames]
+    observations, stats = detect_recording(frames, scenario.rig)
+    visible = np.all(np.isfinite(recording.drawn), axis=(2, 3))
+    found = observations.complete
+    assert observations.uv.shape[0] == recording.drawn.shape[0]
+    assert found[visible].mean() >= 0.98
+    errors = np.linalg.norm(observations.uv - recording.drawn, axis=-1)[found & visible]
+    assert (errors > 3).mean() <= 0.005  # labels correct on >= 99.5 % of the points written
+    good = errors[errors <= 3]
+    assert np.sqrt(np.mean(good**2) / 2) < 0.15  # per-coordinate RMS centre error
+    assert sum(s.detected for s in stats.values()) == found.sum()
+
+
+def test_spurious_reflections_rarely_produce_a_wrong_triple() -> None:
+    scenario = paper_fisheye_scenario()
+    rng = np.random.default_rng(4)
+    recording = render_recording(scenario, 200, 30.0, RenderOptions(reflection_rate=1.0), rng)
+    frames = [ImageFrame(camera, stamp, image, "mono8") for camera, stamp, image in recording.frames]
+    observations, stats = detect_recording(frames, scenario.rig)
+    written = observations.complete
+    errors = np.linalg.norm(observations.uv - recording.drawn, axis=-1).max(axis=-1)
+    wrong = (errors > 3) & written
+    assert wrong.sum() <= 0.005 * recording.drawn.shape[0] * len(scenario.cameras)
+    assert sum(s.rejected["competing_triples"] for s in stats.values()) + written.sum() > 0

@@ -1,0 +1,1 @@
+"""LED wand detection: blobs to labelled A/B/C points (no ROS)."""

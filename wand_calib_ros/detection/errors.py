@@ -1,0 +1,13 @@
+"""Errors of the detection package."""
+
+from __future__ import annotations
+
+from wand_calib_ros.errors import WandCalibError
+
+
+class DetectionError(WandCalibError):
+    """Base class of the detection errors."""
+
+
+class ImageError(DetectionError):
+    """An image that cannot be used (unknown encoding, wrong size, empty)."""

@@ -1,0 +1,158 @@
+"""From a stream of camera images to wand observations: detect, track labels, group by time.
+
+Images of different cameras whose header stamps lie within a tolerance form
+one frame. Each camera keeps its last detection: an ambiguous A/C labelling is
+settled by continuity with it when it is recent, otherwise the view is
+rejected as "ambiguous" rather than risk swapped labels.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wand_calib_ros.core.camera_model import CameraModel
+from wand_calib_ros.core.errors import CoreError
+from wand_calib_ros.core.intrinsics_init import initial_model, lens_candidates
+from wand_calib_ros.core.rig import CameraSpec, RigSpec, WandObservations
+from wand_calib_ros.detection.blobs import BlobOptions, find_blobs, to_gray
+from wand_calib_ros.detection.errors import ImageError
+from wand_calib_ros.detection.wand import WandDetection, WandOptions, identify_wand, resolve_with_previous
+from wand_calib_ros.io.bags import ImageFrame
+
+#: A previous detection older than this cannot settle an ambiguous one.
+TRACK_GAP_NS = 200_000_000
+#: Image ratios |AB|/|BC| from which the labels are trusted without tracking (the wand's is L1/L2).
+ANCHOR_RATIO = 1.5
+
+
+@dataclass
+class CameraStats:
+    """Counts of one camera's images."""
+
+    images: int = 0
+    detected: int = 0
+    rejected: Counter[str] = field(default_factory=Counter)
+
+
+def detect_image(
+    image: NDArray, encoding: str, blob_options: BlobOptions, wand_options: WandOptions, model: CameraModel | None
+) -> WandDetection:
+    """Blobs and wand of one decoded image (ImageError for unusable images)."""
+    gray = to_gray(image, encoding)
+    saturation = 65535.0 if encoding == "mono16" else 255.0
+    return identify_wand(find_blobs(gray, blob_options, saturation=saturation), wand_options, model)
+
+
+def nominal_model(spec: CameraSpec) -> CameraModel | None:
+    """The camera's Step 1 model (best classic projection at the nominal focal length), or None."""
+    try:
+        return initial_model(spec, lens_candidates(spec)[0])
+    except CoreError:
+        return None
+
+
+def detect_recording(
+    frames: Iterable[ImageFrame],
+    rig: RigSpec,
+    *,
+    tolerance_ns: int = 5_000_000,
+    blob_options: BlobOptions = BlobOptions(),
+) -> tuple[WandObservations, dict[str, CameraStats]]:
+    """Wand observations of a recording, with per-camera counts (detected, rejected by reason).
+
+    Args:
+        frames: decoded images of the rig's cameras, roughly in time order.
+        rig: the rig description (image sizes, wand lengths).
+        tolerance_ns: images closer in time than this belong to the same frame.
+        blob_options: blob extraction settings.
+    """
+    wand_options = WandOptions(ratio=rig.wand.L1 / rig.wand.L2)
+    sizes = {c.name: c.image_size for c in rig.cameras}
+    models = {c.name: nominal_model(c) for c in rig.cameras}
+    stats = {name: CameraStats() for name in rig.camera_names}
+    found: dict[str, list[tuple[int, WandDetection]]] = {name: [] for name in rig.camera_names}
+    stamps: list[int] = []
+    for frame in sorted(frames, key=lambda f: f.stamp_ns):
+        stamps.append(frame.stamp_ns)
+        counts = stats[frame.camera]
+        counts.images += 1
+        height, width = frame.image.shape[:2]
+        if (width, height) != sizes[frame.camera]:
+            counts.rejected["wrong_size"] += 1
+            continue
+        try:
+            detection = detect_image(frame.image, frame.encoding, blob_options, wand_options, models[frame.camera])
+        except ImageError:
+            counts.rejected["bad_image"] += 1
+            continue
+        if detection.points is None:
+            counts.rejected[detection.reason or "no_wand"] += 1
+            continue
+        found[frame.camera].append((frame.stamp_ns, detection))
+    detections: list[tuple[int, str, NDArray[np.float64]]] = []
+    for camera, sequence in found.items():
+        labelled = track_labels(sequence)
+        for (stamp, _), points in zip(sequence, labelled, strict=True):
+            if points is None:
+                stats[camera].rejected["ambiguous"] += 1
+            else:
+                stats[camera].detected += 1
+                detections.append((stamp, camera, points))
+    return _group(detections, np.array(stamps, dtype=np.int64), rig.camera_names, tolerance_ns), stats
+
+
+def track_labels(sequence: list[tuple[int, WandDetection]]) -> list[NDArray[np.float64] | None]:
+    """A, B, C of each detection of one camera, ambiguous ones settled by their neighbours in time.
+
+    Detections whose image ratio |AB|/|BC| is at least ANCHOR_RATIO keep their labels; a
+    forward pass settles the others by continuity with the previous detection when that one
+    is settled and at most TRACK_GAP_NS older; a backward pass settles what is left from the
+    next one. Chains stop at detections they cannot settle. Detections nothing settles are None.
+    """
+    # Only confident labellings start tracks: perspective can shrink |AB| below |BC| when the wand
+    # points steeply at the camera, so a ratio near 1 says little about which end is A.
+    labelled: list[NDArray[np.float64] | None] = [
+        d.points if d.image_ratio >= ANCHOR_RATIO else None for _, d in sequence
+    ]
+    for order in (range(len(sequence)), range(len(sequence) - 1, -1, -1)):
+        last: tuple[int, NDArray[np.float64]] | None = None
+        for i in order:
+            stamp, detection = sequence[i]
+            if labelled[i] is None and last is not None and abs(stamp - last[0]) <= TRACK_GAP_NS:
+                resolved = resolve_with_previous(detection, last[1])
+                labelled[i] = None if resolved.ambiguous else resolved.points
+            # A chain never bridges a detection it could not settle: the wand may have turned
+            # through the line of sight there, swapping which image end is A.
+            last = None if labelled[i] is None else (stamp, labelled[i])  # type: ignore[assignment]
+    return labelled
+
+
+def _group(
+    detections: list[tuple[int, str, NDArray[np.float64]]],
+    stamps: NDArray[np.int64],
+    names: tuple[str, ...],
+    tolerance_ns: int,
+) -> WandObservations:
+    """Observations whose frame ids number the recording's time slots.
+
+    Every image stamp (with or without a wand) opens a new slot when it lies more
+    than ``tolerance_ns`` after the current slot's first stamp; a detection belongs
+    to the slot of its image.
+    """
+    starts: list[int] = []
+    for stamp in np.sort(stamps):
+        if not starts or stamp - starts[-1] > tolerance_ns:
+            starts.append(int(stamp))
+    slot_starts = np.array(starts, dtype=np.int64)
+    uv = np.full((slot_starts.size, len(names), 3, 2), np.nan)
+    index = {name: i for i, name in enumerate(names)}
+    for stamp, camera, points in detections:
+        slot = int(np.searchsorted(slot_starts, stamp, side="right")) - 1
+        uv[slot, index[camera]] = points
+    seen = np.any(np.isfinite(uv), axis=(1, 2, 3))
+    return WandObservations(np.flatnonzero(seen), names, uv[seen])

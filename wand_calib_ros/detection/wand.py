@@ -1,0 +1,158 @@
+"""Wand identification: which three blobs are A, B and C.
+
+A, B, C are collinear with B between them and |AB| = L1 > L2 = |BC|. Among
+the candidate blobs every triple is scored by how far its middle point lies
+from the line through its ends (relative to its length, so fisheye curvature
+within the tolerance is accepted) and by how far its image ratio |AB|/|BC| is
+from the wand's; perspective changes that ratio, so it only breaks ties. The
+end farther from B is A. When the image ratio is close to 1 (the wand points
+steeply towards the camera) the labels are ambiguous: the detection says so
+and a tracker or another camera has to decide (:func:`resolve_with_previous`).
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wand_calib_ros.core.camera_model import CameraModel, unproject
+from wand_calib_ros.detection.blobs import Blobs
+
+FloatArray = NDArray[np.float64]
+
+#: Reasons a frame gives no wand (counted per camera by ``wand-calib detect``).
+REASONS = ("no_blobs", "too_few_blobs", "not_collinear", "competing_triples")
+
+
+@dataclass(frozen=True)
+class WandOptions:
+    """Wand identification settings.
+
+    Attributes:
+        ratio: the wand's |AB| / |BC| = L1 / L2.
+        collinearity: largest distance of B from the line AC, as a fraction of |AC|.
+        min_length_px: smallest |AC| in the image.
+        ambiguous_ratio: image ratios within [1/x, x] of 1 leave A and C ambiguous.
+        competing_margin: a second triple scoring within this factor of the best makes the frame ambiguous.
+    """
+
+    ratio: float = 2.0
+    collinearity: float = 0.03
+    min_length_px: float = 6.0
+    ambiguous_ratio: float = 1.25
+    competing_margin: float = 2.0
+
+
+@dataclass(frozen=True, eq=False)
+class WandDetection:
+    """The wand in one image, or why not.
+
+    Attributes:
+        points: (3, 2) pixels of A, B, C, or None.
+        quality: 0..1, higher is better (collinearity and ratio agreement).
+        reason: None when found, else one of :data:`REASONS`.
+        ambiguous: A and C could be swapped (image ratio near 1).
+        image_ratio: |AB| / |BC| in the image.
+    """
+
+    points: FloatArray | None
+    quality: float
+    reason: str | None
+    ambiguous: bool = False
+    image_ratio: float = float("nan")
+
+
+def _score(
+    triple: FloatArray, options: WandOptions, bearings: FloatArray | None = None
+) -> tuple[float, FloatArray, float] | None:
+    """(score, A-B-C ordered points, image ratio) of a triple, or None when it is not a wand.
+
+    Args:
+        triple: (3, 2) pixels.
+        options: tolerances.
+        bearings: (3, 3) their unit bearings under a (nominal) camera model, or None: then
+            collinearity is judged in the image, else on the sphere (the wand's points lie on
+            a great circle, however strongly a fisheye bends its image).
+    """
+    # The ends of the longest side are A and C; the third point is B.
+    d01, d02, d12 = (np.linalg.norm(triple[i] - triple[j]) for i, j in ((0, 1), (0, 2), (1, 2)))
+    i, j, m, length = max(((0, 1, 2, d01), (0, 2, 1, d02), (1, 2, 0, d12)), key=lambda t: t[3])
+    if length < options.min_length_px:
+        return None
+    a, c, b = triple[i], triple[j], triple[m]
+    if bearings is None:
+        axis = (c - a) / length
+        off_line = abs(axis[0] * (b - a)[1] - axis[1] * (b - a)[0]) / length
+    else:
+        normal = np.cross(bearings[i], bearings[j])
+        span = np.linalg.norm(normal)  # sin of the angle between the ends' rays
+        off_line = abs(float(normal @ bearings[m])) / max(span * span, 1e-12) if span > 0 else np.inf
+    if off_line > options.collinearity:
+        return None
+    ab, bc = np.linalg.norm(b - a), np.linalg.norm(c - b)
+    if min(ab, bc) <= 0:
+        return None
+    if ab < bc:  # A is the end farther from B
+        a, c, ab, bc = c, a, bc, ab
+    ratio = ab / bc
+    ratio_error = abs(np.log(ratio / options.ratio))
+    score = off_line / options.collinearity + 0.25 * ratio_error
+    return score, np.stack([a, b, c]), ratio
+
+
+def identify_wand(
+    blobs: Blobs, options: WandOptions = WandOptions(), model: CameraModel | None = None
+) -> WandDetection:
+    """The most wand-like collinear triple among the blobs (see the module docstring).
+
+    Args:
+        blobs: the image's blobs.
+        options: tolerances.
+        model: the camera's (nominal or calibrated) model: collinearity is then tested on the
+            unit sphere, which keeps fisheye images of the wand straight.
+    """
+    n = blobs.centres.shape[0]
+    if n == 0:
+        return WandDetection(None, 0.0, "no_blobs")
+    if n < 3:
+        return WandDetection(None, 0.0, "too_few_blobs")
+    scored = []
+    bearings = unproject(model, blobs.centres) if model is not None else None
+    for triple in itertools.combinations(range(n), 3):
+        index = list(triple)
+        outcome = _score(blobs.centres[index], options, None if bearings is None else bearings[index])
+        if outcome is not None:
+            scored.append(outcome)
+    if not scored:
+        return WandDetection(None, 0.0, "not_collinear")
+    scored.sort(key=lambda s: s[0])
+    best = scored[0]
+    if len(scored) > 1 and scored[1][0] < options.competing_margin * best[0] + 0.05:
+        return WandDetection(None, 0.0, "competing_triples")
+    score, points, ratio = best
+    ambiguous = 1 / options.ambiguous_ratio <= ratio <= options.ambiguous_ratio
+    return WandDetection(points, float(1.0 / (1.0 + score)), None, bool(ambiguous), float(ratio))
+
+
+#: Continuity settles a labelling only when one order is this much closer to the previous frame than the other.
+CONTINUITY_MARGIN = 0.5
+
+
+def resolve_with_previous(detection: WandDetection, previous: FloatArray | None) -> WandDetection:
+    """Label a detection by continuity with a neighbouring frame's A, B, C.
+
+    The order (A, B, C) or (C, B, A) nearer to the neighbour's points wins when it
+    is clearly nearer (CONTINUITY_MARGIN); otherwise (the wand turned through the
+    line of sight between the frames) the detection stays ambiguous.
+    """
+    if detection.points is None or previous is None:
+        return detection
+    straight = np.linalg.norm(detection.points - previous, axis=1).sum()
+    swapped = np.linalg.norm(detection.points[::-1] - previous, axis=1).sum()
+    if min(straight, swapped) > CONTINUITY_MARGIN * max(straight, swapped):
+        return WandDetection(detection.points, detection.quality, None, True, detection.image_ratio)
+    points = detection.points if straight <= swapped else detection.points[::-1].copy()
+    return WandDetection(points, detection.quality, None, False, detection.image_ratio)
