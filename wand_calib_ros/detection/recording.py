@@ -21,7 +21,13 @@ from wand_calib_ros.core.intrinsics_init import initial_model, lens_candidates
 from wand_calib_ros.core.rig import CameraSpec, RigSpec, WandObservations
 from wand_calib_ros.detection.blobs import BlobOptions, find_blobs, to_gray
 from wand_calib_ros.detection.errors import ImageError
-from wand_calib_ros.detection.wand import WandDetection, WandOptions, identify_wand, resolve_with_previous
+from wand_calib_ros.detection.wand import (
+    BearingTable,
+    WandDetection,
+    WandOptions,
+    identify_wand,
+    resolve_with_previous,
+)
 from wand_calib_ros.io.bags import ImageFrame
 
 #: A previous detection older than this cannot settle an ambiguous one.
@@ -40,7 +46,11 @@ class CameraStats:
 
 
 def detect_image(
-    image: NDArray, encoding: str, blob_options: BlobOptions, wand_options: WandOptions, model: CameraModel | None
+    image: NDArray,
+    encoding: str,
+    blob_options: BlobOptions,
+    wand_options: WandOptions,
+    model: CameraModel | BearingTable | None,
 ) -> WandDetection:
     """Blobs and wand of one decoded image (ImageError for unusable images)."""
     gray = to_gray(image, encoding)
@@ -48,10 +58,10 @@ def detect_image(
     return identify_wand(find_blobs(gray, blob_options, saturation=saturation), wand_options, model)
 
 
-def nominal_model(spec: CameraSpec) -> CameraModel | None:
-    """The camera's Step 1 model (best classic projection at the nominal focal length), or None."""
+def nominal_model(spec: CameraSpec) -> BearingTable | None:
+    """Bearings under the camera's Step 1 model (best classic projection at the nominal focal length)."""
     try:
-        return initial_model(spec, lens_candidates(spec)[0])
+        return BearingTable(initial_model(spec, lens_candidates(spec)[0]))
     except CoreError:
         return None
 

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.camera_model import CameraModel, unproject
+from wand_calib_ros.core.camera_model import CameraModel, monotonic_limit, radius, unproject
 from wand_calib_ros.detection.blobs import Blobs
 
 FloatArray = NDArray[np.float64]
@@ -103,16 +103,34 @@ def _score(
     return score, np.stack([a, b, c]), ratio
 
 
+class BearingTable:
+    """Fast approximate unprojection for the collinearity test: theta(r) tabulated once per camera."""
+
+    def __init__(self, model: CameraModel, samples: int = 4096) -> None:
+        self.model = model
+        limit = monotonic_limit(model.k)
+        self.theta = np.linspace(0.0, limit, samples)
+        self.radius = radius(model.k, self.theta)
+
+    def __call__(self, uv: FloatArray) -> FloatArray:
+        """(N, 3) unit bearings of (N, 2) pixels (radii beyond the table are clamped)."""
+        xy = (uv - self.model.principal_point) / self.model.m
+        r = np.hypot(xy[:, 0], xy[:, 1])
+        theta = np.interp(r, self.radius, self.theta)
+        scale = np.where(r > 0, np.sin(theta) / np.where(r > 0, r, 1.0), 1.0 / self.model.k[0])
+        return np.column_stack([xy * scale[:, None], np.cos(theta)])
+
+
 def identify_wand(
-    blobs: Blobs, options: WandOptions = WandOptions(), model: CameraModel | None = None
+    blobs: Blobs, options: WandOptions = WandOptions(), model: CameraModel | BearingTable | None = None
 ) -> WandDetection:
     """The most wand-like collinear triple among the blobs (see the module docstring).
 
     Args:
         blobs: the image's blobs.
         options: tolerances.
-        model: the camera's (nominal or calibrated) model: collinearity is then tested on the
-            unit sphere, which keeps fisheye images of the wand straight.
+        model: the camera's (nominal or calibrated) model, or its BearingTable: collinearity is
+            then tested on the unit sphere, which keeps fisheye images of the wand straight.
     """
     n = blobs.centres.shape[0]
     if n == 0:
@@ -120,7 +138,12 @@ def identify_wand(
     if n < 3:
         return WandDetection(None, 0.0, "too_few_blobs")
     scored = []
-    bearings = unproject(model, blobs.centres) if model is not None else None
+    if model is None:
+        bearings = None
+    elif isinstance(model, BearingTable):
+        bearings = model(blobs.centres)
+    else:
+        bearings = unproject(model, blobs.centres)
     for triple in itertools.combinations(range(n), 3):
         index = list(triple)
         outcome = _score(blobs.centres[index], options, None if bearings is None else bearings[index])
