@@ -231,3 +231,30 @@ def test_detect_on_a_bag_without_the_topics_is_one_clear_line(tmp_path: Path, ca
         ]
     )
     _expect_one_line_error(capsys, code, "none of the image topics", "/cam0/image_raw")
+
+
+def test_detect_writes_debug_overlays(tmp_path: Path) -> None:
+    out = tmp_path / "rec"
+    assert main(["-q", "render", "paper", "--frames", "10", "--reflections", "0.5", "--out", str(out)]) == 0
+    debug = tmp_path / "debug"
+    assert (
+        main(
+            [
+                "-q",
+                "detect",
+                str(out / "bag"),
+                "--cameras",
+                str(out / "cameras.yaml"),
+                "--output",
+                str(out / "obs.csv"),
+                "--debug-dir",
+                str(debug),
+                "--debug-every",
+                "5",
+            ]
+        )
+        == 0
+    )
+    pictures = sorted(debug.glob("*.png"))
+    assert len(pictures) == 4  # 10 images per camera, every 5th
+    assert pictures[0].read_bytes()[:4] == b"\x89PNG"

@@ -13,6 +13,7 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from wand_calib_ros.core.metrics import camera_errors, heldout_wand_rms, rereference
@@ -72,6 +73,8 @@ def _parser() -> argparse.ArgumentParser:
     det.add_argument("--output", required=True, type=Path, help="observations CSV to write")
     det.add_argument("--topic", default="/{camera}/image_raw", help="topic pattern (default /{camera}/image_raw)")
     det.add_argument("--sync-tolerance-ms", type=float, default=5.0, help="images this close in time form a frame")
+    det.add_argument("--debug-dir", type=Path, help="write overlay images (blobs, chosen A/B/C) here")
+    det.add_argument("--debug-every", type=int, default=30, help="overlay every N-th image per camera (default 30)")
 
     rep = commands.add_parser("report", help="write an HTML calibration report with figures")
     rep.add_argument("--result", required=True, type=Path, help="result YAML of 'calibrate'")
@@ -260,8 +263,23 @@ def _detect(args: argparse.Namespace) -> int:
     rig = load_rig(args.cameras)
     topics = {name: args.topic.format(camera=name) for name in rig.camera_names}
     started = time.perf_counter()
+    seen: dict[str, int] = {}
+    if args.debug_dir is not None:
+        args.debug_dir.mkdir(parents=True, exist_ok=True)
+
+    def inspect(frame, blobs, detection, reason) -> None:  # type: ignore[no-untyped-def]
+        count = seen[frame.camera] = seen.get(frame.camera, 0) + 1
+        total = sum(seen.values())
+        if total % 1000 == 0:
+            log.info("detect: %d images, %.0f images/s", total, total / (time.perf_counter() - started))
+        if args.debug_dir is not None and (count - 1) % max(args.debug_every, 1) == 0:
+            from wand_calib_ros.detection.overlay import draw_overlay
+
+            picture = draw_overlay(frame.image, frame.encoding, blobs, detection, reason)
+            cv2.imwrite(str(args.debug_dir / f"{frame.camera}_{frame.stamp_ns}.png"), picture)
+
     observations, stats = detect_recording(
-        read_image_frames(args.bag, topics), rig, tolerance_ns=int(args.sync_tolerance_ms * 1e6)
+        read_image_frames(args.bag, topics), rig, tolerance_ns=int(args.sync_tolerance_ms * 1e6), inspect=inspect
     )
     args.output.parent.mkdir(parents=True, exist_ok=True)
     write_observations(observations, args.output)

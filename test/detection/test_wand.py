@@ -70,3 +70,26 @@ def test_spurious_reflections_rarely_produce_a_wrong_triple() -> None:
     wrong = (errors > 3) & written
     assert wrong.sum() <= 0.005 * recording.drawn.shape[0] * len(scenario.cameras)
     assert sum(s.rejected["competing_triples"] for s in stats.values()) + written.sum() > 0
+
+
+def test_unusable_images_are_counted_by_reason_not_raised() -> None:
+    scenario = paper_fisheye_scenario()
+    rng = np.random.default_rng(5)
+    good = render_recording(scenario, 3, 30.0, RenderOptions(), rng)
+    frames = [ImageFrame(camera, stamp, image, "mono8") for camera, stamp, image in good.frames]
+    t = 2_000_000_000_000_000_000
+    frames += [
+        ImageFrame("cam0", t, np.zeros((10, 10), np.uint8), "mono8"),  # wrong size
+        ImageFrame("cam0", t + 10**8, np.zeros((480, 640), np.uint8), "mono8"),  # empty (black)
+        ImageFrame("cam0", t + 2 * 10**8, np.full((480, 640), 255, np.uint8), "mono8"),  # saturated
+        ImageFrame("cam0", t + 3 * 10**8, np.zeros((480, 640, 3), np.uint8), "yuv422"),  # unknown encoding
+        ImageFrame("cam1", t, rng.integers(0, 255, (480, 640), dtype=np.uint8), "mono8"),  # all noise
+    ]
+    observations, stats = detect_recording(frames, scenario.rig)
+    assert stats["cam0"].rejected["wrong_size"] == 1
+    assert stats["cam0"].rejected["bad_image"] == 1
+    assert stats["cam0"].rejected["no_blobs"] == 2
+    assert stats["cam0"].detected == 3 and observations.complete[:, 0].sum() == 3
+    cam1 = stats["cam1"]
+    assert cam1.images == 4 and cam1.detected + sum(cam1.rejected.values()) == 4
+    assert cam1.detected == observations.complete[:, 1].sum() <= 3  # the noise image gives no wand

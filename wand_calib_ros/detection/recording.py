@@ -9,7 +9,7 @@ rejected as "ambiguous" rather than risk swapped labels.
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -19,7 +19,7 @@ from wand_calib_ros.core.camera_model import CameraModel
 from wand_calib_ros.core.errors import CoreError
 from wand_calib_ros.core.intrinsics_init import initial_model, lens_candidates
 from wand_calib_ros.core.rig import CameraSpec, RigSpec, WandObservations
-from wand_calib_ros.detection.blobs import BlobOptions, find_blobs, to_gray
+from wand_calib_ros.detection.blobs import BlobOptions, Blobs, find_blobs, to_gray
 from wand_calib_ros.detection.errors import ImageError
 from wand_calib_ros.detection.wand import (
     BearingTable,
@@ -51,11 +51,12 @@ def detect_image(
     blob_options: BlobOptions,
     wand_options: WandOptions,
     model: CameraModel | BearingTable | None,
-) -> WandDetection:
+) -> tuple[Blobs, WandDetection]:
     """Blobs and wand of one decoded image (ImageError for unusable images)."""
     gray = to_gray(image, encoding)
     saturation = 65535.0 if encoding == "mono16" else 255.0
-    return identify_wand(find_blobs(gray, blob_options, saturation=saturation), wand_options, model)
+    blobs = find_blobs(gray, blob_options, saturation=saturation)
+    return blobs, identify_wand(blobs, wand_options, model)
 
 
 def nominal_model(spec: CameraSpec) -> BearingTable | None:
@@ -72,6 +73,7 @@ def detect_recording(
     *,
     tolerance_ns: int = 5_000_000,
     blob_options: BlobOptions = BlobOptions(),
+    inspect: Callable[[ImageFrame, Blobs | None, WandDetection | None, str | None], None] | None = None,
 ) -> tuple[WandObservations, dict[str, CameraStats]]:
     """Wand observations of a recording, with per-camera counts (detected, rejected by reason).
 
@@ -80,6 +82,8 @@ def detect_recording(
         rig: the rig description (image sizes, wand lengths).
         tolerance_ns: images closer in time than this belong to the same frame.
         blob_options: blob extraction settings.
+        inspect: called for every image with its blobs, detection and rejection reason
+            (progress reports, debug overlays).
     """
     wand_options = WandOptions(ratio=rig.wand.L1 / rig.wand.L2)
     sizes = {c.name: c.image_size for c in rig.cameras}
@@ -92,16 +96,22 @@ def detect_recording(
         counts = stats[frame.camera]
         counts.images += 1
         height, width = frame.image.shape[:2]
+        blobs: Blobs | None = None
+        detection: WandDetection | None = None
         if (width, height) != sizes[frame.camera]:
-            counts.rejected["wrong_size"] += 1
-            continue
-        try:
-            detection = detect_image(frame.image, frame.encoding, blob_options, wand_options, models[frame.camera])
-        except ImageError:
-            counts.rejected["bad_image"] += 1
-            continue
-        if detection.points is None:
-            counts.rejected[detection.reason or "no_wand"] += 1
+            reason: str | None = "wrong_size"
+        else:
+            try:
+                blobs, detection = detect_image(
+                    frame.image, frame.encoding, blob_options, wand_options, models[frame.camera]
+                )
+                reason = detection.reason if detection.points is None else None
+            except ImageError:
+                reason = "bad_image"
+        if inspect is not None:
+            inspect(frame, blobs, detection, reason)
+        if reason is not None or detection is None:
+            counts.rejected[reason or "no_wand"] += 1
             continue
         found[frame.camera].append((frame.stamp_ns, detection))
     detections: list[tuple[int, str, NDArray[np.float64]]] = []
