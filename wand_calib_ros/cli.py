@@ -258,7 +258,7 @@ def _render(args: argparse.Namespace) -> int:
 
 def _detect(args: argparse.Namespace) -> int:
     from wand_calib_ros.detection.recording import detect_recording
-    from wand_calib_ros.io.bags import read_image_frames
+    from wand_calib_ros.io.bags import count_images, read_image_frames
 
     rig = load_rig(args.cameras)
     topics = {name: args.topic.format(camera=name) for name in rig.camera_names}
@@ -267,11 +267,18 @@ def _detect(args: argparse.Namespace) -> int:
     if args.debug_dir is not None:
         args.debug_dir.mkdir(parents=True, exist_ok=True)
 
+    expected = count_images(args.bag, topics)
+    show_progress = not args.quiet and expected > 0
+
     def inspect(frame, blobs, detection, reason) -> None:  # type: ignore[no-untyped-def]
         count = seen[frame.camera] = seen.get(frame.camera, 0) + 1
         total = sum(seen.values())
-        if total % 1000 == 0:
-            log.info("detect: %d images, %.0f images/s", total, total / (time.perf_counter() - started))
+        if show_progress and (total % 100 == 0 or total == expected):
+            done = min(total / expected, 1.0)
+            rate = total / max(time.perf_counter() - started, 1e-9)
+            bar = "#" * round(30 * done) + "-" * (30 - round(30 * done))
+            end = "\n" if total >= expected else ""
+            print(f"\rdetect [{bar}] {total}/{expected} images, {rate:.0f}/s", end=end, file=sys.stderr, flush=True)
         if args.debug_dir is not None and (count - 1) % max(args.debug_every, 1) == 0:
             from wand_calib_ros.detection.overlay import draw_overlay
 

@@ -119,6 +119,19 @@ def _decode(message: object, msgtype: str, where: str) -> tuple[NDArray, str]:
     return (rows.reshape(height, width, channels) if channels > 1 else rows.reshape(height, width)), encoding
 
 
+def count_images(path: Path, topics: dict[str, str]) -> int:
+    """Messages on the given topics (0 when the bag cannot be read: reading reports the error)."""
+    try:
+        reader = Reader(path)
+        reader.open()
+    except Exception:
+        return 0
+    try:
+        return sum(c.msgcount for c in reader.connections if c.topic in set(topics.values()))
+    finally:
+        reader.close()
+
+
 def read_image_frames(path: Path, topics: dict[str, str]) -> Iterator[ImageFrame]:
     """Decoded images of the given camera topics in bag order.
 
