@@ -66,6 +66,7 @@ def _parser() -> argparse.ArgumentParser:
     ren.add_argument("--reflections", type=float, default=0.0, help="probability of a spurious spot per image")
     ren.add_argument("--occlusions", type=float, default=0.0, help="probability that an LED is hidden")
     ren.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap", help="rosbag2 storage (default mcap)")
+    ren.add_argument("--independent", action="store_true", help="independent placements instead of a waved wand")
 
     det = commands.add_parser("detect", help="detect the wand in a rosbag2 of camera images")
     det.add_argument("bag", type=Path, help="rosbag2 directory (mcap or sqlite3)")
@@ -237,7 +238,7 @@ def _render(args: argparse.Namespace) -> int:
     scenario = SCENARIOS[args.scenario]()
     rng = np.random.default_rng(args.seed)
     options = RenderOptions(reflection_rate=args.reflections, occlusion_rate=args.occlusions)
-    recording = render_recording(scenario, args.frames, args.fps, options, rng)
+    recording = render_recording(scenario, args.frames, args.fps, options, rng, independent=args.independent)
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
     if (out / "bag").exists():

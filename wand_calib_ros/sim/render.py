@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wand_calib_ros.core.camera_model import project
-from wand_calib_ros.sim.scenarios import Scenario, visibility
+from wand_calib_ros.sim.scenarios import Scenario, sample_placements, visibility
 
 FloatArray = NDArray[np.float64]
 
@@ -145,11 +145,24 @@ class Recording:
     stamps_ns: NDArray[np.int64]
 
 
+def independent_placements(scenario: Scenario, n_frames: int, fps: float, rng: np.random.Generator) -> WandMotion:
+    """Unrelated wand placements (the scenario's sampler) shown one per frame: no continuity to track."""
+    wand_a, direction, facing = sample_placements(scenario, n_frames, rng)
+    return WandMotion(np.arange(n_frames) / fps, wand_a, direction, facing)
+
+
 def render_recording(
-    scenario: Scenario, n_frames: int, fps: float, options: RenderOptions, rng: np.random.Generator
+    scenario: Scenario,
+    n_frames: int,
+    fps: float,
+    options: RenderOptions,
+    rng: np.random.Generator,
+    *,
+    independent: bool = False,
 ) -> Recording:
-    """Images of every camera for a wand waved through the scenario's volume (hardware-synchronised)."""
-    motion = wave_wand(scenario, n_frames, fps, rng)
+    """Images of every camera (hardware-synchronised) of a wand waved through the scenario's volume,
+    or of independent placements when ``independent``."""
+    motion = (independent_placements if independent else wave_wand)(scenario, n_frames, fps, rng)
     uv = true_pixels(scenario, motion)
     stamps = np.round(motion.times * 1e9).astype(np.int64) + 1_700_000_000 * 10**9
     frames = []
