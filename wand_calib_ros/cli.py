@@ -286,9 +286,11 @@ def _detect(args: argparse.Namespace) -> int:
             picture = draw_overlay(frame.image, frame.encoding, blobs, detection, reason)
             cv2.imwrite(str(args.debug_dir / f"{frame.camera}_{frame.stamp_ns}.png"), picture)
 
-    observations, stats = detect_recording(
+    observations, stats, ambiguous = detect_recording(
         read_image_frames(args.bag, topics), rig, tolerance_ns=int(args.sync_tolerance_ms * 1e6), inspect=inspect
     )
+    if ambiguous and len(rig.cameras) >= 2:
+        observations = _settle_across_cameras(rig, observations, ambiguous, stats)
     args.output.parent.mkdir(parents=True, exist_ok=True)
     write_observations(observations, args.output)
     print(f"detected the wand in {args.bag} -> {args.output} ({time.perf_counter() - started:.1f} s)")
@@ -296,6 +298,23 @@ def _detect(args: argparse.Namespace) -> int:
         reasons = ", ".join(f"{reason} {n}" for reason, n in sorted(counts.rejected.items())) or "none"
         print(f"  {name}: {counts.images} images, {counts.detected} with the wand; rejected: {reasons}")
     return 0
+
+
+def _settle_across_cameras(rig, observations, ambiguous, stats):  # type: ignore[no-untyped-def]
+    """Label views that neither their image nor time settled, with a calibration of the settled ones."""
+    from wand_calib_ros.detection.consistency import label_across_cameras
+
+    try:
+        result = calibrate(rig, observations)
+    except WandCalibError as error:
+        log.info("no calibration to settle %d ambiguous views across cameras: %s", len(ambiguous), error)
+        return observations
+    observations, settled = label_across_cameras(observations, ambiguous, result, rig.wand)
+    for camera in settled:
+        stats[camera].rejected["ambiguous"] -= 1
+        stats[camera].detected += 1
+    log.info("%d of %d ambiguous views settled by the other cameras", len(settled), len(ambiguous))
+    return observations
 
 
 def _report(args: argparse.Namespace) -> int:

@@ -47,7 +47,7 @@ def test_rendered_recording_meets_the_detection_targets() -> None:
     rng = np.random.default_rng(3)
     recording = render_recording(scenario, 240, 30.0, RenderOptions(), rng)
     frames = [ImageFrame(camera, stamp, image, "mono8") for camera, stamp, image in recording.frames]
-    observations, stats = detect_recording(frames, scenario.rig)
+    observations, stats, _ = detect_recording(frames, scenario.rig)
     visible = np.all(np.isfinite(recording.drawn), axis=(2, 3))
     found = observations.complete
     assert observations.uv.shape[0] == recording.drawn.shape[0]
@@ -64,7 +64,7 @@ def test_spurious_reflections_rarely_produce_a_wrong_triple() -> None:
     rng = np.random.default_rng(4)
     recording = render_recording(scenario, 200, 30.0, RenderOptions(reflection_rate=1.0), rng)
     frames = [ImageFrame(camera, stamp, image, "mono8") for camera, stamp, image in recording.frames]
-    observations, stats = detect_recording(frames, scenario.rig)
+    observations, stats, _ = detect_recording(frames, scenario.rig)
     written = observations.complete
     errors = np.linalg.norm(observations.uv - recording.drawn, axis=-1).max(axis=-1)
     wrong = (errors > 3) & written
@@ -85,7 +85,7 @@ def test_unusable_images_are_counted_by_reason_not_raised() -> None:
         ImageFrame("cam0", t + 3 * 10**8, np.zeros((480, 640, 3), np.uint8), "yuv422"),  # unknown encoding
         ImageFrame("cam1", t, rng.integers(0, 255, (480, 640), dtype=np.uint8), "mono8"),  # all noise
     ]
-    observations, stats = detect_recording(frames, scenario.rig)
+    observations, stats, _ = detect_recording(frames, scenario.rig)
     assert stats["cam0"].rejected["wrong_size"] == 1
     assert stats["cam0"].rejected["bad_image"] == 1
     assert stats["cam0"].rejected["no_blobs"] == 2
@@ -93,3 +93,21 @@ def test_unusable_images_are_counted_by_reason_not_raised() -> None:
     cam1 = stats["cam1"]
     assert cam1.images == 4 and cam1.detected + sum(cam1.rejected.values()) == 4
     assert cam1.detected == observations.complete[:, 1].sum() <= 3  # the noise image gives no wand
+
+
+def test_other_cameras_settle_ambiguous_views_of_independent_placements() -> None:
+    from wand_calib_ros.core.pipeline import calibrate
+    from wand_calib_ros.detection.consistency import label_across_cameras
+
+    scenario = paper_fisheye_scenario()
+    rng = np.random.default_rng(8)
+    recording = render_recording(scenario, 200, 30.0, RenderOptions(), rng, independent=True)
+    frames = [ImageFrame(camera, stamp, image, "mono8") for camera, stamp, image in recording.frames]
+    observations, _, ambiguous = detect_recording(frames, scenario.rig)
+    assert ambiguous  # no continuity between independent placements
+    result = calibrate(scenario.rig, observations)
+    settled_obs, settled = label_across_cameras(observations, ambiguous, result, scenario.wand)
+    assert len(settled) > 0.3 * len(ambiguous)
+    errors = np.linalg.norm(settled_obs.uv - recording.drawn[settled_obs.frames], axis=-1)
+    finite = np.isfinite(errors)
+    assert (errors[finite] > 3).sum() == 0

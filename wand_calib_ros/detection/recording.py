@@ -11,6 +11,7 @@ from __future__ import annotations
 from collections import Counter
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -34,6 +35,22 @@ from wand_calib_ros.io.bags import ImageFrame
 TRACK_GAP_NS = 200_000_000
 #: Image ratios |AB|/|BC| from which the labels are trusted without tracking (the wand's is L1/L2).
 ANCHOR_RATIO = 1.5
+
+
+class Detections(NamedTuple):
+    """What a recording gave.
+
+    Attributes:
+        observations: labelled wand points per frame (time slot) and camera.
+        stats: per camera counts.
+        ambiguous: (frame id, camera, (3, 2) points in either order) of views whose A/C
+            labels neither the image nor time settled; other cameras can (see
+            :func:`wand_calib_ros.detection.consistency.label_across_cameras`).
+    """
+
+    observations: WandObservations
+    stats: dict[str, CameraStats]
+    ambiguous: list[tuple[int, str, NDArray[np.float64]]]
 
 
 @dataclass
@@ -74,7 +91,7 @@ def detect_recording(
     tolerance_ns: int = 5_000_000,
     blob_options: BlobOptions = BlobOptions(),
     inspect: Callable[[ImageFrame, Blobs | None, WandDetection | None, str | None], None] | None = None,
-) -> tuple[WandObservations, dict[str, CameraStats]]:
+) -> Detections:
     """Wand observations of a recording, with per-camera counts (detected, rejected by reason).
 
     Args:
@@ -115,15 +132,22 @@ def detect_recording(
             continue
         found[frame.camera].append((frame.stamp_ns, detection))
     detections: list[tuple[int, str, NDArray[np.float64]]] = []
+    unsettled: list[tuple[int, str, NDArray[np.float64]]] = []
     for camera, sequence in found.items():
         labelled = track_labels(sequence)
-        for (stamp, _), points in zip(sequence, labelled, strict=True):
+        for (stamp, detection), points in zip(sequence, labelled, strict=True):
             if points is None:
                 stats[camera].rejected["ambiguous"] += 1
+                unsettled.append((stamp, camera, detection.points))  # type: ignore[arg-type]
             else:
                 stats[camera].detected += 1
                 detections.append((stamp, camera, points))
-    return _group(detections, np.array(stamps, dtype=np.int64), rig.camera_names, tolerance_ns), stats
+    slots = _slots(np.array(stamps, dtype=np.int64), tolerance_ns)
+    observations = _group(detections, slots, rig.camera_names)
+    ambiguous = [
+        (int(np.searchsorted(slots, stamp, side="right")) - 1, camera, points) for stamp, camera, points in unsettled
+    ]
+    return Detections(observations, stats, ambiguous)
 
 
 def track_labels(sequence: list[tuple[int, WandDetection]]) -> list[NDArray[np.float64] | None]:
@@ -152,27 +176,23 @@ def track_labels(sequence: list[tuple[int, WandDetection]]) -> list[NDArray[np.f
     return labelled
 
 
-def _group(
-    detections: list[tuple[int, str, NDArray[np.float64]]],
-    stamps: NDArray[np.int64],
-    names: tuple[str, ...],
-    tolerance_ns: int,
-) -> WandObservations:
-    """Observations whose frame ids number the recording's time slots.
-
-    Every image stamp (with or without a wand) opens a new slot when it lies more
-    than ``tolerance_ns`` after the current slot's first stamp; a detection belongs
-    to the slot of its image.
-    """
+def _slots(stamps: NDArray[np.int64], tolerance_ns: int) -> NDArray[np.int64]:
+    """First stamp of each time slot: an image opens a new slot when it lies more than
+    ``tolerance_ns`` after the current slot's first stamp."""
     starts: list[int] = []
     for stamp in np.sort(stamps):
         if not starts or stamp - starts[-1] > tolerance_ns:
             starts.append(int(stamp))
-    slot_starts = np.array(starts, dtype=np.int64)
-    uv = np.full((slot_starts.size, len(names), 3, 2), np.nan)
+    return np.array(starts, dtype=np.int64)
+
+
+def _group(
+    detections: list[tuple[int, str, NDArray[np.float64]]], slots: NDArray[np.int64], names: tuple[str, ...]
+) -> WandObservations:
+    """Observations whose frame ids number the recording's time slots (frames without a wand left out)."""
+    uv = np.full((slots.size, len(names), 3, 2), np.nan)
     index = {name: i for i, name in enumerate(names)}
     for stamp, camera, points in detections:
-        slot = int(np.searchsorted(slot_starts, stamp, side="right")) - 1
-        uv[slot, index[camera]] = points
+        uv[int(np.searchsorted(slots, stamp, side="right")) - 1, index[camera]] = points
     seen = np.any(np.isfinite(uv), axis=(1, 2, 3))
     return WandObservations(np.flatnonzero(seen), names, uv[seen])

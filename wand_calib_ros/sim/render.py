@@ -146,9 +146,10 @@ class Recording:
 
 
 def independent_placements(scenario: Scenario, n_frames: int, fps: float, rng: np.random.Generator) -> WandMotion:
-    """Unrelated wand placements (the scenario's sampler) shown one per frame: no continuity to track."""
+    """Unrelated wand placements (the scenario's sampler), one per second whatever ``fps``: a wand put
+    down and picked up again, with no continuity to track."""
     wand_a, direction, facing = sample_placements(scenario, n_frames, rng)
-    return WandMotion(np.arange(n_frames) / fps, wand_a, direction, facing)
+    return WandMotion(np.arange(n_frames, dtype=np.float64), wand_a, direction, facing)
 
 
 def render_recording(
