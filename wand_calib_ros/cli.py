@@ -261,6 +261,7 @@ def _detect(args: argparse.Namespace) -> int:
     from wand_calib_ros.detection.recording import detect_recording
     from wand_calib_ros.io.bags import count_images, read_image_frames
 
+    cv2.setNumThreads(1)  # per-image work is small: OpenCV's thread pool only adds overhead here
     rig = load_rig(args.cameras)
     topics = {name: args.topic.format(camera=name) for name in rig.camera_names}
     started = time.perf_counter()
