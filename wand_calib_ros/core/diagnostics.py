@@ -13,13 +13,15 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.camera_model import project
-from wand_calib_ros.core.refine import triangulate_placements
+from wand_calib_ros.core.camera_model import project, unproject
+from wand_calib_ros.core.geometry import triangulate
 from wand_calib_ros.core.result import CalibrationResult, ClockOffset
-from wand_calib_ros.core.rig import WandObservations
+from wand_calib_ros.core.rig import WandObservations, spread_subset
 
 FloatArray = NDArray[np.float64]
 
+#: Frames (spread over the recording) used for the estimate.
+MAX_FRAMES = 3000
 #: A camera is reported when residual and velocity correlate at least this much ...
 CLOCK_CORRELATION = 0.7
 #: ... and removing dt * v lowers its leave-one-out residual by at least this fraction.
@@ -45,16 +47,22 @@ def clock_offsets(result: CalibrationResult, observations: WandObservations) -> 
     frames = obs.frames
     consecutive = np.zeros(frames.size, dtype=bool)
     consecutive[1:-1] = (frames[2:] - frames[:-2]) == 2
+    # A few thousand frames are plenty for two numbers per camera.
+    rows = np.flatnonzero(consecutive)
+    rows = rows[spread_subset(rows.size, MAX_FRAMES)]
+    uv = obs.uv[rows]
+    velocity = (obs.uv[rows + 1] - obs.uv[rows - 1]) / 2.0
+    bearings = np.stack([unproject(models[c], uv[:, c]) for c in range(len(names))], axis=2)  # (F, 3, C, 3)
+    rotations = np.stack([p.rotation for p in poses])
+    translations = np.stack([p.translation for p in poses])
     out = []
     for c, name in enumerate(names):
-        others = obs.uv.copy()
-        others[:, c] = np.nan
-        points = triangulate_placements(models, poses, others)
-        residual = project(models[c], poses[c].apply(points)) - obs.uv[:, c]  # (F, 3, 2)
-        velocity = np.full_like(residual, np.nan)
-        velocity[1:-1] = (obs.uv[2:, c] - obs.uv[:-2, c]) / 2.0
-        ok = np.all(np.isfinite(residual), axis=-1) & np.all(np.isfinite(velocity), axis=-1) & consecutive[:, None]
-        r, v = residual[ok], velocity[ok]
+        others = bearings.copy()
+        others[:, :, c] = np.nan
+        points = triangulate(others.reshape(-1, len(names), 3), rotations, translations).reshape(-1, 3, 3)
+        residual = project(models[c], poses[c].apply(points)) - uv[:, c]  # (F, 3, 2)
+        ok = np.all(np.isfinite(residual), axis=-1) & np.all(np.isfinite(velocity[:, c]), axis=-1)
+        r, v = residual[ok], velocity[:, c][ok]
         if r.shape[0] < 10 or not np.any(v):
             continue
         offset = -float(np.sum(v * r) / np.sum(v * v))
