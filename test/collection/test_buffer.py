@@ -1,0 +1,66 @@
+"""The persisted observation buffer: append, resume, thin, reset."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from wand_calib_ros.collection.buffer import ObservationBuffer
+from wand_calib_ros.io.errors import FormatError
+from wand_calib_ros.io.observations_csv import read_observations
+from wand_calib_ros.sim.scenarios import paper_fisheye_scenario, simulate
+
+
+def test_frames_are_persisted_at_once_and_resumed(tmp_path: Path) -> None:
+    scenario = paper_fisheye_scenario()
+    data = simulate(scenario, 0.5, np.random.default_rng(0), n=40)
+    path = tmp_path / "observations.csv"
+    buffer = ObservationBuffer.open(path, scenario.rig)
+    for uv in data.observations.uv[:25]:
+        assert buffer.offer(uv)
+    on_disk = read_observations(path, scenario.rig.camera_names)  # no close needed: flushed per frame
+    assert on_disk.frames.tolist() == list(range(25))
+    assert np.allclose(on_disk.uv, data.observations.uv[:25], atol=1e-5)
+    again = ObservationBuffer.open(path, scenario.rig)  # a restart after a crash
+    assert again.next_frame == 25
+    for uv in data.observations.uv[25:]:
+        again.offer(uv)
+    assert read_observations(path, scenario.rig.camera_names).frames.size == 40
+
+
+def test_a_wand_held_still_is_stored_once(tmp_path: Path) -> None:
+    scenario = paper_fisheye_scenario()
+    data = simulate(scenario, 0.0, np.random.default_rng(1), n=2)
+    buffer = ObservationBuffer.open(tmp_path / "o.csv", scenario.rig, min_motion_px=2.0)
+    still = data.observations.uv[0]
+    assert buffer.offer(still)
+    for _ in range(10):
+        assert not buffer.offer(still + 0.3)
+    assert buffer.offer(data.observations.uv[1])
+    assert buffer.stats.still == 10 and buffer.stats.accepted == 2
+
+
+def test_a_full_buffer_only_takes_frames_that_add_coverage(tmp_path: Path) -> None:
+    scenario = paper_fisheye_scenario()
+    data = simulate(scenario, 0.5, np.random.default_rng(2), n=400)
+    buffer = ObservationBuffer.open(tmp_path / "o.csv", scenario.rig, capacity=100)
+    for uv in data.observations.uv:
+        buffer.offer(uv)
+    assert 100 <= len(buffer.frames) < 400 and buffer.stats.full > 0
+
+
+def test_reset_keeps_a_backup_and_a_corrupt_file_is_refused(tmp_path: Path) -> None:
+    scenario = paper_fisheye_scenario()
+    data = simulate(scenario, 0.5, np.random.default_rng(3), n=5)
+    path = tmp_path / "o.csv"
+    buffer = ObservationBuffer.open(path, scenario.rig)
+    for uv in data.observations.uv:
+        buffer.offer(uv)
+    backup = buffer.reset()
+    assert backup is not None and read_observations(backup).frames.size == 5
+    assert buffer.next_frame == 0 and path.read_text().strip() == "frame,camera,point,u,v"
+    path.write_text("frame,camera,point,u,v\n0,cam0,A,nan,1\n")
+    with pytest.raises(FormatError, match="cannot resume the buffer"):
+        ObservationBuffer.open(path, scenario.rig)

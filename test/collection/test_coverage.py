@@ -1,0 +1,47 @@
+"""Coverage feedback while waving."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from wand_calib_ros.collection.coverage import CoverageThresholds, CoverageTracker
+from wand_calib_ros.sim.scenarios import paper_fisheye_scenario, ring_scenario, simulate
+
+
+def test_a_well_waved_wand_is_ready() -> None:
+    scenario = paper_fisheye_scenario()
+    data = simulate(scenario, 0.5, np.random.default_rng(0))
+    tracker = CoverageTracker(scenario.rig, CoverageThresholds(min_theta_fraction=0.5))
+    for uv in data.observations.uv:
+        tracker.add(uv)
+    status = tracker.status()
+    assert status.ready, status.messages()
+    assert status.shared[0, 1] == 300
+    assert tracker.heat_map(0).shape == (64, 64)
+
+
+def test_a_small_corner_of_the_view_is_named() -> None:
+    scenario = replace(paper_fisheye_scenario(), volume=np.array([[-150.0, -150.0, 1350.0], [150.0, 150.0, 1650.0]]))
+    data = simulate(scenario, 0.5, np.random.default_rng(1), n=60)
+    tracker = CoverageTracker(scenario.rig)
+    for uv in data.observations.uv:
+        tracker.add(uv)
+    status = tracker.status()
+    assert not status.ready
+    message = next(m for m in status.messages() if m.startswith("cam0:"))
+    assert "60 of 100 placements" in message and "top-left" in message and "uncovered" in message
+
+
+def test_disconnected_groups_are_reported() -> None:
+    scenario = ring_scenario()
+    data = simulate(scenario, 0.5, np.random.default_rng(2))
+    tracker = CoverageTracker(scenario.rig, CoverageThresholds(min_placements=1, min_image_fraction=0.0))
+    complete = data.observations.complete
+    for uv, row in zip(data.observations.uv, complete, strict=True):
+        if not (row[:3].any() and row[3:].any()):  # hide every placement linking the two halves
+            tracker.add(uv)
+    status = tracker.status()
+    assert not status.connected
+    assert any("cam0, cam1, cam2 | cam3, cam4, cam5" in m for m in status.messages())

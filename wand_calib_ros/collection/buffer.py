@@ -1,0 +1,147 @@
+"""A bounded, persisted buffer of synchronised wand observations.
+
+Every accepted frame is appended to an observations CSV (the core's format) and
+flushed at once, so a crash loses at most the frame being written and a restart
+resumes from the file. A frame in which no camera's wand moved by more than
+``min_motion_px`` since the last accepted frame is a near-duplicate (the wand
+held still) and is skipped; once ``capacity`` frames are stored, a frame is only
+accepted when it shows a camera the wand in an image cell with few
+observations, so the buffer stays bounded without losing coverage.
+"""
+
+from __future__ import annotations
+
+import csv
+import shutil
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wand_calib_ros.core.rig import POINT_LABELS, RigSpec, WandObservations
+from wand_calib_ros.io.errors import FormatError
+from wand_calib_ros.io.observations_csv import COLUMNS, read_observations
+
+FloatArray = NDArray[np.float64]
+
+#: Cells per image side for the coverage test of a full buffer.
+GRID = 8
+
+
+@dataclass
+class BufferStats:
+    """Counters of the buffer."""
+
+    accepted: int = 0
+    still: int = 0
+    full: int = 0
+    empty: int = 0
+
+
+@dataclass
+class ObservationBuffer:
+    """See the module docstring. Create with :meth:`open`."""
+
+    path: Path
+    rig: RigSpec
+    capacity: int
+    min_motion_px: float
+    frames: list[int] = field(default_factory=list)
+    uv: list[FloatArray] = field(default_factory=list)
+    stats: BufferStats = field(default_factory=BufferStats)
+    _cells: NDArray[np.int64] | None = None
+
+    @staticmethod
+    def open(path: Path, rig: RigSpec, *, capacity: int = 20_000, min_motion_px: float = 2.0) -> ObservationBuffer:
+        """A buffer persisted at ``path``; resumes from the file when it exists (a corrupt file is an error)."""
+        buffer = ObservationBuffer(Path(path), rig, capacity, min_motion_px)
+        buffer._cells = np.zeros((len(rig.cameras), GRID, GRID), dtype=np.int64)
+        if buffer.path.exists() and buffer.path.stat().st_size > 0:
+            try:
+                existing = read_observations(buffer.path, rig.camera_names)
+            except FormatError as error:
+                raise FormatError(buffer.path, f"cannot resume the buffer ({error}); move the file away") from None
+            for frame, uv in zip(existing.frames, existing.uv, strict=True):
+                buffer._remember(int(frame), uv)
+        else:
+            buffer.path.parent.mkdir(parents=True, exist_ok=True)
+            with buffer.path.open("w", newline="") as handle:
+                csv.writer(handle).writerow(COLUMNS)
+        return buffer
+
+    @property
+    def next_frame(self) -> int:
+        """Frame id for the next accepted frame (continues after a resume)."""
+        return self.frames[-1] + 1 if self.frames else 0
+
+    def offer(self, uv: FloatArray) -> bool:
+        """Consider one synchronised frame ((C, 3, 2), NaN where unseen); True when it was stored."""
+        complete = np.all(np.isfinite(uv), axis=(1, 2))
+        if complete.sum() < 1:
+            self.stats.empty += 1
+            return False
+        if self.uv:
+            last = self.uv[-1]
+            moved = np.linalg.norm(uv - last, axis=-1).max(axis=-1)  # (C,) NaN where either is missing
+            both = complete & np.all(np.isfinite(last), axis=(1, 2))
+            if both.any() and not np.any(moved[both] > self.min_motion_px) and np.array_equal(both, complete):
+                self.stats.still += 1
+                return False
+        if len(self.frames) >= self.capacity and not self._adds_coverage(uv, complete):
+            self.stats.full += 1
+            return False
+        frame = self.next_frame
+        self._append_rows(frame, uv)
+        self._remember(frame, uv)
+        self.stats.accepted += 1
+        return True
+
+    def observations(self) -> WandObservations:
+        """Everything stored, in the core's observation type."""
+        uv = np.array(self.uv) if self.uv else np.zeros((0, len(self.rig.cameras), 3, 2))
+        return WandObservations(np.array(self.frames, dtype=np.int64), self.rig.camera_names, uv)
+
+    def reset(self) -> Path | None:
+        """Move the file to a timestamped backup and start empty; returns the backup path."""
+        backup = None
+        if self.path.exists():
+            backup = self.path.with_name(f"{self.path.stem}.{time.strftime('%Y%m%d-%H%M%S')}.bak{self.path.suffix}")
+            shutil.move(self.path, backup)
+        self.frames, self.uv, self.stats = [], [], BufferStats()
+        self._cells = np.zeros((len(self.rig.cameras), GRID, GRID), dtype=np.int64)
+        with self.path.open("w", newline="") as handle:
+            csv.writer(handle).writerow(COLUMNS)
+        return backup
+
+    def _cell_index(self, c: int, points: FloatArray) -> NDArray[np.int64]:
+        width, height = self.rig.cameras[c].image_size
+        return np.clip((points / [width, height] * GRID).astype(np.int64), 0, GRID - 1)
+
+    def _adds_coverage(self, uv: FloatArray, complete: NDArray[np.bool_]) -> bool:
+        assert self._cells is not None
+        median = np.median(self._cells, axis=(1, 2))
+        for c in np.flatnonzero(complete):
+            cells = self._cell_index(c, uv[c])
+            if np.any(self._cells[c, cells[:, 1], cells[:, 0]] < max(median[c], 1)):
+                return True
+        return False
+
+    def _remember(self, frame: int, uv: FloatArray) -> None:
+        assert self._cells is not None
+        self.frames.append(frame)
+        self.uv.append(np.asarray(uv, dtype=np.float64))
+        for c in np.flatnonzero(np.all(np.isfinite(uv), axis=(1, 2))):
+            cells = self._cell_index(c, uv[c])
+            np.add.at(self._cells[c], (cells[:, 1], cells[:, 0]), 1)
+
+    def _append_rows(self, frame: int, uv: FloatArray) -> None:
+        with self.path.open("a", newline="") as handle:
+            writer = csv.writer(handle)
+            for c, name in enumerate(self.rig.camera_names):
+                for p, label in enumerate(POINT_LABELS):
+                    u, v = uv[c, p]
+                    if np.isfinite(u) and np.isfinite(v):
+                        writer.writerow([frame, name, label, f"{u:.6f}", f"{v:.6f}"])
+            handle.flush()

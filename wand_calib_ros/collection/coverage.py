@@ -1,0 +1,171 @@
+"""Is the wand data good enough to calibrate? Coverage per camera and connectivity of the rig.
+
+Per camera: placements seen completely, the share of an 8 x 8 image grid the
+wand's points reached, which of the nine image regions (corners, edges,
+centre) are still empty, and the widest off-axis angle reached (under the
+nominal lens model) against what the image offers. For the rig: placements
+each camera pair shares and whether those pairs connect every camera.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import networkx as nx
+import numpy as np
+from numpy.typing import NDArray
+
+from wand_calib_ros.core.rig import RigSpec
+from wand_calib_ros.detection.recording import nominal_model
+
+FloatArray = NDArray[np.float64]
+
+GRID = 8
+_REGIONS = {
+    (0, 0): "top-left", (0, 1): "top", (0, 2): "top-right",
+    (1, 0): "left", (1, 1): "centre", (1, 2): "right",
+    (2, 0): "bottom-left", (2, 1): "bottom", (2, 2): "bottom-right",
+}  # fmt: skip
+
+
+@dataclass(frozen=True)
+class CoverageThresholds:
+    """What "ready" means.
+
+    Attributes:
+        min_placements: complete views per camera.
+        min_image_fraction: share of the 8 x 8 grid cells with wand points.
+        min_theta_fraction: widest observed angle over the widest angle the image offers.
+        min_pair_placements: placements a camera pair must share to link them.
+    """
+
+    min_placements: int = 100
+    min_image_fraction: float = 0.5
+    min_theta_fraction: float = 0.7
+    min_pair_placements: int = 15
+
+
+@dataclass(frozen=True)
+class CameraCoverage:
+    """One camera's coverage and what is missing (plain words)."""
+
+    name: str
+    placements: int
+    image_fraction: float
+    max_theta_deg: float
+    reach_theta_deg: float
+    missing: tuple[str, ...]
+
+    @property
+    def ok(self) -> bool:
+        return not self.missing
+
+
+@dataclass(frozen=True)
+class CoverageStatus:
+    """The rig's coverage: per camera, per pair, connectivity and readiness."""
+
+    cameras: tuple[CameraCoverage, ...]
+    shared: NDArray[np.int64]
+    connected: bool
+    groups: tuple[tuple[str, ...], ...]
+
+    @property
+    def ready(self) -> bool:
+        return self.connected and all(c.ok for c in self.cameras)
+
+    def messages(self) -> list[str]:
+        """One line per problem, e.g. "cam2: corners top-left, bottom-right uncovered"."""
+        lines = [f"{c.name}: {'; '.join(c.missing)}" for c in self.cameras if c.missing]
+        if not self.connected:
+            lines.append("cameras not linked by shared placements: " + " | ".join(", ".join(g) for g in self.groups))
+        return lines
+
+
+class CoverageTracker:
+    """Accumulates synchronised frames and reports :class:`CoverageStatus`."""
+
+    def __init__(self, rig: RigSpec, thresholds: CoverageThresholds = CoverageThresholds()) -> None:
+        self.rig = rig
+        self.thresholds = thresholds
+        n = len(rig.cameras)
+        self.cells = np.zeros((n, GRID, GRID), dtype=np.int64)
+        self.placements = np.zeros(n, dtype=np.int64)
+        self.shared = np.zeros((n, n), dtype=np.int64)
+        self.max_theta = np.zeros(n)
+        self._bearings = [nominal_model(spec) for spec in rig.cameras]
+        self.reach = np.array([self._reach(c) for c in range(n)])
+
+    def _reach(self, c: int) -> float:
+        """Widest angle the image offers (the corners, or theta_max if smaller), rad."""
+        spec, table = self.rig.cameras[c], self._bearings[c]
+        if table is None:
+            return spec.max_view_angle
+        width, height = spec.image_size
+        corners = np.array([[0, 0], [width - 1, 0], [0, height - 1], [width - 1, height - 1]], dtype=float)
+        theta = np.arccos(np.clip(table(corners)[:, 2], -1, 1))
+        return float(min(theta.max(), spec.max_view_angle))
+
+    def add(self, uv: FloatArray) -> None:
+        """One frame: (C, 3, 2) pixels, NaN where a camera did not see the point."""
+        complete = np.all(np.isfinite(uv), axis=(1, 2))
+        self.placements += complete
+        self.shared += np.outer(complete, complete)
+        for c in np.flatnonzero(complete):
+            width, height = self.rig.cameras[c].image_size
+            cells = np.clip((uv[c] / [width, height] * GRID).astype(np.int64), 0, GRID - 1)
+            np.add.at(self.cells[c], (cells[:, 1], cells[:, 0]), 1)
+            table = self._bearings[c]
+            if table is not None:
+                theta = np.arccos(np.clip(table(uv[c])[:, 2], -1, 1))
+                self.max_theta[c] = max(self.max_theta[c], float(theta.max()))
+
+    def heat_map(self, camera: int, scale: int = 8) -> NDArray[np.uint8]:
+        """(GRID*scale, GRID*scale) mono8 picture of where the camera saw the wand (brighter: more)."""
+        counts = self.cells[camera].astype(np.float64)
+        picture = np.sqrt(counts / max(counts.max(), 1.0)) * 255
+        return np.kron(picture, np.ones((scale, scale))).astype(np.uint8)
+
+    def status(self) -> CoverageStatus:
+        """Current coverage against the thresholds."""
+        t = self.thresholds
+        cameras = []
+        for c, spec in enumerate(self.rig.cameras):
+            missing = []
+            if self.placements[c] < t.min_placements:
+                missing.append(f"{self.placements[c]} of {t.min_placements} placements")
+            occupied = self.cells[c] > 0
+            fraction = float(occupied.mean())
+            if fraction < t.min_image_fraction:
+                empty = [
+                    name for (row, col), name in _REGIONS.items()
+                    if not occupied[row * GRID // 3 : (row + 1) * GRID // 3 + (row == 2),
+                                    col * GRID // 3 : (col + 1) * GRID // 3 + (col == 2)].any()
+                ]  # fmt: skip
+                where = f"; {', '.join(empty)} uncovered" if empty else ""
+                missing.append(f"{100 * fraction:.0f} % of the image covered{where}")
+            if self.max_theta[c] < t.min_theta_fraction * self.reach[c]:
+                missing.append(
+                    f"wand seen up to {np.degrees(self.max_theta[c]):.0f} deg off-axis of "
+                    f"{np.degrees(self.reach[c]):.0f}: move it towards the image border"
+                )
+            cameras.append(
+                CameraCoverage(
+                    spec.name,
+                    int(self.placements[c]),
+                    fraction,
+                    float(np.degrees(self.max_theta[c])),
+                    float(np.degrees(self.reach[c])),
+                    tuple(missing),
+                )
+            )
+        graph = nx.Graph()
+        graph.add_nodes_from(range(len(self.rig.cameras)))
+        n = len(self.rig.cameras)
+        graph.add_edges_from(
+            (i, j) for i in range(n) for j in range(i + 1, n) if self.shared[i, j] >= t.min_pair_placements
+        )
+        groups = tuple(
+            tuple(self.rig.cameras[i].name for i in sorted(g)) for g in sorted(nx.connected_components(graph), key=min)
+        )
+        return CoverageStatus(tuple(cameras), self.shared.copy(), len(groups) == 1, groups)
