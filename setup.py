@@ -26,6 +26,7 @@ setup(
     entry_points={
         "console_scripts": [
             "wand-calib = wand_calib_ros.cli:main",
+            "collector = wand_calib_ros.nodes.collector:main",
         ],
     },
 )

@@ -1,0 +1,247 @@
+"""The live calibration node: image topics in, calibration out.
+
+One node subscribes to every camera's image topic (sensor-data QoS), runs the
+LED detector, time-synchronises the detections into frames, keeps them in the
+persisted buffer and tracks coverage (published on ``/diagnostics`` at 1 Hz).
+``/calibrate`` (std_srvs/Trigger) solves on a worker thread and publishes per
+camera ``wand_calib/<cam>/camera_info`` (transient local, ``equidistant``) and
+writes ``result.yaml`` and camera_info YAML files into ``output_dir``;
+``/reset`` clears the buffer after backing it up. Only message and parameter
+translation lives here: the work is done by the core, detection and
+collection packages.
+"""
+
+from __future__ import annotations
+
+import logging
+import sys
+import threading
+from pathlib import Path
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from sensor_msgs.msg import CameraInfo, Image
+from std_srvs.srv import Trigger
+
+from wand_calib_ros.collection.buffer import ObservationBuffer
+from wand_calib_ros.collection.coverage import CoverageThresholds, CoverageTracker
+from wand_calib_ros.collection.sync import FrameSynchroniser
+from wand_calib_ros.core.camera_model import to_opencv_fisheye
+from wand_calib_ros.core.pipeline import calibrate
+from wand_calib_ros.core.result import CalibrationResult
+from wand_calib_ros.detection.blobs import BlobOptions
+from wand_calib_ros.detection.errors import ImageError
+from wand_calib_ros.detection.recording import detect_image, nominal_model
+from wand_calib_ros.detection.wand import WandOptions, resolve_with_previous
+from wand_calib_ros.errors import WandCalibError
+from wand_calib_ros.io.result_yaml import write_camera_infos, write_result
+from wand_calib_ros.io.rig_yaml import load_rig
+
+_LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
+
+
+def image_to_array(message: Image) -> np.ndarray:
+    """The pixels of a sensor_msgs/Image as a numpy array (no copy for 8-bit data)."""
+    data = np.frombuffer(message.data, dtype=np.uint8)
+    height, step = message.height, message.step
+    rows = data[: height * step].reshape(height, step)
+    if message.encoding == "mono16":
+        return rows.view(">u2" if message.is_bigendian else "<u2")[:, : message.width]
+    channels = {"bgr8": 3, "rgb8": 3, "bgra8": 4, "rgba8": 4}.get(message.encoding, 1)
+    pixels = rows[:, : message.width * channels]
+    return pixels.reshape(height, message.width, channels) if channels > 1 else pixels
+
+
+def camera_info_message(result: CalibrationResult, name: str, stamp: object) -> CameraInfo:
+    """sensor_msgs/CameraInfo (``equidistant``) exactly equivalent to a calibrated camera."""
+    model = result.camera(name).model
+    opencv = to_opencv_fisheye(model)
+    info = CameraInfo()
+    info.header.stamp = stamp
+    info.header.frame_id = name
+    info.width, info.height = model.image_size
+    info.distortion_model = "equidistant"
+    info.d = [float(v) for v in opencv.distortion]
+    info.k = [float(v) for v in opencv.camera_matrix.ravel()]
+    info.r = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
+    info.p = [float(v) for v in np.hstack([opencv.camera_matrix, np.zeros((3, 1))]).ravel()]
+    return info
+
+
+class CollectorNode(Node):
+    """Detection, synchronisation, buffer, coverage and /calibrate in one node."""
+
+    def __init__(self, **kwargs: object) -> None:
+        super().__init__("wand_calib_collector", **kwargs)
+        cameras_file = self._parameter("cameras_file", "", "rig description (cameras.yaml contract)")
+        output_dir = Path(self._parameter("output_dir", "wand_calib_output", "where observations and results go"))
+        tolerance_ms = self._parameter("sync_tolerance_ms", 5.0, "images closer in time form one frame (ms)")
+        capacity = self._parameter("buffer_capacity", 20000, "frames kept before thinning")
+        min_placements = self._parameter("min_placements", 100, "complete views per camera needed")
+        image_qos = self._parameter("image_qos", "sensor_data", "sensor_data (best effort) or reliable (bag replay)")
+        if not cameras_file:
+            raise WandCalibError("parameter cameras_file is required (the rig description)")
+        self.rig = load_rig(cameras_file)
+        self.output_dir = output_dir
+        self.buffer = ObservationBuffer.open(output_dir / "observations.csv", self.rig, capacity=int(capacity))
+        self.coverage = CoverageTracker(self.rig, CoverageThresholds(min_placements=int(min_placements)))
+        for uv in self.buffer.uv:
+            self.coverage.add(uv)
+        self.sync = FrameSynchroniser(self.rig.camera_names, slop_ns=int(float(tolerance_ms) * 1e6))
+        self.wand_options = WandOptions(ratio=self.rig.wand.L1 / self.rig.wand.L2)
+        self.models = {c.name: nominal_model(c) for c in self.rig.cameras}
+        self.previous: dict[str, tuple[int, np.ndarray]] = {}
+        self.lock = threading.Lock()
+        self.solving = threading.Event()
+        self.result: CalibrationResult | None = None
+        images = ReentrantCallbackGroup()
+        for spec in self.rig.cameras:
+            self.create_subscription(
+                Image,
+                f"/{spec.name}/image_raw",
+                lambda m, n=spec.name: self._on_image(n, m),
+                qos_profile_sensor_data if image_qos == "sensor_data" else QoSProfile(depth=100),
+                callback_group=images,
+            )
+        # /calibrate may be called again while it solves (and answers "in progress"); diagnostics
+        # have their own group so they keep flowing during a solve.
+        self.create_service(Trigger, "calibrate", self._on_calibrate, callback_group=ReentrantCallbackGroup())
+        self.create_service(Trigger, "reset", self._on_reset, callback_group=MutuallyExclusiveCallbackGroup())
+        self.info_publishers = {
+            spec.name: self.create_publisher(CameraInfo, f"wand_calib/{spec.name}/camera_info", _LATCHED)
+            for spec in self.rig.cameras
+        }
+        self.diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.create_timer(1.0, self._publish_diagnostics, callback_group=MutuallyExclusiveCallbackGroup())
+        self.get_logger().info(
+            f"collecting {', '.join(self.rig.camera_names)} into {self.buffer.path} ({len(self.buffer.frames)} resumed)"
+        )
+
+    def _parameter(self, name: str, default: object, description: str) -> object:
+        return self.declare_parameter(name, default, ParameterDescriptor(description=description)).value
+
+    def _on_image(self, camera: str, message: Image) -> None:
+        stamp = message.header.stamp.sec * 10**9 + message.header.stamp.nanosec
+        points = None
+        try:
+            _, detection = detect_image(
+                image_to_array(message), message.encoding, BlobOptions(), self.wand_options, self.models[camera]
+            )
+        except (ImageError, ValueError):
+            detection = None
+        with self.lock:
+            if detection is not None and detection.points is not None:
+                last = self.previous.get(camera)
+                recent = last is not None and abs(stamp - last[0]) <= 200_000_000
+                settled = (
+                    detection
+                    if detection.image_ratio >= 1.5
+                    else resolve_with_previous(detection, last[1] if recent and last is not None else None)
+                )
+                if not settled.ambiguous and settled.points is not None:
+                    points = settled.points
+                    self.previous[camera] = (stamp, points)
+            for frame in self.sync.add(camera, stamp, points):
+                if self.buffer.offer(frame.uv):
+                    self.coverage.add(frame.uv)
+
+    def _publish_diagnostics(self) -> None:
+        with self.lock:
+            status = self.coverage.status()
+            frames = len(self.buffer.frames)
+        array = DiagnosticArray()
+        array.header.stamp = self.get_clock().now().to_msg()
+        for camera in status.cameras:
+            entry = DiagnosticStatus(name=f"wand_calib: {camera.name}", hardware_id=camera.name)
+            entry.level = DiagnosticStatus.OK if camera.ok else DiagnosticStatus.WARN
+            entry.message = "ready" if camera.ok else "; ".join(camera.missing)
+            entry.values = [
+                KeyValue(key="placements", value=str(camera.placements)),
+                KeyValue(key="image_coverage_percent", value=f"{100 * camera.image_fraction:.0f}"),
+                KeyValue(key="max_theta_deg", value=f"{camera.max_theta_deg:.1f}"),
+            ]
+            array.status.append(entry)
+        rig = DiagnosticStatus(name="wand_calib: rig", hardware_id="rig")
+        rig.level = DiagnosticStatus.OK if status.ready else DiagnosticStatus.WARN
+        rig.message = f"ready ({frames} frames)" if status.ready else " | ".join(status.messages())
+        array.status.append(rig)
+        self.diagnostics.publish(array)
+
+    def _on_calibrate(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        with self.lock:
+            if self.solving.is_set():
+                response.success, response.message = False, "a calibration is already running"
+                return response
+            self.solving.set()
+        with self.lock:
+            for frame in self.sync.flush_all():
+                if self.buffer.offer(frame.uv):
+                    self.coverage.add(frame.uv)
+            observations = self.buffer.observations()
+        outcome: dict[str, object] = {}
+        worker = threading.Thread(target=self._solve, args=(observations, outcome), daemon=True)
+        worker.start()
+        worker.join()  # the service group waits; image and timer callbacks keep running
+        self.solving.clear()
+        response.success = bool(outcome.get("success"))
+        response.message = str(outcome.get("message", ""))
+        return response
+
+    def _solve(self, observations: object, outcome: dict[str, object]) -> None:
+        try:
+            result = calibrate(self.rig, observations)  # type: ignore[arg-type]
+        except WandCalibError as error:
+            outcome.update(success=False, message=f"calibration failed: {error}")
+            return
+        self.output_dir.mkdir(parents=True, exist_ok=True)
+        write_result(result, self.output_dir / "result.yaml")
+        write_camera_infos(result, self.output_dir / "camera_info")
+        stamp = self.get_clock().now().to_msg()
+        for name, publisher in self.info_publishers.items():
+            publisher.publish(camera_info_message(result, name, stamp))
+        self.result = result
+        summary = ", ".join(f"{c.name} {c.rms_reprojection_px:.2f} px" for c in result.cameras)
+        outcome.update(
+            success=True,
+            message=f"RMS {summary}; wand {result.wand_length_rms_mm:.2f} mm RMS; {self.output_dir / 'result.yaml'}",
+        )
+
+    def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        with self.lock:
+            backup = self.buffer.reset()
+            self.coverage = CoverageTracker(self.rig, self.coverage.thresholds)
+        response.success, response.message = True, f"buffer cleared; backup {backup}"
+        return response
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``ros2 run wand_calib_ros collector --ros-args -p cameras_file:=...``"""
+    logging.basicConfig(level=logging.WARNING)
+    rclpy.init(args=argv if argv is not None else sys.argv)
+    executor = MultiThreadedExecutor(num_threads=4)
+    try:
+        node = CollectorNode()
+    except WandCalibError as error:
+        print(f"collector: error: {error}", file=sys.stderr)
+        rclpy.try_shutdown()
+        return 2
+    executor.add_node(node)
+    try:
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
