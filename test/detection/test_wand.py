@@ -111,3 +111,15 @@ def test_other_cameras_settle_ambiguous_views_of_independent_placements() -> Non
     errors = np.linalg.norm(settled_obs.uv - recording.drawn[settled_obs.frames], axis=-1)
     finite = np.isfinite(errors)
     assert (errors[finite] > 3).sum() == 0
+
+
+def test_online_labeller_follows_a_live_stream() -> None:
+    from wand_calib_ros.detection.recording import OnlineLabeller
+
+    clear = WandDetection(np.array([[0.0, 0], [20, 0], [30, 0]]), 1.0, None, False, 2.0)
+    ambiguous = WandDetection(np.array([[31.0, 0], [16, 0], [1, 0]]), 1.0, None, True, 1.0)
+    labeller = OnlineLabeller()
+    assert labeller.update(0, ambiguous) is None  # nothing to follow yet
+    assert np.allclose(labeller.update(33_000_000, clear)[0], [0, 0])
+    assert np.allclose(labeller.update(66_000_000, ambiguous)[0], [1, 0])  # continuity swaps it
+    assert labeller.update(10**9, ambiguous) is None  # too long after

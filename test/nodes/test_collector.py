@@ -73,8 +73,8 @@ def test_collect_calibrate_and_publish(tmp_path: Path) -> None:
         deadline = time.monotonic() + 20
         while stats.accepted + stats.still + stats.full + stats.empty < 140 and time.monotonic() < deadline:
             time.sleep(0.1)
-        # every frame arrived; frames where the wand hardly moved since the last one are thinned out
-        assert stats.accepted + stats.still >= 140 and stats.accepted >= 30
+        # every frame arrived (frames whose A/C labels no camera could settle yet count as empty)
+        assert stats.accepted + stats.still + stats.full + stats.empty >= 140 and stats.accepted >= 50
         client = helper.create_client(Trigger, "calibrate")
         assert client.wait_for_service(timeout_sec=5)
         response = client.call(Trigger.Request())

@@ -150,6 +150,24 @@ def detect_recording(
     return Detections(observations, stats, ambiguous)
 
 
+class OnlineLabeller:
+    """The forward pass of :func:`track_labels` for live streams: one detection at a time."""
+
+    def __init__(self) -> None:
+        self._last: tuple[int, NDArray[np.float64]] | None = None
+
+    def update(self, stamp_ns: int, detection: WandDetection) -> NDArray[np.float64] | None:
+        """A, B, C of the detection, or None when neither its image nor the previous frame settles them."""
+        points: NDArray[np.float64] | None = None
+        if detection.points is not None and detection.image_ratio >= ANCHOR_RATIO:
+            points = detection.points
+        elif self._last is not None and abs(stamp_ns - self._last[0]) <= TRACK_GAP_NS:
+            resolved = resolve_with_previous(detection, self._last[1])
+            points = None if resolved.ambiguous else resolved.points
+        self._last = None if points is None else (stamp_ns, points)
+        return points
+
+
 def track_labels(sequence: list[tuple[int, WandDetection]]) -> list[NDArray[np.float64] | None]:
     """A, B, C of each detection of one camera, ambiguous ones settled by their neighbours in time.
 

@@ -37,8 +37,8 @@ from wand_calib_ros.core.pipeline import calibrate
 from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.detection.blobs import BlobOptions
 from wand_calib_ros.detection.errors import ImageError
-from wand_calib_ros.detection.recording import detect_image, nominal_model
-from wand_calib_ros.detection.wand import WandOptions, resolve_with_previous
+from wand_calib_ros.detection.recording import OnlineLabeller, detect_image, nominal_model
+from wand_calib_ros.detection.wand import WandOptions
 from wand_calib_ros.errors import WandCalibError
 from wand_calib_ros.io.result_yaml import write_camera_infos, write_result
 from wand_calib_ros.io.rig_yaml import load_rig
@@ -96,7 +96,7 @@ class CollectorNode(Node):
         self.sync = FrameSynchroniser(self.rig.camera_names, slop_ns=int(float(tolerance_ms) * 1e6))
         self.wand_options = WandOptions(ratio=self.rig.wand.L1 / self.rig.wand.L2)
         self.models = {c.name: nominal_model(c) for c in self.rig.cameras}
-        self.previous: dict[str, tuple[int, np.ndarray]] = {}
+        self.labellers = {name: OnlineLabeller() for name in self.rig.camera_names}
         self.lock = threading.Lock()
         self.solving = threading.Event()
         self.result: CalibrationResult | None = None
@@ -137,16 +137,7 @@ class CollectorNode(Node):
             detection = None
         with self.lock:
             if detection is not None and detection.points is not None:
-                last = self.previous.get(camera)
-                recent = last is not None and abs(stamp - last[0]) <= 200_000_000
-                settled = (
-                    detection
-                    if detection.image_ratio >= 1.5
-                    else resolve_with_previous(detection, last[1] if recent and last is not None else None)
-                )
-                if not settled.ambiguous and settled.points is not None:
-                    points = settled.points
-                    self.previous[camera] = (stamp, points)
+                points = self.labellers[camera].update(stamp, detection)
             for frame in self.sync.add(camera, stamp, points):
                 if self.buffer.offer(frame.uv):
                     self.coverage.add(frame.uv)
