@@ -19,16 +19,14 @@ from numpy.typing import NDArray
 from wand_calib_ros.core.bundle_adjustment import (
     BundleProblem,
     BundleState,
-    bundle_adjust,
     default_free_mask,
-    residuals,
 )
 from wand_calib_ros.core.camera_model import CameraModel, unproject
 from wand_calib_ros.core.errors import CoreError, DegenerateDataError, InsufficientDataError
 from wand_calib_ros.core.essential import RelativePose, epipolar_angles, relative_pose
 from wand_calib_ros.core.geometry import Pose, wand_directions
 from wand_calib_ros.core.intrinsics_init import initial_model, lens_candidates
-from wand_calib_ros.core.refine import robust_sigma, triangulate_placements
+from wand_calib_ros.core.refine import robust_adjustment, triangulate_placements
 from wand_calib_ros.core.result import LensTrial
 from wand_calib_ros.core.rig import CameraSpec, WandSpec, spread_subset
 from wand_calib_ros.core.wand_lm import WandFit, optimise_wand_lengths
@@ -244,9 +242,7 @@ def _pair_bundle(
     free = default_free_mask(2)
     free[:, 2:5] = False
     try:
-        result = bundle_adjust(
-            state, problem, free, loss_scale=2.0 * robust_sigma(residuals(state, problem)), tolerance=1e-5
-        )
+        result, _ = robust_adjustment(state, problem, free)
     except CoreError:
         return fit.models, fit.pose
     models = result.state.models

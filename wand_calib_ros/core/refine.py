@@ -174,7 +174,7 @@ def refine_calibration(
     # low-order model converges in a few iterations even from a rough start.
     low_order = full.copy()
     low_order[:, 2:5] = False
-    robust, sigma = _robust_adjustment(state, BundleProblem.from_dense(wand, uv[keep]), low_order)
+    robust, sigma = robust_adjustment(state, BundleProblem.from_dense(wand, uv[keep]), low_order)
     clean, rejected = gate_views(uv[keep], robust.residuals, VIEW_GATE_SIGMAS * sigma)
     still = _enough_views(clean)
     log.info("robust pass: sigma %.3f px, %d views rejected, %d placements left", sigma, rejected.sum(), still.sum())
@@ -267,7 +267,7 @@ def _subset(state: BundleState, mask: NDArray[np.bool_]) -> BundleState:
     return BundleState(state.models, state.poses, state.wand_a[mask], state.wand_direction[mask])
 
 
-def _robust_adjustment(
+def robust_adjustment(
     state: BundleState, problem: BundleProblem, free: NDArray[np.bool_]
 ) -> tuple[BundleResult, float]:
     """Huber adjustment with the loss scale from the initial state's robust noise estimate.
