@@ -100,14 +100,15 @@ class CollectorNode(Node):
         self.lock = threading.Lock()
         self.solving = threading.Event()
         self.result: CalibrationResult | None = None
-        images = ReentrantCallbackGroup()
+        # One group per camera: cameras are detected in parallel, each camera's images in order
+        # (the A/C labeller follows the wand from one image to the next).
         for spec in self.rig.cameras:
             self.create_subscription(
                 Image,
                 f"/{spec.name}/image_raw",
                 lambda m, n=spec.name: self._on_image(n, m),
                 qos_profile_sensor_data if image_qos == "sensor_data" else QoSProfile(depth=100),
-                callback_group=images,
+                callback_group=MutuallyExclusiveCallbackGroup(),
             )
         # /calibrate may be called again while it solves (and answers "in progress"); diagnostics
         # have their own group so they keep flowing during a solve.
