@@ -12,6 +12,7 @@ import yaml
 
 rclpy = pytest.importorskip("rclpy")
 
+from geometry_msgs.msg import TransformStamped  # noqa: E402
 from rclpy.context import Context  # noqa: E402
 from rclpy.executors import MultiThreadedExecutor  # noqa: E402
 from rclpy.node import Node  # noqa: E402
@@ -59,7 +60,9 @@ def test_collect_calibrate_and_publish(tmp_path: Path) -> None:
         c.spec.name: helper.create_publisher(Image, f"/{c.spec.name}/image_raw", reliable) for c in scenario.cameras
     }
     infos: list[CameraInfo] = []
+    transforms: list[TransformStamped] = []
     helper.create_subscription(CameraInfo, "wand_calib/cam1/camera_info", infos.append, latched)
+    helper.create_subscription(TransformStamped, "wand_calib/cam1/extrinsics", transforms.append, latched)
     executor.add_node(collector)
     executor.add_node(helper)
     spinner = threading.Thread(target=executor.spin, daemon=True)
@@ -81,8 +84,12 @@ def test_collect_calibrate_and_publish(tmp_path: Path) -> None:
         assert response.success, response.message
         assert "result.yaml" in response.message
         deadline = time.monotonic() + 5
-        while not infos and time.monotonic() < deadline:
+        while not (infos and transforms) and time.monotonic() < deadline:
             time.sleep(0.05)
+        centre = scenario.cameras[1].pose.center / 1000.0  # camera 1 in camera 0's frame, metres
+        moved = transforms[-1].transform.translation
+        assert transforms[-1].header.frame_id == "cam0" and transforms[-1].child_frame_id == "cam1"
+        assert np.linalg.norm(np.array([moved.x, moved.y, moved.z]) - centre) < 0.01
         assert infos and infos[-1].distortion_model == "equidistant"
         truth = scenario.cameras[1].model
         assert abs(infos[-1].k[0] - truth.focal_px[0]) < 0.5

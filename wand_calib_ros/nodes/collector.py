@@ -5,6 +5,7 @@ LED detector, time-synchronises the detections into frames, keeps them in the
 persisted buffer and tracks coverage (published on ``/diagnostics`` at 1 Hz).
 ``/calibrate`` (std_srvs/Trigger) solves on a worker thread and publishes per
 camera ``wand_calib/<cam>/camera_info`` (transient local, ``equidistant``) and
+``wand_calib/<cam>/extrinsics`` (geometry_msgs/TransformStamped, parent = reference camera), and
 writes ``result.yaml`` and camera_info YAML files into ``output_dir``;
 ``/reset`` clears the buffer after backing it up. Only message and parameter
 translation lives here: the work is done by the core, detection and
@@ -21,11 +22,13 @@ from pathlib import Path
 import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import TransformStamped
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import CameraInfo, Image
 from std_srvs.srv import Trigger
 
@@ -74,6 +77,29 @@ def camera_info_message(result: CalibrationResult, name: str, stamp: object) -> 
     return info
 
 
+def extrinsics_message(result: CalibrationResult, name: str, stamp: object) -> TransformStamped:
+    """geometry_msgs/TransformStamped of a camera in the reference camera's frame (metres).
+
+    The transform maps the camera's frame into the reference camera's frame
+    (ROS convention: parent = reference camera, child = this camera), i.e. the
+    inverse of the result's X_cam = R X_ref + T.
+    """
+    pose = result.camera(name).pose
+    rotation = pose.rotation.T
+    translation = pose.center / 1000.0
+    x, y, z, w = Rotation.from_matrix(rotation).as_quat()
+    message = TransformStamped()
+    message.header.stamp = stamp
+    message.header.frame_id = result.reference_camera
+    message.child_frame_id = name
+    message.transform.translation.x, message.transform.translation.y, message.transform.translation.z = (
+        float(v) for v in translation
+    )
+    message.transform.rotation.x, message.transform.rotation.y = float(x), float(y)
+    message.transform.rotation.z, message.transform.rotation.w = float(z), float(w)
+    return message
+
+
 class CollectorNode(Node):
     """Detection, synchronisation, buffer, coverage and /calibrate in one node."""
 
@@ -116,6 +142,10 @@ class CollectorNode(Node):
         self.create_service(Trigger, "reset", self._on_reset, callback_group=MutuallyExclusiveCallbackGroup())
         self.info_publishers = {
             spec.name: self.create_publisher(CameraInfo, f"wand_calib/{spec.name}/camera_info", _LATCHED)
+            for spec in self.rig.cameras
+        }
+        self.extrinsics_publishers = {
+            spec.name: self.create_publisher(TransformStamped, f"wand_calib/{spec.name}/extrinsics", _LATCHED)
             for spec in self.rig.cameras
         }
         self.diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
@@ -197,6 +227,7 @@ class CollectorNode(Node):
         stamp = self.get_clock().now().to_msg()
         for name, publisher in self.info_publishers.items():
             publisher.publish(camera_info_message(result, name, stamp))
+            self.extrinsics_publishers[name].publish(extrinsics_message(result, name, stamp))
         self.result = result
         summary = ", ".join(f"{c.name} {c.rms_reprojection_px:.2f} px" for c in result.cameras)
         outcome.update(
