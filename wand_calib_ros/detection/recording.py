@@ -151,17 +151,26 @@ def detect_recording(
 
 
 class OnlineLabeller:
-    """The forward pass of :func:`track_labels` for live streams: one detection at a time."""
+    """Labels one camera's detections as they come (the forward pass of :func:`track_labels`)."""
 
     def __init__(self) -> None:
         self._last: tuple[int, NDArray[np.float64]] | None = None
 
-    def update(self, stamp_ns: int, detection: WandDetection) -> NDArray[np.float64] | None:
-        """A, B, C of the detection, or None when neither its image nor the previous frame settles them."""
-        points: NDArray[np.float64] | None = None
-        if detection.points is not None and detection.image_ratio >= ANCHOR_RATIO:
+    def update(
+        self, stamp_ns: int, detection: WandDetection, known: NDArray[np.float64] | None = None
+    ) -> NDArray[np.float64] | None:
+        """A, B, C of the detection, or None when neither its image nor the previous detection settles them.
+
+        Only confident labellings (image ratio >= ANCHOR_RATIO) stand on their own: perspective can
+        shrink |AB| below |BC| when the wand points steeply at the camera. Others follow the previous
+        settled detection when it is at most TRACK_GAP_NS away. A chain never bridges a detection
+        it could not settle: the wand may have turned through the line of sight there, swapping
+        which image end is A. ``known`` labels from an earlier pass are taken as they are.
+        """
+        points = known
+        if points is None and detection.points is not None and detection.image_ratio >= ANCHOR_RATIO:
             points = detection.points
-        elif self._last is not None and abs(stamp_ns - self._last[0]) <= TRACK_GAP_NS:
+        elif points is None and self._last is not None and abs(stamp_ns - self._last[0]) <= TRACK_GAP_NS:
             resolved = resolve_with_previous(detection, self._last[1])
             points = None if resolved.ambiguous else resolved.points
         self._last = None if points is None else (stamp_ns, points)
@@ -171,26 +180,15 @@ class OnlineLabeller:
 def track_labels(sequence: list[tuple[int, WandDetection]]) -> list[NDArray[np.float64] | None]:
     """A, B, C of each detection of one camera, ambiguous ones settled by their neighbours in time.
 
-    Detections whose image ratio |AB|/|BC| is at least ANCHOR_RATIO keep their labels; a
-    forward pass settles the others by continuity with the previous detection when that one
-    is settled and at most TRACK_GAP_NS older; a backward pass settles what is left from the
-    next one. Chains stop at detections they cannot settle. Detections nothing settles are None.
+    A forward pass of :class:`OnlineLabeller`, then a backward one that settles what is left from
+    the next detection. Detections nothing settles are None.
     """
-    # Only confident labellings start tracks: perspective can shrink |AB| below |BC| when the wand
-    # points steeply at the camera, so a ratio near 1 says little about which end is A.
-    labelled: list[NDArray[np.float64] | None] = [
-        d.points if d.image_ratio >= ANCHOR_RATIO else None for _, d in sequence
-    ]
-    for order in (range(len(sequence)), range(len(sequence) - 1, -1, -1)):
-        last: tuple[int, NDArray[np.float64]] | None = None
-        for i in order:
-            stamp, detection = sequence[i]
-            if labelled[i] is None and last is not None and abs(stamp - last[0]) <= TRACK_GAP_NS:
-                resolved = resolve_with_previous(detection, last[1])
-                labelled[i] = None if resolved.ambiguous else resolved.points
-            # A chain never bridges a detection it could not settle: the wand may have turned
-            # through the line of sight there, swapping which image end is A.
-            last = None if labelled[i] is None else (stamp, labelled[i])  # type: ignore[assignment]
+    forward = OnlineLabeller()
+    labelled = [forward.update(stamp, detection) for stamp, detection in sequence]
+    backward = OnlineLabeller()
+    for i in range(len(sequence) - 1, -1, -1):
+        stamp, detection = sequence[i]
+        labelled[i] = backward.update(stamp, detection, known=labelled[i])
     return labelled
 
 

@@ -3,7 +3,7 @@
 One node subscribes to every camera's image topic (sensor-data QoS), runs the
 LED detector, time-synchronises the detections into frames, keeps them in the
 persisted buffer and tracks coverage (published on ``/diagnostics`` at 1 Hz).
-``/calibrate`` (std_srvs/Trigger) solves on a worker thread and publishes per
+``/calibrate`` (std_srvs/Trigger) solves in its own executor thread and publishes per
 camera ``wand_calib/<cam>/camera_info`` (transient local, ``equidistant``) and
 ``wand_calib/<cam>/extrinsics`` (geometry_msgs/TransformStamped, parent = reference camera), and
 writes ``result.yaml`` and camera_info YAML files into ``output_dir``;
@@ -38,6 +38,7 @@ from wand_calib_ros.collection.sync import FrameSynchroniser
 from wand_calib_ros.core.camera_model import to_opencv_fisheye
 from wand_calib_ros.core.pipeline import calibrate
 from wand_calib_ros.core.result import CalibrationResult
+from wand_calib_ros.core.rig import WandObservations
 from wand_calib_ros.detection.blobs import BlobOptions
 from wand_calib_ros.detection.errors import ImageError
 from wand_calib_ros.detection.recording import OnlineLabeller, detect_image, nominal_model
@@ -196,31 +197,28 @@ class CollectorNode(Node):
         self.diagnostics.publish(array)
 
     def _on_calibrate(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        # A reentrant group: the solve runs in this executor thread while the image, timer and
+        # other service callbacks keep running in the others.
         with self.lock:
             if self.solving.is_set():
                 response.success, response.message = False, "a calibration is already running"
                 return response
             self.solving.set()
-        with self.lock:
             for frame in self.sync.flush_all():
                 if self.buffer.offer(frame.uv):
                     self.coverage.add(frame.uv)
             observations = self.buffer.observations()
-        outcome: dict[str, object] = {}
-        worker = threading.Thread(target=self._solve, args=(observations, outcome), daemon=True)
-        worker.start()
-        worker.join()  # the service group waits; image and timer callbacks keep running
-        self.solving.clear()
-        response.success = bool(outcome.get("success"))
-        response.message = str(outcome.get("message", ""))
+        try:
+            response.success, response.message = self._solve(observations)
+        finally:
+            self.solving.clear()
         return response
 
-    def _solve(self, observations: object, outcome: dict[str, object]) -> None:
+    def _solve(self, observations: WandObservations) -> tuple[bool, str]:
         try:
-            result = calibrate(self.rig, observations)  # type: ignore[arg-type]
+            result = calibrate(self.rig, observations)
         except WandCalibError as error:
-            outcome.update(success=False, message=f"calibration failed: {error}")
-            return
+            return False, f"calibration failed: {error}"
         self.output_dir.mkdir(parents=True, exist_ok=True)
         write_result(result, self.output_dir / "result.yaml")
         write_camera_infos(result, self.output_dir / "camera_info")
@@ -230,10 +228,7 @@ class CollectorNode(Node):
             self.extrinsics_publishers[name].publish(extrinsics_message(result, name, stamp))
         self.result = result
         summary = ", ".join(f"{c.name} {c.rms_reprojection_px:.2f} px" for c in result.cameras)
-        outcome.update(
-            success=True,
-            message=f"RMS {summary}; wand {result.wand_length_rms_mm:.2f} mm RMS; {self.output_dir / 'result.yaml'}",
-        )
+        return True, f"RMS {summary}; wand {result.wand_length_rms_mm:.2f} mm RMS; {self.output_dir / 'result.yaml'}"
 
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         with self.lock:
