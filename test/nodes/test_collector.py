@@ -1,4 +1,4 @@
-"""The collector node in-process: rendered images in, /calibrate, CameraInfo and result.yaml out."""
+"""The collector and calibrator in-process: rendered images in, /calibrate, CameraInfo and files out."""
 
 from __future__ import annotations
 
@@ -9,98 +9,121 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from conftest import LATCHED, Ros, wait_until
+
+from wand_calib_ros.core.pipeline import calibrate
+from wand_calib_ros.io.observations_csv import read_observations
+from wand_calib_ros.io.result_yaml import read_result
+from wand_calib_ros.io.rig_yaml import save_rig
+from wand_calib_ros.sim.render import RenderOptions, render_recording
+from wand_calib_ros.sim.scenarios import paper_fisheye_scenario, simulate
 
 rclpy = pytest.importorskip("rclpy")
 
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from geometry_msgs.msg import TransformStamped  # noqa: E402
-from rclpy.context import Context  # noqa: E402
-from rclpy.executors import MultiThreadedExecutor  # noqa: E402
-from rclpy.node import Node  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from sensor_msgs.msg import CameraInfo, Image  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
-from wand_calib_ros.io.rig_yaml import save_rig  # noqa: E402
+from wand_calib_ros.nodes.calibrator import CalibratorNode  # noqa: E402
 from wand_calib_ros.nodes.collector import CollectorNode  # noqa: E402
-from wand_calib_ros.sim.render import RenderOptions, render_recording  # noqa: E402
-from wand_calib_ros.sim.scenarios import paper_fisheye_scenario  # noqa: E402
+from wand_calib_ros.nodes.messages import array_to_image  # noqa: E402
 
 
-def _image(stamp_ns: int, frame_id: str, pixels: np.ndarray) -> Image:
-    message = Image()
-    message.header.stamp.sec, message.header.stamp.nanosec = divmod(stamp_ns, 10**9)
-    message.header.frame_id = frame_id
-    message.height, message.width = pixels.shape
-    message.encoding, message.step = "mono8", pixels.shape[1]
-    message.data = pixels.tobytes()
-    return message
-
-
-def test_collect_calibrate_and_publish(tmp_path: Path) -> None:
+def test_collect_calibrate_and_publish(ros: Ros, tmp_path: Path) -> None:
     scenario = paper_fisheye_scenario()
     recording = render_recording(scenario, 150, 30.0, RenderOptions(), np.random.default_rng(0))
     save_rig(scenario.rig, tmp_path / "cameras.yaml")
-    context = Context()
-    rclpy.init(context=context, domain_id=int(np.random.default_rng().integers(60, 200)))
-    executor = MultiThreadedExecutor(context=context)
-    collector = CollectorNode(
-        context=context,
-        parameter_overrides=[
-            Parameter("cameras_file", value=str(tmp_path / "cameras.yaml")),
-            Parameter("output_dir", value=str(tmp_path / "out")),
-            Parameter("min_placements", value=50),
-            Parameter("image_qos", value="reliable"),
-        ],
+    overrides = [
+        Parameter("cameras_file", value=str(tmp_path / "cameras.yaml")),
+        Parameter("output_dir", value=str(tmp_path / "out")),
+        Parameter("min_placements", value=50),
+        Parameter("min_theta_fraction", value=0.5),
+        Parameter("min_image_fraction", value=0.3),
+    ]
+    collector = ros.add(
+        CollectorNode(context=ros.context, parameter_overrides=[*overrides, Parameter("image_qos", value="reliable")])
     )
-    helper = Node("test_helper", context=context)
-    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
-    reliable = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
+    ros.add(CalibratorNode(context=ros.context, parameter_overrides=overrides, before_calibrate=collector.flush))
     publishers = {
-        c.spec.name: helper.create_publisher(Image, f"/{c.spec.name}/image_raw", reliable) for c in scenario.cameras
+        name: ros.helper.create_publisher(Image, f"/{name}/image_raw", 50) for name in scenario.rig.camera_names
     }
-    infos: list[CameraInfo] = []
-    transforms: list[TransformStamped] = []
-    helper.create_subscription(CameraInfo, "wand_calib/cam1/camera_info", infos.append, latched)
-    helper.create_subscription(TransformStamped, "wand_calib/cam1/extrinsics", transforms.append, latched)
-    executor.add_node(collector)
-    executor.add_node(helper)
-    spinner = threading.Thread(target=executor.spin, daemon=True)
-    spinner.start()
-    try:
-        time.sleep(0.5)
-        for camera, stamp, pixels in recording.frames:
-            publishers[camera].publish(_image(stamp, camera, pixels))
-            time.sleep(0.01)
-        stats = collector.buffer.stats
-        deadline = time.monotonic() + 20
-        while stats.accepted + stats.still + stats.full + stats.empty < 140 and time.monotonic() < deadline:
-            time.sleep(0.1)
-        # every frame arrived (frames whose A/C labels no camera could settle yet count as empty)
-        assert stats.accepted + stats.still + stats.full + stats.empty >= 140 and stats.accepted >= 50
-        client = helper.create_client(Trigger, "calibrate")
-        assert client.wait_for_service(timeout_sec=5)
-        response = client.call(Trigger.Request())
-        assert response.success, response.message
-        assert "result.yaml" in response.message
-        deadline = time.monotonic() + 5
-        while not (infos and transforms) and time.monotonic() < deadline:
-            time.sleep(0.05)
-        centre = scenario.cameras[1].pose.center / 1000.0  # camera 1 in camera 0's frame, metres
-        moved = transforms[-1].transform.translation
-        assert transforms[-1].header.frame_id == "cam0" and transforms[-1].child_frame_id == "cam1"
-        assert np.linalg.norm(np.array([moved.x, moved.y, moved.z]) - centre) < 0.01
-        assert infos and infos[-1].distortion_model == "equidistant"
-        truth = scenario.cameras[1].model
-        assert abs(infos[-1].k[0] - truth.focal_px[0]) < 0.5
-        assert abs(infos[-1].k[2] - truth.principal_point[0]) < 1.0
-        result = yaml.safe_load((tmp_path / "out" / "result.yaml").read_text())
-        assert set(result["cameras"]) == {"cam0", "cam1"}
-        assert (tmp_path / "out" / "observations.csv").read_text().startswith("frame,camera,point,u,v")
-    finally:
-        executor.shutdown()
-        collector.destroy_node()
-        helper.destroy_node()
-        rclpy.shutdown(context=context)
-        spinner.join(timeout=5)
-    assert not spinner.is_alive()
+    infos = ros.collect(CameraInfo, "wand_calib/cam1/camera_info", LATCHED)
+    transforms = ros.collect(TransformStamped, "wand_calib/cam1/extrinsics", LATCHED)
+    diagnostics = ros.collect(DiagnosticArray, "/diagnostics")
+    heat_maps = ros.collect(Image, "wand_calib/cam0/coverage", 1)
+    assert wait_until(lambda: all(p.get_subscription_count() for p in publishers.values()), 10)
+    for camera, stamp, pixels in recording.frames:
+        publishers[camera].publish(array_to_image(pixels, stamp, camera))
+        time.sleep(0.005)
+    assert wait_until(lambda: sum(collector.received.values()) == len(recording.frames), 20)
+
+    client = ros.helper.create_client(Trigger, "calibrate")
+    assert client.wait_for_service(timeout_sec=5)
+    response = client.call(Trigger.Request(), timeout_sec=120)
+    assert response.success, response.message
+    assert str(tmp_path / "out" / "result.yaml") in response.message
+    assert wait_until(lambda: bool(infos and transforms and diagnostics and heat_maps), 5)
+
+    # The published results match the truth.
+    centre = scenario.cameras[1].pose.center / 1000.0  # camera 1 in camera 0's frame, metres
+    moved = transforms[-1].transform.translation
+    assert (transforms[-1].header.frame_id, transforms[-1].child_frame_id) == ("cam0", "cam1")
+    assert np.linalg.norm(np.array([moved.x, moved.y, moved.z]) - centre) < 0.01
+    assert infos[-1].distortion_model == "equidistant"
+    truth = scenario.cameras[1].model
+    assert abs(infos[-1].k[0] - truth.focal_px[0]) < 0.5
+    assert abs(infos[-1].k[2] - truth.principal_point[0]) < 1.0
+    # Every image was accounted for, and nothing the labeller held back was lost at /calibrate.
+    stream = collector.streams["cam0"]
+    assert stream.stats.detected + sum(stream.stats.rejected.values()) == 150
+    assert not stream.labeller.flush()
+
+    # wand-calib calibrate on the persisted buffer computes exactly what /calibrate did.
+    out = tmp_path / "out"
+    again = calibrate(scenario.rig, read_observations(out / "observations.csv", scenario.rig.camera_names))
+    _, written = read_result(out / "result.yaml")
+    for camera in again.cameras:
+        assert np.allclose(written[camera.name].model.intrinsic_vector(), camera.model.intrinsic_vector(), rtol=1e-9)
+    assert yaml.safe_load((out / "camera_info" / "cam1.yaml").read_text())["distortion_model"] == "equidistant"
+    assert (out / "report" / "index.html").exists()
+
+    # Feedback: per camera diagnostics with counts, a heat map shaped like the image.
+    names = {status.name for status in diagnostics[-1].status}
+    assert {"wand_calib: cam0", "wand_calib: cam1", "wand_calib: rig"} <= names
+    assert heat_maps[-1].encoding == "bgr8" and heat_maps[-1].width == 320
+
+
+def test_calibrate_answers_clearly_when_busy_short_of_data_or_reset(ros: Ros, tmp_path: Path) -> None:
+    scenario = paper_fisheye_scenario()
+    save_rig(scenario.rig, tmp_path / "cameras.yaml")
+    overrides = [
+        Parameter("cameras_file", value=str(tmp_path / "cameras.yaml")),
+        Parameter("output_dir", value=str(tmp_path / "out")),
+    ]
+    gate = threading.Event()
+    collector = ros.add(CollectorNode(context=ros.context, parameter_overrides=overrides))
+    ros.add(CalibratorNode(context=ros.context, parameter_overrides=overrides, before_calibrate=lambda: gate.wait(10)))
+    client = ros.helper.create_client(Trigger, "calibrate")
+    assert client.wait_for_service(timeout_sec=5)
+    first = client.call_async(Trigger.Request())
+    time.sleep(0.5)
+    busy = client.call(Trigger.Request(), timeout_sec=5)
+    assert not busy.success and "already running" in busy.message
+    gate.set()
+    assert wait_until(first.done, 10)
+    assert not first.result().success and "nothing collected yet" in first.result().message
+
+    data = simulate(scenario, 0.5, np.random.default_rng(0), n=30)
+    for uv in data.observations.uv:
+        collector.buffer.offer(uv)
+    short = client.call(Trigger.Request(), timeout_sec=30)
+    assert not short.success
+    assert "coverage insufficient" in short.message and "cam0: 30 of 100 placements" in short.message
+
+    reset = ros.helper.create_client(Trigger, "reset")
+    assert reset.wait_for_service(timeout_sec=5)
+    assert reset.call(Trigger.Request(), timeout_sec=10).success
+    assert len(read_observations(next((tmp_path / "out").glob("observations.*.bak.csv"))).frames) == 30
+    assert not collector.buffer.frames

@@ -26,6 +26,9 @@ from wand_calib_ros.io.observations_csv import COLUMNS, read_observations
 
 FloatArray = NDArray[np.float64]
 
+#: The buffer's file name in a collector's output directory.
+BUFFER_FILE = "observations.csv"
+
 #: Cells per image side for the coverage test of a full buffer.
 GRID = 8
 

@@ -120,12 +120,6 @@ class CoverageTracker:
                 theta = np.arccos(np.clip(table(uv[c])[:, 2], -1, 1))
                 self.max_theta[c] = max(self.max_theta[c], float(theta.max()))
 
-    def heat_map(self, camera: int, scale: int = 8) -> NDArray[np.uint8]:
-        """(GRID*scale, GRID*scale) mono8 picture of where the camera saw the wand (brighter: more)."""
-        counts = self.cells[camera].astype(np.float64)
-        picture = np.sqrt(counts / max(counts.max(), 1.0)) * 255
-        return np.kron(picture, np.ones((scale, scale))).astype(np.uint8)
-
     def status(self) -> CoverageStatus:
         """Current coverage against the thresholds."""
         t = self.thresholds

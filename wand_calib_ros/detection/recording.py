@@ -1,9 +1,11 @@
 """From a stream of camera images to wand observations: detect, track labels, group by time.
 
-Images of different cameras whose header stamps lie within a tolerance form
-one frame. Each camera keeps its last detection: an ambiguous A/C labelling is
-settled by continuity with it when it is recent, otherwise the view is
-rejected as "ambiguous" rather than risk swapped labels.
+Each camera's images go through a :class:`CameraStream` (blobs, wand, labels).
+An ambiguous A/C labelling is settled by continuity with a neighbouring
+detection in time (before or after it), otherwise the view is rejected as
+"ambiguous" rather than risk swapped labels. For recordings, images of
+different cameras whose header stamps lie within a tolerance form one frame;
+live, the collector's synchroniser does that.
 """
 
 from __future__ import annotations
@@ -84,6 +86,87 @@ def nominal_model(spec: CameraSpec) -> BearingTable | None:
         return None
 
 
+class Labelled(NamedTuple):
+    """One image's outcome once its labels are decided.
+
+    Attributes:
+        stamp_ns: the image's stamp.
+        points: (3, 2) pixels of A, B, C, or None (no wand, or A and C could not be told apart).
+        unsettled: (3, 2) the wand's ends and middle in either order when only the A/C labels were
+            missing (other cameras may settle them), else None.
+    """
+
+    stamp_ns: int
+    points: NDArray[np.float64] | None
+    unsettled: NDArray[np.float64] | None = None
+
+
+class CameraStream:
+    """One camera's images in, labelled wand points out: detection, then a :class:`StreamLabeller`.
+
+    Feed images in time order with :meth:`push` (or :meth:`detect` and :meth:`label` to see each
+    image's blobs); results come out in time order, ambiguous ones up to ``max_hold_ns`` late.
+    ``stats`` counts images, labelled wands and rejections by reason.
+    """
+
+    def __init__(
+        self,
+        spec: CameraSpec,
+        wand_options: WandOptions,
+        blob_options: BlobOptions = BlobOptions(),
+        *,
+        max_hold_ns: int | None = 1_000_000_000,
+    ) -> None:
+        self.spec = spec
+        self.wand_options = wand_options
+        self.blob_options = blob_options
+        self.model = nominal_model(spec)
+        self.labeller = StreamLabeller(max_hold_ns)
+        self.stats = CameraStats()
+        self._pending: dict[int, WandDetection] = {}
+
+    def detect(self, image: NDArray, encoding: str) -> tuple[Blobs | None, WandDetection | None, str | None]:
+        """Blobs, wand and rejection reason (None when the wand was found) of one image."""
+        self.stats.images += 1
+        height, width = image.shape[:2]
+        if (width, height) != self.spec.image_size:
+            return None, None, "wrong_size"
+        try:
+            blobs, detection = detect_image(image, encoding, self.blob_options, self.wand_options, self.model)
+        except ImageError:
+            return None, None, "bad_image"
+        return blobs, detection, detection.reason if detection.points is None else None
+
+    def label(self, stamp_ns: int, detection: WandDetection | None, reason: str | None) -> list[Labelled]:
+        """Hand one image's detection to the labeller; returns the outcomes it releases."""
+        if reason is not None or detection is None:
+            self.stats.rejected[reason or "no_wand"] += 1
+            return [Labelled(stamp_ns, None)]
+        self._pending[stamp_ns] = detection
+        return self._released(self.labeller.push(stamp_ns, detection))
+
+    def push(self, stamp_ns: int, image: NDArray, encoding: str) -> list[Labelled]:
+        """:meth:`detect` then :meth:`label`."""
+        _, detection, reason = self.detect(image, encoding)
+        return self.label(stamp_ns, detection, reason)
+
+    def flush(self) -> list[Labelled]:
+        """Release what the labeller holds back (unsettled)."""
+        return self._released(self.labeller.flush())
+
+    def _released(self, results: list[tuple[int, NDArray[np.float64] | None]]) -> list[Labelled]:
+        out = []
+        for stamp, points in results:
+            detection = self._pending.pop(stamp)
+            if points is None:
+                self.stats.rejected["ambiguous"] += 1
+                out.append(Labelled(stamp, None, detection.points))
+            else:
+                self.stats.detected += 1
+                out.append(Labelled(stamp, points))
+        return out
+
+
 def detect_recording(
     frames: Iterable[ImageFrame],
     rig: RigSpec,
@@ -103,50 +186,26 @@ def detect_recording(
             (progress reports, debug overlays).
     """
     wand_options = WandOptions(ratio=rig.wand.L1 / rig.wand.L2)
-    sizes = {c.name: c.image_size for c in rig.cameras}
-    models = {c.name: nominal_model(c) for c in rig.cameras}
-    stats = {name: CameraStats() for name in rig.camera_names}
-    found: dict[str, list[tuple[int, WandDetection]]] = {name: [] for name in rig.camera_names}
+    streams = {c.name: CameraStream(c, wand_options, blob_options, max_hold_ns=None) for c in rig.cameras}
+    outcomes: list[tuple[str, Labelled]] = []
     stamps: list[int] = []
     for frame in sorted(frames, key=lambda f: f.stamp_ns):
         stamps.append(frame.stamp_ns)
-        counts = stats[frame.camera]
-        counts.images += 1
-        height, width = frame.image.shape[:2]
-        blobs: Blobs | None = None
-        detection: WandDetection | None = None
-        if (width, height) != sizes[frame.camera]:
-            reason: str | None = "wrong_size"
-        else:
-            try:
-                blobs, detection = detect_image(
-                    frame.image, frame.encoding, blob_options, wand_options, models[frame.camera]
-                )
-                reason = detection.reason if detection.points is None else None
-            except ImageError:
-                reason = "bad_image"
+        stream = streams[frame.camera]
+        blobs, detection, reason = stream.detect(frame.image, frame.encoding)
         if inspect is not None:
             inspect(frame, blobs, detection, reason)
-        if reason is not None or detection is None:
-            counts.rejected[reason or "no_wand"] += 1
-            continue
-        found[frame.camera].append((frame.stamp_ns, detection))
-    detections: list[tuple[int, str, NDArray[np.float64]]] = []
-    unsettled: list[tuple[int, str, NDArray[np.float64]]] = []
-    for camera, sequence in found.items():
-        labelled = track_labels(sequence)
-        for (stamp, detection), points in zip(sequence, labelled, strict=True):
-            if points is None:
-                stats[camera].rejected["ambiguous"] += 1
-                unsettled.append((stamp, camera, detection.points))  # type: ignore[arg-type]
-            else:
-                stats[camera].detected += 1
-                detections.append((stamp, camera, points))
+        outcomes += [(frame.camera, out) for out in stream.label(frame.stamp_ns, detection, reason)]
+    outcomes += [(name, out) for name, stream in streams.items() for out in stream.flush()]
     slots = _slots(np.array(stamps, dtype=np.int64), tolerance_ns)
+    detections = [(out.stamp_ns, camera, out.points) for camera, out in outcomes if out.points is not None]
     observations = _group(detections, slots, rig.camera_names)
     ambiguous = [
-        (int(np.searchsorted(slots, stamp, side="right")) - 1, camera, points) for stamp, camera, points in unsettled
+        (int(np.searchsorted(slots, out.stamp_ns, side="right")) - 1, camera, out.unsettled)
+        for camera, out in outcomes
+        if out.unsettled is not None
     ]
+    stats = {name: stream.stats for name, stream in streams.items()}
     return Detections(observations, stats, ambiguous)
 
 
@@ -177,19 +236,57 @@ class OnlineLabeller:
         return points
 
 
+class StreamLabeller:
+    """Labels one camera's detections as they come, settling ambiguous ones from later ones too.
+
+    The forward pass is :class:`OnlineLabeller`. Detections it cannot settle are held back until
+    a later detection settles them backwards in time (the same rule read backwards), the chain
+    breaks (a gap above TRACK_GAP_NS) or the oldest is ``max_hold_ns`` older than the newest;
+    then they are released unsettled (None). Results come out in time order, at most
+    ``max_hold_ns`` late. With an unbounded hold it labels exactly like :func:`track_labels`.
+    """
+
+    def __init__(self, max_hold_ns: int | None = 1_000_000_000) -> None:
+        self.max_hold_ns = max_hold_ns
+        self._forward = OnlineLabeller()
+        self._held: list[tuple[int, WandDetection]] = []
+
+    def push(self, stamp_ns: int, detection: WandDetection) -> list[tuple[int, NDArray[np.float64] | None]]:
+        """Add a detection (in time order); returns the (stamp, A B C or None) results it releases."""
+        points = self._forward.update(stamp_ns, detection)
+        released: list[tuple[int, NDArray[np.float64] | None]] = []
+        if points is None:
+            if self._held and stamp_ns - self._held[-1][0] > TRACK_GAP_NS:
+                released += self.flush()
+            self._held.append((stamp_ns, detection))
+            while self.max_hold_ns is not None and stamp_ns - self._held[0][0] > self.max_hold_ns:
+                released.append((self._held.pop(0)[0], None))
+            return released
+        if self._held:
+            backward = OnlineLabeller()
+            backward.update(stamp_ns, detection, known=points)
+            settled = [backward.update(stamp, held) for stamp, held in reversed(self._held)]
+            released += [(stamp, labels) for (stamp, _), labels in zip(self._held, reversed(settled), strict=True)]
+            self._held = []
+        released.append((stamp_ns, points))
+        return released
+
+    def flush(self) -> list[tuple[int, NDArray[np.float64] | None]]:
+        """Release every held detection unsettled (end of a recording, a /calibrate call)."""
+        released: list[tuple[int, NDArray[np.float64] | None]] = [(stamp, None) for stamp, _ in self._held]
+        self._held = []
+        return released
+
+
 def track_labels(sequence: list[tuple[int, WandDetection]]) -> list[NDArray[np.float64] | None]:
     """A, B, C of each detection of one camera, ambiguous ones settled by their neighbours in time.
 
-    A forward pass of :class:`OnlineLabeller`, then a backward one that settles what is left from
-    the next detection. Detections nothing settles are None.
+    A forward pass of :class:`OnlineLabeller` with a backward pass over what it left (a
+    :class:`StreamLabeller` that holds back without limit). Detections nothing settles are None.
     """
-    forward = OnlineLabeller()
-    labelled = [forward.update(stamp, detection) for stamp, detection in sequence]
-    backward = OnlineLabeller()
-    for i in range(len(sequence) - 1, -1, -1):
-        stamp, detection = sequence[i]
-        labelled[i] = backward.update(stamp, detection, known=labelled[i])
-    return labelled
+    labeller = StreamLabeller(max_hold_ns=None)
+    released = [labels for stamp, detection in sequence for _, labels in labeller.push(stamp, detection)]
+    return released + [labels for _, labels in labeller.flush()]
 
 
 def _slots(stamps: NDArray[np.int64], tolerance_ns: int) -> NDArray[np.int64]:

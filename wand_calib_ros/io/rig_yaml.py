@@ -6,12 +6,16 @@ cameras:
   - {name: cam0, image_size: [640, 480], pixel_size_um: [5.6, 5.6],
      nominal_focal_mm: 1.8, max_view_angle_deg: 92.5, lens: fisheye}   # lens optional
 ```
-Unknown keys (e.g. a ROS node's ``image_topic``) are kept out of the core and ignored here.
+The ROS nodes read three optional keys per camera with :func:`load_camera_endpoints`:
+``image_topic`` (default ``/<name>/image_raw``), ``points_topic`` (default ``wand_points`` next to
+the image topic) and ``set_camera_info`` (the driver's service, default next to the image topic).
+The core never sees them.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -128,3 +132,44 @@ def rig_to_dict(rig: RigSpec) -> dict[str, Any]:
 def save_rig(rig: RigSpec, path: str | Path) -> None:
     """Write ``cameras.yaml``."""
     Path(path).write_text(yaml.safe_dump(rig_to_dict(rig), sort_keys=False, default_flow_style=None))
+
+
+@dataclass(frozen=True)
+class CameraEndpoints:
+    """Where a camera lives on ROS (absolute names).
+
+    Attributes:
+        image_topic: its images (sensor_msgs/Image).
+        points_topic: its wand points from a detector node (geometry_msgs/PolygonStamped).
+        set_camera_info: its driver's sensor_msgs/srv/SetCameraInfo service.
+    """
+
+    image_topic: str
+    points_topic: str
+    set_camera_info: str
+
+
+def _ros_name(path: Path, where: str, value: Any) -> str:
+    if not isinstance(value, str) or not value.startswith("/") or value.endswith("/") or " " in value:
+        raise FormatError(path, f"{where} must be an absolute ROS name such as /cam0/image_raw, got {value!r}")
+    return value
+
+
+def load_camera_endpoints(path: str | Path) -> dict[str, CameraEndpoints]:
+    """Per camera ROS topics and services of ``cameras.yaml`` (defaults where not given)."""
+    path = Path(path)
+    rig = load_rig(path)
+    items = {str(item["name"]): item for item in yaml.safe_load(path.read_text())["cameras"]}
+    endpoints = {}
+    for name in rig.camera_names:
+        item = items[name]
+        image = _ros_name(path, f"camera '{name}' image_topic", item.get("image_topic", f"/{name}/image_raw"))
+        namespace = image.rsplit("/", 1)[0]
+        endpoints[name] = CameraEndpoints(
+            image,
+            _ros_name(path, f"camera '{name}' points_topic", item.get("points_topic", f"{namespace}/wand_points")),
+            _ros_name(
+                path, f"camera '{name}' set_camera_info", item.get("set_camera_info", f"{namespace}/set_camera_info")
+            ),
+        )
+    return endpoints

@@ -1,264 +1,237 @@
-"""The live calibration node: image topics in, calibration out.
+"""The collector node: images (or detector points) in, a coverage-checked persisted buffer out.
 
-One node subscribes to every camera's image topic (sensor-data QoS), runs the
-LED detector, time-synchronises the detections into frames, keeps them in the
-persisted buffer and tracks coverage (published on ``/diagnostics`` at 1 Hz).
-``/calibrate`` (std_srvs/Trigger) solves in its own executor thread and publishes per
-camera ``wand_calib/<cam>/camera_info`` (transient local, ``equidistant``) and
-``wand_calib/<cam>/extrinsics`` (geometry_msgs/TransformStamped, parent = reference camera), and
-writes ``result.yaml`` and camera_info YAML files into ``output_dir``;
-``/reset`` clears the buffer after backing it up. Only message and parameter
-translation lives here: the work is done by the core, detection and
-collection packages.
+Per camera it subscribes either to the image topic (sensor-data QoS by default)
+and runs the LED detector itself, or to a detector node's wand points
+(``input: points``). Results are time-synchronised into frames, offered to the
+persisted :class:`ObservationBuffer` and counted by the :class:`CoverageTracker`;
+``/diagnostics`` (1 Hz), a coverage heat map per camera
+(``wand_calib/<cam>/coverage``) and log lines on every change of what is
+missing tell the person waving the wand what to do. ``/reset`` clears the
+buffer after backing it up.
+
+``ros2 run wand_calib_ros collector`` also starts the calibrator node in the
+same process (``with_calibrator``), so a ``/calibrate`` call is the whole
+workflow. Only message and parameter translation lives here.
 """
 
 from __future__ import annotations
 
-import logging
 import sys
 import threading
+import time
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
-import numpy as np
-import rclpy
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import TransformStamped
-from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PolygonStamped
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.context import Context
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
-from scipy.spatial.transform import Rotation
-from sensor_msgs.msg import CameraInfo, Image
+from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from sensor_msgs.msg import Image
 from std_srvs.srv import Trigger
 
-from wand_calib_ros.collection.buffer import ObservationBuffer
-from wand_calib_ros.collection.coverage import CoverageThresholds, CoverageTracker
+from wand_calib_ros.collection.buffer import BUFFER_FILE, ObservationBuffer
+from wand_calib_ros.collection.coverage import CoverageTracker
 from wand_calib_ros.collection.sync import FrameSynchroniser
-from wand_calib_ros.core.camera_model import to_opencv_fisheye
-from wand_calib_ros.core.pipeline import calibrate
-from wand_calib_ros.core.result import CalibrationResult
-from wand_calib_ros.core.rig import WandObservations
-from wand_calib_ros.detection.blobs import BlobOptions
-from wand_calib_ros.detection.errors import ImageError
-from wand_calib_ros.detection.recording import OnlineLabeller, detect_image, nominal_model
+from wand_calib_ros.detection.recording import CameraStream, Labelled
 from wand_calib_ros.detection.wand import WandOptions
-from wand_calib_ros.errors import WandCalibError
-from wand_calib_ros.io.result_yaml import write_camera_infos, write_result
-from wand_calib_ros.io.rig_yaml import load_rig
+from wand_calib_ros.io.rig_yaml import load_camera_endpoints, load_rig
+from wand_calib_ros.nodes import messages
+from wand_calib_ros.nodes.params import (
+    COVERAGE,
+    IMAGE_QOS,
+    LABEL_HOLD,
+    RIG,
+    Param,
+    coverage_thresholds,
+    declare,
+    existing_file,
+)
+from wand_calib_ros.nodes.runner import run
 
-_LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
+PARAMS = (
+    *RIG,
+    *COVERAGE,
+    Param(
+        "input",
+        "images",
+        "images: detect the wand here; points: subscribe to detector nodes",
+        choices=("images", "points"),
+    ),
+    IMAGE_QOS,
+    Param("sync_tolerance_ms", 5.0, "stamps closer than this form one frame (ms)", 0.0, 1000.0),
+    Param("buffer_capacity", 20000, "frames stored before only coverage-adding frames are kept", 100, 10**7),
+    Param("min_motion_px", 2.0, "a frame whose wand moved less than this (px) in every camera is skipped", 0.0, 1000.0),
+    LABEL_HOLD,
+    Param("with_calibrator", True, "also run the calibrator node (/calibrate) in this process"),
+)
 
-
-def image_to_array(message: Image) -> np.ndarray:
-    """The pixels of a sensor_msgs/Image as a numpy array (no copy for 8-bit data)."""
-    data = np.frombuffer(message.data, dtype=np.uint8)
-    height, step = message.height, message.step
-    rows = data[: height * step].reshape(height, step)
-    if message.encoding == "mono16":
-        return rows.view(">u2" if message.is_bigendian else "<u2")[:, : message.width]
-    channels = {"bgr8": 3, "rgb8": 3, "bgra8": 4, "rgba8": 4}.get(message.encoding, 1)
-    pixels = rows[:, : message.width * channels]
-    return pixels.reshape(height, message.width, channels) if channels > 1 else pixels
-
-
-def camera_info_message(result: CalibrationResult, name: str, stamp: object) -> CameraInfo:
-    """sensor_msgs/CameraInfo (``equidistant``) exactly equivalent to a calibrated camera."""
-    model = result.camera(name).model
-    opencv = to_opencv_fisheye(model)
-    info = CameraInfo()
-    info.header.stamp = stamp
-    info.header.frame_id = name
-    info.width, info.height = model.image_size
-    info.distortion_model = "equidistant"
-    info.d = [float(v) for v in opencv.distortion]
-    info.k = [float(v) for v in opencv.camera_matrix.ravel()]
-    info.r = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
-    info.p = [float(v) for v in np.hstack([opencv.camera_matrix, np.zeros((3, 1))]).ravel()]
-    return info
-
-
-def extrinsics_message(result: CalibrationResult, name: str, stamp: object) -> TransformStamped:
-    """geometry_msgs/TransformStamped of a camera in the reference camera's frame (metres).
-
-    The transform maps the camera's frame into the reference camera's frame
-    (ROS convention: parent = reference camera, child = this camera), i.e. the
-    inverse of the result's X_cam = R X_ref + T.
-    """
-    pose = result.camera(name).pose
-    rotation = pose.rotation.T
-    translation = pose.center / 1000.0
-    x, y, z, w = Rotation.from_matrix(rotation).as_quat()
-    message = TransformStamped()
-    message.header.stamp = stamp
-    message.header.frame_id = result.reference_camera
-    message.child_frame_id = name
-    message.transform.translation.x, message.transform.translation.y, message.transform.translation.z = (
-        float(v) for v in translation
-    )
-    message.transform.rotation.x, message.transform.rotation.y = float(x), float(y)
-    message.transform.rotation.z, message.transform.rotation.w = float(z), float(w)
-    return message
+#: Points from detector nodes are few and small: deliver every one.
+POINTS_QOS = QoSProfile(depth=200, reliability=ReliabilityPolicy.RELIABLE)
 
 
 class CollectorNode(Node):
-    """Detection, synchronisation, buffer, coverage and /calibrate in one node."""
+    """Detection (or detector points), synchronisation, persisted buffer, coverage feedback."""
 
-    def __init__(self, **kwargs: object) -> None:
+    def __init__(self, **kwargs: Any) -> None:
         super().__init__("wand_calib_collector", **kwargs)
-        cameras_file = self._parameter("cameras_file", "", "rig description (cameras.yaml contract)")
-        output_dir = Path(self._parameter("output_dir", "wand_calib_output", "where observations and results go"))
-        tolerance_ms = self._parameter("sync_tolerance_ms", 5.0, "images closer in time form one frame (ms)")
-        capacity = self._parameter("buffer_capacity", 20000, "frames kept before thinning")
-        min_placements = self._parameter("min_placements", 100, "complete views per camera needed")
-        image_qos = self._parameter("image_qos", "sensor_data", "sensor_data (best effort) or reliable (bag replay)")
-        if not cameras_file:
-            raise WandCalibError("parameter cameras_file is required (the rig description)")
+        values = declare(self, PARAMS)
+        cameras_file = existing_file(values, "cameras_file")
         self.rig = load_rig(cameras_file)
-        self.output_dir = output_dir
-        self.buffer = ObservationBuffer.open(output_dir / "observations.csv", self.rig, capacity=int(capacity))
-        self.coverage = CoverageTracker(self.rig, CoverageThresholds(min_placements=int(min_placements)))
+        self.endpoints = load_camera_endpoints(cameras_file)
+        self.with_calibrator = bool(values["with_calibrator"])
+        self.buffer = ObservationBuffer.open(
+            Path(values["output_dir"]).expanduser() / BUFFER_FILE,
+            self.rig,
+            capacity=values["buffer_capacity"],
+            min_motion_px=values["min_motion_px"],
+        )
+        self.coverage = CoverageTracker(self.rig, coverage_thresholds(values))
         for uv in self.buffer.uv:
             self.coverage.add(uv)
-        self.sync = FrameSynchroniser(self.rig.camera_names, slop_ns=int(float(tolerance_ms) * 1e6))
-        self.wand_options = WandOptions(ratio=self.rig.wand.L1 / self.rig.wand.L2)
-        self.models = {c.name: nominal_model(c) for c in self.rig.cameras}
-        self.labellers = {name: OnlineLabeller() for name in self.rig.camera_names}
+        hold_ns = int(values["label_hold_ms"] * 1e6)
+        self.sync = FrameSynchroniser(
+            self.rig.camera_names, slop_ns=int(values["sync_tolerance_ms"] * 1e6), max_delay_ns=hold_ns + 500_000_000
+        )
+        wand = WandOptions(ratio=self.rig.wand.L1 / self.rig.wand.L2)
+        self.streams = {c.name: CameraStream(c, wand, max_hold_ns=hold_ns) for c in self.rig.cameras}
+        self.received = dict.fromkeys(self.rig.camera_names, 0)
+        self.malformed = dict.fromkeys(self.rig.camera_names, 0)
         self.lock = threading.Lock()
-        self.solving = threading.Event()
-        self.result: CalibrationResult | None = None
-        # One group per camera: cameras are detected in parallel, each camera's images in order
+        self._logged: tuple[bool, float] | None = None  # (ready, when) of the last coverage log line
+        # One group per camera: cameras are handled in parallel, each camera's messages in order
         # (the A/C labeller follows the wand from one image to the next).
-        for spec in self.rig.cameras:
-            self.create_subscription(
-                Image,
-                f"/{spec.name}/image_raw",
-                lambda m, n=spec.name: self._on_image(n, m),
-                qos_profile_sensor_data if image_qos == "sensor_data" else QoSProfile(depth=100),
-                callback_group=MutuallyExclusiveCallbackGroup(),
-            )
-        # /calibrate may be called again while it solves (and answers "in progress"); diagnostics
-        # have their own group so they keep flowing during a solve.
-        self.create_service(Trigger, "calibrate", self._on_calibrate, callback_group=ReentrantCallbackGroup())
+        for name, endpoint in self.endpoints.items():
+            group = MutuallyExclusiveCallbackGroup()
+            if values["input"] == "images":
+                qos = qos_profile_sensor_data if values["image_qos"] == "sensor_data" else QoSProfile(depth=100)
+                self.create_subscription(
+                    Image, endpoint.image_topic, lambda m, n=name: self._on_image(n, m), qos, callback_group=group
+                )
+            else:
+                self.create_subscription(
+                    PolygonStamped,
+                    endpoint.points_topic,
+                    lambda m, n=name: self._on_points(n, m),
+                    POINTS_QOS,
+                    callback_group=group,
+                )
         self.create_service(Trigger, "reset", self._on_reset, callback_group=MutuallyExclusiveCallbackGroup())
-        self.info_publishers = {
-            spec.name: self.create_publisher(CameraInfo, f"wand_calib/{spec.name}/camera_info", _LATCHED)
-            for spec in self.rig.cameras
-        }
-        self.extrinsics_publishers = {
-            spec.name: self.create_publisher(TransformStamped, f"wand_calib/{spec.name}/extrinsics", _LATCHED)
-            for spec in self.rig.cameras
-        }
         self.diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        self.create_timer(1.0, self._publish_diagnostics, callback_group=MutuallyExclusiveCallbackGroup())
+        self.heat_maps = {
+            name: self.create_publisher(Image, f"wand_calib/{name}/coverage", 1) for name in self.rig.camera_names
+        }
+        self.create_timer(1.0, self._publish_feedback, callback_group=MutuallyExclusiveCallbackGroup())
+        source = {"images": "image topics", "points": "detector points"}[values["input"]]
         self.get_logger().info(
-            f"collecting {', '.join(self.rig.camera_names)} into {self.buffer.path} ({len(self.buffer.frames)} resumed)"
+            f"collecting {', '.join(self.rig.camera_names)} from {source} into {self.buffer.path} "
+            f"({len(self.buffer.frames)} frames resumed)"
         )
 
-    def _parameter(self, name: str, default: object, description: str) -> object:
-        return self.declare_parameter(name, default, ParameterDescriptor(description=description)).value
-
     def _on_image(self, camera: str, message: Image) -> None:
-        stamp = message.header.stamp.sec * 10**9 + message.header.stamp.nanosec
-        points = None
+        stream = self.streams[camera]
         try:
-            _, detection = detect_image(
-                image_to_array(message), message.encoding, BlobOptions(), self.wand_options, self.models[camera]
-            )
-        except (ImageError, ValueError):
-            detection = None
+            _, detection, reason = stream.detect(messages.image_to_array(message), message.encoding)
+        except ValueError:
+            detection, reason = None, "bad_image"
         with self.lock:
-            if detection is not None and detection.points is not None:
-                points = self.labellers[camera].update(stamp, detection)
-            for frame in self.sync.add(camera, stamp, points):
+            self.received[camera] += 1
+            self._offer(camera, stream.label(messages.stamp_ns(message.header), detection, reason))
+
+    def _on_points(self, camera: str, message: PolygonStamped) -> None:
+        try:
+            points = messages.message_points(message)
+        except ValueError as error:
+            self.get_logger().warning(f"{camera}: ignoring wand points: {error}", throttle_duration_sec=5.0)
+            with self.lock:
+                self.malformed[camera] += 1
+            return
+        with self.lock:
+            self.received[camera] += 1
+            self._offer(camera, [Labelled(messages.stamp_ns(message.header), points)])
+
+    def _offer(self, camera: str, outcomes: list[Labelled]) -> None:
+        """Synchronise released outcomes and store completed frames (caller holds the lock)."""
+        for outcome in outcomes:
+            for frame in self.sync.add(camera, outcome.stamp_ns, outcome.points):
                 if self.buffer.offer(frame.uv):
                     self.coverage.add(frame.uv)
 
-    def _publish_diagnostics(self) -> None:
+    def flush(self) -> None:
+        """Store everything still held (ambiguous views, pending frames): before /calibrate, at exit."""
         with self.lock:
-            status = self.coverage.status()
-            frames = len(self.buffer.frames)
-        array = DiagnosticArray()
-        array.header.stamp = self.get_clock().now().to_msg()
-        for camera in status.cameras:
-            entry = DiagnosticStatus(name=f"wand_calib: {camera.name}", hardware_id=camera.name)
-            entry.level = DiagnosticStatus.OK if camera.ok else DiagnosticStatus.WARN
-            entry.message = "ready" if camera.ok else "; ".join(camera.missing)
-            entry.values = [
-                KeyValue(key="placements", value=str(camera.placements)),
-                KeyValue(key="image_coverage_percent", value=f"{100 * camera.image_fraction:.0f}"),
-                KeyValue(key="max_theta_deg", value=f"{camera.max_theta_deg:.1f}"),
-            ]
-            array.status.append(entry)
-        rig = DiagnosticStatus(name="wand_calib: rig", hardware_id="rig")
-        rig.level = DiagnosticStatus.OK if status.ready else DiagnosticStatus.WARN
-        rig.message = f"ready ({frames} frames)" if status.ready else " | ".join(status.messages())
-        array.status.append(rig)
-        self.diagnostics.publish(array)
-
-    def _on_calibrate(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        # A reentrant group: the solve runs in this executor thread while the image, timer and
-        # other service callbacks keep running in the others.
-        with self.lock:
-            if self.solving.is_set():
-                response.success, response.message = False, "a calibration is already running"
-                return response
-            self.solving.set()
+            for name, stream in self.streams.items():
+                self._offer(name, stream.flush())
             for frame in self.sync.flush_all():
                 if self.buffer.offer(frame.uv):
                     self.coverage.add(frame.uv)
-            observations = self.buffer.observations()
-        try:
-            response.success, response.message = self._solve(observations)
-        finally:
-            self.solving.clear()
-        return response
 
-    def _solve(self, observations: WandObservations) -> tuple[bool, str]:
-        try:
-            result = calibrate(self.rig, observations)
-        except WandCalibError as error:
-            return False, f"calibration failed: {error}"
-        self.output_dir.mkdir(parents=True, exist_ok=True)
-        write_result(result, self.output_dir / "result.yaml")
-        write_camera_infos(result, self.output_dir / "camera_info")
+    close = flush
+
+    def _counts(self) -> dict[str, dict[str, int]]:
+        counts = {}
+        for name, stream in self.streams.items():
+            counts[name] = {"received": self.received[name], "wand_labelled": stream.stats.detected}
+            counts[name] |= {f"rejected_{reason}": n for reason, n in sorted(stream.stats.rejected.items())}
+            if self.malformed[name]:
+                counts[name]["malformed_points"] = self.malformed[name]
+        return counts
+
+    def _publish_feedback(self) -> None:
+        with self.lock:
+            status = self.coverage.status()
+            counts = self._counts()
+            sync, stored = self.sync.stats, self.buffer.stats
+            rig_values = {
+                "frames_stored": len(self.buffer.frames),
+                "frames_synchronised": sync.frames,
+                "frames_all_cameras": sync.complete,
+                "late_messages": sync.late,
+                "out_of_order_messages": sync.out_of_order,
+                "duplicate_messages": sync.duplicates,
+                "skipped_still": stored.still,
+                "skipped_buffer_full": stored.full,
+                "without_wand": stored.empty,
+            }
+            cells = {name: self.coverage.cells[c].copy() for c, name in enumerate(self.rig.camera_names)}
         stamp = self.get_clock().now().to_msg()
-        for name, publisher in self.info_publishers.items():
-            publisher.publish(camera_info_message(result, name, stamp))
-            self.extrinsics_publishers[name].publish(extrinsics_message(result, name, stamp))
-        self.result = result
-        summary = ", ".join(f"{c.name} {c.rms_reprojection_px:.2f} px" for c in result.cameras)
-        return True, f"RMS {summary}; wand {result.wand_length_rms_mm:.2f} mm RMS; {self.output_dir / 'result.yaml'}"
+        self.diagnostics.publish(messages.diagnostics_message(status, counts, rig_values, stamp))
+        for spec in self.rig.cameras:
+            self.heat_maps[spec.name].publish(
+                messages.heat_map_message(cells[spec.name], spec.image_size, stamp, spec.name)
+            )
+        now = time.monotonic()
+        if self._logged is None or self._logged[0] != status.ready or (not status.ready and now - self._logged[1] > 10):
+            if status.ready:
+                self.get_logger().info(f"ready to calibrate ({rig_values['frames_stored']} frames): call /calibrate")
+            else:
+                self.get_logger().info("still missing: " + " | ".join(status.messages()))
+            self._logged = (status.ready, now)
 
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         with self.lock:
             backup = self.buffer.reset()
             self.coverage = CoverageTracker(self.rig, self.coverage.thresholds)
         response.success, response.message = True, f"buffer cleared; backup {backup}"
+        self.get_logger().info(response.message)
         return response
 
 
-def main(argv: list[str] | None = None) -> int:
-    """``ros2 run wand_calib_ros collector --ros-args -p cameras_file:=...``"""
-    logging.basicConfig(level=logging.WARNING)
-    rclpy.init(args=argv if argv is not None else sys.argv)
-    executor = MultiThreadedExecutor(num_threads=4)
-    try:
-        node = CollectorNode()
-    except WandCalibError as error:
-        print(f"collector: error: {error}", file=sys.stderr)
-        rclpy.try_shutdown()
-        return 2
-    executor.add_node(node)
-    try:
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+def build(context: Context) -> list[Node]:
+    """The collector and, unless ``with_calibrator`` is false, the calibrator fed by it."""
+    from wand_calib_ros.nodes.calibrator import CalibratorNode
+
+    collector = CollectorNode(context=context)
+    if not collector.with_calibrator:
+        return [collector]
+    return [collector, CalibratorNode(context=context, before_calibrate=collector.flush)]
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``ros2 run wand_calib_ros collector --ros-args --params-file config/<rig>.params.yaml``"""
+    return run("collector", build, argv, threads=6)
 
 
 if __name__ == "__main__":

@@ -1,0 +1,94 @@
+"""What a /calibrate call does, without ROS: check coverage, calibrate, write the result files.
+
+The observations come from the collector's persisted buffer file, so
+``wand-calib calibrate`` on that file computes exactly the same result.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from wand_calib_ros.collection.coverage import CoverageStatus, CoverageThresholds, CoverageTracker
+from wand_calib_ros.collection.errors import CoverageError
+from wand_calib_ros.core.pipeline import CalibrationOptions, calibrate
+from wand_calib_ros.core.result import CalibrationResult
+from wand_calib_ros.core.rig import RigSpec, WandObservations
+from wand_calib_ros.io.result_yaml import write_camera_infos, write_result
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class CalibrationFiles:
+    """Where a calibration was written.
+
+    Attributes:
+        result: ``result.yaml`` (the core's result contract).
+        camera_info: one camera_info YAML per camera (``equidistant``).
+        report: the HTML report, or None when not asked for (or it failed).
+    """
+
+    result: Path
+    camera_info: tuple[Path, ...]
+    report: Path | None
+
+
+def coverage_of(rig: RigSpec, observations: WandObservations, thresholds: CoverageThresholds) -> CoverageStatus:
+    """Coverage of a set of observations (what the collector reports while waving)."""
+    tracker = CoverageTracker(rig, thresholds)
+    for uv in observations.uv:
+        tracker.add(uv)
+    return tracker.status()
+
+
+def run_calibration(
+    rig: RigSpec,
+    observations: WandObservations,
+    output_dir: Path,
+    *,
+    thresholds: CoverageThresholds | None = None,
+    report: bool = True,
+    options: CalibrationOptions = CalibrationOptions(),
+) -> tuple[CalibrationResult, CalibrationFiles]:
+    """Calibrate and write ``result.yaml``, ``camera_info/<cam>.yaml`` and ``report/index.html``.
+
+    Args:
+        rig: the rig description.
+        observations: everything collected.
+        output_dir: where the files go (created).
+        thresholds: coverage required first (None: no check).
+        report: also write the HTML report (a failure there is logged, not raised).
+        options: calibration settings.
+
+    Raises:
+        CoverageError: the coverage is below ``thresholds`` (the message says what is missing).
+        WandCalibError: the calibration itself failed (too few views, disconnected cameras, ...).
+    """
+    if thresholds is not None:
+        status = coverage_of(rig, observations, thresholds)
+        if not status.ready:
+            raise CoverageError(status.messages())
+    result = calibrate(rig, observations, options)
+    output_dir.mkdir(parents=True, exist_ok=True)
+    result_path = output_dir / "result.yaml"
+    write_result(result, result_path)
+    infos = tuple(write_camera_infos(result, output_dir / "camera_info"))
+    report_path = None
+    if report:
+        from wand_calib_ros.report.html import write_report  # matplotlib only when a report is asked for
+
+        try:
+            report_path = write_report(rig, observations, result_path, output_dir / "report")
+        except (OSError, ValueError, np.linalg.LinAlgError) as error:
+            log.warning("the calibration is written, but its report failed: %s", error)
+    return result, CalibrationFiles(result_path, infos, report_path)
+
+
+def summary(result: CalibrationResult, files: CalibrationFiles) -> str:
+    """One line for a service answer: per camera RMS, wand-length RMS, where the result is."""
+    cameras = ", ".join(f"{c.name} {c.rms_reprojection_px:.2f} px" for c in result.cameras)
+    return f"RMS {cameras}; wand {result.wand_length_rms_mm:.2f} mm RMS; {files.result}"

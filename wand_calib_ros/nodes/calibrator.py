@@ -1,0 +1,171 @@
+"""The calibrator node: ``/calibrate`` on what a collector persisted, results on topics and in files.
+
+``/calibrate`` (std_srvs/Trigger) reads the collector's buffer file
+(``output_dir/observations.csv``), checks its coverage, and runs the pipeline in
+its own executor thread (diagnostics and images keep flowing). It answers at once
+when a run is already in progress, and with what is missing or why the solve
+failed otherwise; on success with per camera RMS, the wand-length RMS and the
+result's path. It publishes per camera ``wand_calib/<cam>/camera_info``
+(sensor_msgs/CameraInfo, ``equidistant``) and ``wand_calib/<cam>/extrinsics``
+(geometry_msgs/TransformStamped, parent = reference camera), both
+transient-local, and writes ``result.yaml``, ``camera_info/<cam>.yaml`` and
+``report/index.html``. With ``commit_to_drivers`` it sends each camera's
+CameraInfo to its driver's ``set_camera_info`` service, as ROS
+camera_calibration's commit does.
+
+It runs inside ``collector`` by default, or alone (``ros2 run wand_calib_ros
+calibrator``) on the buffer file of a collector that runs elsewhere or has stopped.
+"""
+
+from __future__ import annotations
+
+import sys
+import threading
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from geometry_msgs.msg import TransformStamped
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.context import Context
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import CameraInfo
+from sensor_msgs.srv import SetCameraInfo
+from std_srvs.srv import Trigger
+
+from wand_calib_ros.collection.buffer import BUFFER_FILE
+from wand_calib_ros.collection.job import run_calibration, summary
+from wand_calib_ros.core.result import CalibrationResult
+from wand_calib_ros.errors import WandCalibError
+from wand_calib_ros.io.observations_csv import read_observations
+from wand_calib_ros.io.rig_yaml import load_camera_endpoints, load_rig
+from wand_calib_ros.nodes import messages
+from wand_calib_ros.nodes.params import COVERAGE, RIG, Param, coverage_thresholds, declare, existing_file
+from wand_calib_ros.nodes.runner import run
+
+PARAMS = (
+    *RIG,
+    *COVERAGE,
+    Param("require_coverage", True, "refuse /calibrate until the coverage thresholds are met"),
+    Param("write_report", True, "write output_dir/report/index.html after each calibration"),
+    Param("commit_to_drivers", False, "send the results to each camera driver's set_camera_info service"),
+    Param("driver_timeout_s", 5.0, "how long to wait for a driver's set_camera_info (s)", 0.1, 600.0),
+)
+
+#: Results stay available to late subscribers.
+LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
+
+
+class CalibratorNode(Node):
+    """``/calibrate`` on the persisted buffer; publishes and writes the result (module docstring)."""
+
+    def __init__(self, *, before_calibrate: Callable[[], None] | None = None, **kwargs: Any) -> None:
+        """
+        Args:
+            before_calibrate: called at the start of each /calibrate (the in-process collector
+                stores what it still holds).
+            **kwargs: passed to :class:`rclpy.node.Node` (context, parameter_overrides, ...).
+        """
+        super().__init__("wand_calib_calibrator", **kwargs)
+        values = declare(self, PARAMS)
+        cameras_file = existing_file(values, "cameras_file")
+        self.rig = load_rig(cameras_file)
+        self.endpoints = load_camera_endpoints(cameras_file)
+        self.output_dir = Path(values["output_dir"]).expanduser()
+        self.thresholds = coverage_thresholds(values) if values["require_coverage"] else None
+        self.write_report = bool(values["write_report"])
+        self.commit = bool(values["commit_to_drivers"])
+        self.driver_timeout = float(values["driver_timeout_s"])
+        self.before_calibrate = before_calibrate
+        self.result: CalibrationResult | None = None
+        self._running = threading.Lock()
+        # Reentrant: a second /calibrate during a solve gets its "in progress" answer at once,
+        # and driver answers arrive while the solve's thread waits for them.
+        group = ReentrantCallbackGroup()
+        self.create_service(Trigger, "calibrate", self._on_calibrate, callback_group=group)
+        self.info_publishers = {
+            name: self.create_publisher(CameraInfo, f"wand_calib/{name}/camera_info", LATCHED)
+            for name in self.rig.camera_names
+        }
+        self.extrinsics_publishers = {
+            name: self.create_publisher(TransformStamped, f"wand_calib/{name}/extrinsics", LATCHED)
+            for name in self.rig.camera_names
+        }
+        self.drivers = {
+            name: self.create_client(SetCameraInfo, endpoint.set_camera_info, callback_group=group)
+            for name, endpoint in self.endpoints.items()
+        }
+        self.get_logger().info(f"/calibrate reads {self.output_dir / BUFFER_FILE}")
+
+    def _on_calibrate(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        if not self._running.acquire(blocking=False):
+            response.success, response.message = False, "a calibration is already running; try again when it ends"
+            return response
+        try:
+            response.success, response.message = self._calibrate()
+        finally:
+            self._running.release()
+        log = self.get_logger().info if response.success else self.get_logger().warning
+        log(f"/calibrate: {response.message}")
+        return response
+
+    def _calibrate(self) -> tuple[bool, str]:
+        if self.before_calibrate is not None:
+            self.before_calibrate()
+        path = self.output_dir / BUFFER_FILE
+        if not path.exists() or sum(1 for _ in path.open()) <= 1:
+            return False, f"nothing collected yet in {path}: is the collector running and the wand in view?"
+        try:
+            observations = read_observations(path, self.rig.camera_names)
+            result, files = run_calibration(
+                self.rig, observations, self.output_dir, thresholds=self.thresholds, report=self.write_report
+            )
+        except WandCalibError as error:
+            return False, f"calibration failed: {error}"
+        stamp = self.get_clock().now().to_msg()
+        for name in self.rig.camera_names:
+            self.info_publishers[name].publish(messages.camera_info_message(result, name, stamp))
+            self.extrinsics_publishers[name].publish(messages.extrinsics_message(result, name, stamp))
+        self.result = result
+        answer = summary(result, files)
+        if self.commit:
+            failures = self._commit(result, stamp)
+            if failures:
+                return False, f"{answer}; but committing to the drivers failed: {'; '.join(failures)}"
+            answer += f"; committed to {', '.join(self.rig.camera_names)}"
+        return True, answer
+
+    def _commit(self, result: CalibrationResult, stamp: Any) -> list[str]:
+        """Send each camera's CameraInfo to its driver; returns what failed (empty: all committed)."""
+        pending = {}
+        failures = []
+        for name, client in self.drivers.items():
+            if not client.wait_for_service(timeout_sec=self.driver_timeout):
+                failures.append(f"{name}: no service {client.srv_name}")
+                continue
+            request = SetCameraInfo.Request(camera_info=messages.camera_info_message(result, name, stamp))
+            pending[name] = client.call_async(request)
+        for name, future in pending.items():
+            done = threading.Event()
+            future.add_done_callback(lambda _, d=done: d.set())
+            if not done.wait(self.driver_timeout):
+                future.cancel()
+                failures.append(f"{name}: {self.drivers[name].srv_name} did not answer")
+            elif not future.result().success:
+                failures.append(f"{name}: {future.result().status_message}")
+        return failures
+
+
+def build(context: Context) -> list[Node]:
+    """A calibrator on its own (on the buffer file of a collector elsewhere)."""
+    return [CalibratorNode(context=context)]
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``ros2 run wand_calib_ros calibrator --ros-args -p cameras_file:=... -p output_dir:=...``"""
+    return run("calibrator", build, argv)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,177 @@
+"""Translation between ROS messages and the core's arrays and records (no maths here).
+
+Conventions: pixel coordinates are OpenCV's (origin at the centre of the top-left
+pixel); wand points travel as geometry_msgs/PolygonStamped with the points A, B, C
+in that order (x = u, y = v, z = 0, float32) and an empty polygon when the image
+showed no usable wand.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import Point32, PolygonStamped, TransformStamped
+from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
+from sensor_msgs.msg import CameraInfo, Image
+from std_msgs.msg import Header
+
+from wand_calib_ros.collection.coverage import CoverageStatus
+from wand_calib_ros.core.result import CalibrationResult
+from wand_calib_ros.io.result_yaml import camera_info_dict
+
+_CHANNELS = {"mono8": 1, "mono16": 1, "bgr8": 3, "rgb8": 3, "bgra8": 4, "rgba8": 4}
+
+
+def stamp_ns(header: Header) -> int:
+    """A header's stamp in nanoseconds."""
+    return int(header.stamp.sec) * 10**9 + int(header.stamp.nanosec)
+
+
+def time_message(nanoseconds: int) -> Time:
+    """builtin_interfaces/Time of a stamp in nanoseconds."""
+    sec, nanosec = divmod(int(nanoseconds), 10**9)
+    return Time(sec=sec, nanosec=nanosec)
+
+
+def image_to_array(message: Image) -> NDArray:
+    """The pixels of a sensor_msgs/Image as a numpy array (no copy for 8-bit data).
+
+    Raises:
+        ValueError: the data is shorter than ``height * step`` or the step is too small.
+    """
+    data = np.frombuffer(message.data, dtype=np.uint8)
+    height, step, width = message.height, message.step, message.width
+    channels = _CHANNELS.get(message.encoding, 1)
+    depth = 2 if message.encoding == "mono16" else 1
+    if data.size < height * step or step < width * channels * depth:
+        raise ValueError(f"image data of {data.size} bytes does not hold {height} rows of step {step}")
+    rows = data[: height * step].reshape(height, step)
+    if depth == 2:
+        return rows[:, : width * 2].view(">u2" if message.is_bigendian else "<u2")
+    pixels = rows[:, : width * channels]
+    return pixels.reshape(height, width, channels) if channels > 1 else pixels
+
+
+def array_to_image(pixels: NDArray, stamp: int, frame_id: str, encoding: str = "mono8") -> Image:
+    """sensor_msgs/Image of an 8-bit (H, W) or (H, W, channels) array (filled from bytes: fast)."""
+    message = Image()
+    message.header.stamp = time_message(stamp)
+    message.header.frame_id = frame_id
+    message.height, message.width = pixels.shape[:2]
+    message.encoding = encoding
+    message.step = pixels.shape[1] * (pixels.shape[2] if pixels.ndim == 3 else 1) * pixels.dtype.itemsize
+    message.data = np.ascontiguousarray(pixels).tobytes()
+    return message
+
+
+def points_message(points: NDArray[np.float64] | None, header: Header) -> PolygonStamped:
+    """PolygonStamped of A, B, C ((3, 2) pixels), or an empty polygon for "no wand"."""
+    message = PolygonStamped(header=header)
+    if points is not None:
+        message.polygon.points = [Point32(x=float(u), y=float(v), z=0.0) for u, v in points]
+    return message
+
+
+def message_points(message: PolygonStamped) -> NDArray[np.float64] | None:
+    """A, B, C ((3, 2) pixels) of a PolygonStamped, None for an empty polygon.
+
+    Raises:
+        ValueError: neither 0 nor 3 points, or coordinates that are not finite.
+    """
+    if not message.polygon.points:
+        return None
+    points = np.array([[p.x, p.y] for p in message.polygon.points], dtype=np.float64)
+    if points.shape != (3, 2) or not np.all(np.isfinite(points)):
+        raise ValueError(f"expected the 3 finite points A, B, C, got {points.tolist()}")
+    return points
+
+
+def camera_info_message(result: CalibrationResult, name: str, stamp: Time) -> CameraInfo:
+    """sensor_msgs/CameraInfo (``equidistant``) exactly equivalent to a calibrated camera."""
+    document = camera_info_dict(name, result.camera(name).model)
+    info = CameraInfo()
+    info.header.stamp = stamp
+    info.header.frame_id = name
+    info.width, info.height = document["image_width"], document["image_height"]
+    info.distortion_model = document["distortion_model"]
+    info.d = [float(v) for v in document["distortion_coefficients"]["data"]]
+    info.k = [float(v) for v in document["camera_matrix"]["data"]]
+    info.r = [float(v) for v in document["rectification_matrix"]["data"]]
+    info.p = [float(v) for v in document["projection_matrix"]["data"]]
+    return info
+
+
+def extrinsics_message(result: CalibrationResult, name: str, stamp: Time) -> TransformStamped:
+    """geometry_msgs/TransformStamped of a camera in the reference camera's frame (metres).
+
+    The transform maps the camera's frame into the reference camera's frame
+    (ROS convention: parent = reference camera, child = this camera), i.e. the
+    inverse of the result's X_cam = R X_ref + T.
+    """
+    pose = result.camera(name).pose
+    x, y, z, w = Rotation.from_matrix(pose.rotation.T).as_quat()
+    message = TransformStamped()
+    message.header.stamp = stamp
+    message.header.frame_id = result.reference_camera
+    message.child_frame_id = name
+    t = message.transform.translation
+    t.x, t.y, t.z = (float(v) for v in pose.center / 1000.0)
+    r = message.transform.rotation
+    r.x, r.y, r.z, r.w = float(x), float(y), float(z), float(w)
+    return message
+
+
+def diagnostics_message(
+    status: CoverageStatus, counts: dict[str, dict[str, int]], rig_values: dict[str, int], stamp: Time
+) -> DiagnosticArray:
+    """/diagnostics: one OK/WARN entry per camera (what is missing) and one for the rig.
+
+    Args:
+        status: coverage of what the buffer holds.
+        counts: per camera counters (images, wands, rejections) shown as key/values.
+        rig_values: rig-wide counters (frames stored, late or out-of-order messages, ...).
+        stamp: the array's stamp.
+    """
+    array = DiagnosticArray()
+    array.header.stamp = stamp
+    for camera in status.cameras:
+        entry = DiagnosticStatus(name=f"wand_calib: {camera.name}", hardware_id=camera.name)
+        entry.level = DiagnosticStatus.OK if camera.ok else DiagnosticStatus.WARN
+        entry.message = "ready" if camera.ok else "; ".join(camera.missing)
+        values = {
+            "placements": camera.placements,
+            "image_coverage_percent": f"{100 * camera.image_fraction:.0f}",
+            "max_theta_deg": f"{camera.max_theta_deg:.1f}",
+            "reachable_theta_deg": f"{camera.reach_theta_deg:.1f}",
+            **counts.get(camera.name, {}),
+        }
+        entry.values = [KeyValue(key=key, value=str(value)) for key, value in values.items()]
+        array.status.append(entry)
+    rig = DiagnosticStatus(name="wand_calib: rig", hardware_id="rig")
+    rig.level = DiagnosticStatus.OK if status.ready else DiagnosticStatus.WARN
+    rig.message = "ready to calibrate" if status.ready else " | ".join(status.messages())
+    rig.values = [KeyValue(key=key, value=str(value)) for key, value in rig_values.items()]
+    array.status.append(rig)
+    return array
+
+
+def heat_map_message(counts: NDArray[np.int64], image_size: tuple[int, int], stamp: Time, frame_id: str) -> Image:
+    """bgr8 picture (about 320 px wide, the camera's aspect) of where a camera saw the wand.
+
+    Args:
+        counts: (rows, cols) wand points per image cell.
+        image_size: the camera's (width, height), for the aspect ratio.
+        stamp: the message stamp.
+        frame_id: the camera's frame.
+    """
+    width, height = image_size
+    size = (320, max(1, round(320 * height / width)))
+    level = np.sqrt(counts / max(float(counts.max()), 1.0)) * 255
+    picture = cv2.applyColorMap(level.astype(np.uint8), cv2.COLORMAP_INFERNO)
+    picture[counts == 0] = (96, 0, 0)  # never seen: dark blue, apart from "seen a little"
+    message = array_to_image(cv2.resize(picture, size, interpolation=cv2.INTER_NEAREST), 0, frame_id, "bgr8")
+    message.header.stamp = stamp
+    return message

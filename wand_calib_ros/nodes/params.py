@@ -1,0 +1,135 @@
+"""Node parameters declared with type, range and description, validated once at start-up.
+
+A node lists its parameters as :class:`Param` records; :func:`declare` declares them
+all (so ``ros2 param describe`` shows the ranges and choices) and turns a wrong type,
+a value out of range or a missing required value into one :class:`SettingsError` that
+names the parameter and what to write instead.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+from rclpy.node import Node
+
+from wand_calib_ros.collection.coverage import CoverageThresholds
+from wand_calib_ros.errors import WandCalibError
+
+_TYPES = {
+    bool: ParameterType.PARAMETER_BOOL,
+    int: ParameterType.PARAMETER_INTEGER,
+    float: ParameterType.PARAMETER_DOUBLE,
+    str: ParameterType.PARAMETER_STRING,
+}
+
+
+class SettingsError(WandCalibError):
+    """A node parameter that cannot be used; the message names it."""
+
+
+@dataclass(frozen=True)
+class Param:
+    """One node parameter.
+
+    Attributes:
+        name: parameter name.
+        default: default value; its Python type is the parameter's type.
+        description: what it does, with units.
+        low: smallest allowed value (numbers).
+        high: largest allowed value (numbers).
+        choices: allowed values (strings).
+        required: an empty string is not accepted.
+    """
+
+    name: str
+    default: bool | int | float | str
+    description: str
+    low: float | None = None
+    high: float | None = None
+    choices: tuple[str, ...] = ()
+    required: bool = False
+
+    def descriptor(self) -> ParameterDescriptor:
+        descriptor = ParameterDescriptor(description=self.description, type=_TYPES[type(self.default)])
+        if isinstance(self.default, float) and self.low is not None and self.high is not None:
+            descriptor.floating_point_range = [FloatingPointRange(from_value=self.low, to_value=self.high, step=0.0)]
+        elif type(self.default) is int and self.low is not None and self.high is not None:
+            descriptor.integer_range = [IntegerRange(from_value=int(self.low), to_value=int(self.high), step=1)]
+        if self.choices:
+            descriptor.additional_constraints = "one of: " + ", ".join(self.choices)
+        elif self.required:
+            descriptor.additional_constraints = "required"
+        return descriptor
+
+
+def declare(node: Node, params: Iterable[Param]) -> dict[str, Any]:
+    """Declare ``params`` on ``node`` and return their validated values by name.
+
+    Raises:
+        SettingsError: naming the first unusable parameter and what it accepts.
+    """
+    values: dict[str, Any] = {}
+    for param in params:
+        kind = type(param.default).__name__
+        try:
+            value = node.declare_parameter(param.name, param.default, param.descriptor()).value
+        except InvalidParameterTypeException:
+            hint = " (write 5.0, not 5)" if isinstance(param.default, float) else ""
+            raise SettingsError(f"parameter {param.name} must be a {kind}{hint}: {param.description}") from None
+        except InvalidParameterValueException:
+            raise SettingsError(
+                f"parameter {param.name} must lie in [{param.low}, {param.high}]: {param.description}"
+            ) from None
+        if param.choices and value not in param.choices:
+            raise SettingsError(f"parameter {param.name} must be one of {', '.join(param.choices)}, got {value!r}")
+        if param.required and value == "":
+            raise SettingsError(f"parameter {param.name} is required: {param.description}")
+        values[param.name] = value
+    return values
+
+
+def existing_file(values: dict[str, Any], name: str) -> Path:
+    """The file a parameter names (SettingsError when it does not exist)."""
+    path = Path(values[name]).expanduser()
+    if not path.is_file():
+        raise SettingsError(f"parameter {name}: no such file {path}")
+    return path
+
+
+#: Parameters every wand_calib node reads.
+RIG = (
+    Param("cameras_file", "", "rig description: wand lengths and cameras (cameras.yaml contract)", required=True),
+    Param("output_dir", "wand_calib_output", "observations.csv, result.yaml, camera_info/ and report/ go here"),
+)
+
+#: What "ready to calibrate" means (the collector reports it, /calibrate requires it).
+COVERAGE = (
+    Param("min_placements", 100, "complete wand views each camera needs", 1, 10**7),
+    Param("min_pair_placements", 15, "placements two cameras must share to link them", 1, 10**7),
+    Param("min_image_fraction", 0.5, "share of each image (8 x 8 grid) the wand must reach", 0.0, 1.0),
+    Param("min_theta_fraction", 0.7, "widest off-axis angle reached over what the image offers", 0.0, 1.0),
+)
+
+#: How a node subscribes to images.
+IMAGE_QOS = Param(
+    "image_qos", "sensor_data", "image subscription QoS (reliable for bag replay)", choices=("sensor_data", "reliable")
+)
+#: How long the labeller may hold an A/C-ambiguous view back.
+LABEL_HOLD = Param(
+    "label_hold_ms", 2000.0, "how long an A/C-ambiguous view may wait for a later one to settle it (ms)", 0.0, 60000.0
+)
+
+
+def coverage_thresholds(values: dict[str, Any]) -> CoverageThresholds:
+    """:class:`CoverageThresholds` from the :data:`COVERAGE` parameters."""
+    return CoverageThresholds(
+        min_placements=values["min_placements"],
+        min_image_fraction=values["min_image_fraction"],
+        min_theta_fraction=values["min_theta_fraction"],
+        min_pair_placements=values["min_pair_placements"],
+    )
