@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import sys
 import threading
+import traceback
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -104,10 +105,15 @@ class CalibratorNode(Node):
             return response
         try:
             response.success, response.message = self._calibrate()
+        except Exception as error:  # a bug: still answer, so the caller does not wait forever
+            self.get_logger().error(f"/calibrate: unexpected error\n{traceback.format_exc()}")
+            response.success, response.message = False, f"unexpected error (please report): {error!r}"
         finally:
             self._running.release()
-        log = self.get_logger().info if response.success else self.get_logger().warning
-        log(f"/calibrate: {response.message}")
+        if response.success:  # rclpy ties one severity to each logging call site
+            self.get_logger().info(f"/calibrate: {response.message}")
+        else:
+            self.get_logger().warning(f"/calibrate: {response.message}")
         return response
 
     def _calibrate(self) -> tuple[bool, str]:

@@ -1,0 +1,70 @@
+"""The calibrator alone on a persisted buffer, and committing results to camera drivers."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import LATCHED, Ros, wait_until
+
+from wand_calib_ros.io.observations_csv import write_observations
+from wand_calib_ros.io.rig_yaml import save_rig
+from wand_calib_ros.sim.scenarios import paper_fisheye_scenario, simulate
+
+rclpy = pytest.importorskip("rclpy")
+
+from rclpy.parameter import Parameter  # noqa: E402
+from sensor_msgs.msg import CameraInfo  # noqa: E402
+from sensor_msgs.srv import SetCameraInfo  # noqa: E402
+from std_srvs.srv import Trigger  # noqa: E402
+
+from wand_calib_ros.nodes.calibrator import CalibratorNode  # noqa: E402
+
+
+def test_calibrator_alone_commits_to_the_drivers(ros: Ros, tmp_path: Path) -> None:
+    scenario = paper_fisheye_scenario()
+    data = simulate(scenario, 0.5, np.random.default_rng(3))
+    save_rig(scenario.rig, tmp_path / "cameras.yaml")
+    (tmp_path / "out").mkdir()
+    write_observations(data.observations, tmp_path / "out" / "observations.csv")
+    ros.add(
+        CalibratorNode(
+            context=ros.context,
+            parameter_overrides=[
+                Parameter("cameras_file", value=str(tmp_path / "cameras.yaml")),
+                Parameter("output_dir", value=str(tmp_path / "out")),
+                Parameter("commit_to_drivers", value=True),
+                Parameter("driver_timeout_s", value=1.0),
+                Parameter("write_report", value=False),
+                Parameter("min_theta_fraction", value=0.5),
+            ],
+        )
+    )
+    committed: dict[str, CameraInfo] = {}
+
+    def driver(name: str):  # a camera driver's camera_info_manager service
+        def handle(request: SetCameraInfo.Request, response: SetCameraInfo.Response) -> SetCameraInfo.Response:
+            committed[name] = request.camera_info
+            response.success, response.status_message = True, "stored"
+            return response
+
+        return handle
+
+    ros.helper.create_service(SetCameraInfo, "/cam0/set_camera_info", driver("cam0"))
+    published = ros.collect(CameraInfo, "wand_calib/cam0/camera_info", LATCHED)
+    client = ros.helper.create_client(Trigger, "calibrate")
+    assert client.wait_for_service(timeout_sec=5)
+    partial = client.call(Trigger.Request(), timeout_sec=120)
+    assert not partial.success
+    assert "committing to the drivers failed: cam1: no service /cam1/set_camera_info" in partial.message
+    assert (tmp_path / "out" / "result.yaml").exists()  # the calibration itself is kept
+
+    ros.helper.create_service(SetCameraInfo, "/cam1/set_camera_info", driver("cam1"))
+    full = client.call(Trigger.Request(), timeout_sec=120)
+    assert full.success and "committed to cam0, cam1" in full.message, full.message
+    assert wait_until(lambda: bool(published), 5)
+    assert committed["cam0"].distortion_model == "equidistant"
+    assert list(committed["cam0"].k) == list(published[-1].k) and list(committed["cam0"].d) == list(published[-1].d)
+    truth = scenario.cameras[1].model
+    assert abs(committed["cam1"].k[0] - truth.focal_px[0]) < 1.0

@@ -1,0 +1,64 @@
+"""Start-up validation: every unusable parameter is one clear error naming it."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from conftest import Ros
+
+from wand_calib_ros.io.rig_yaml import save_rig
+from wand_calib_ros.sim.scenarios import paper_fisheye_scenario
+
+rclpy = pytest.importorskip("rclpy")
+
+from rclpy.parameter import Parameter  # noqa: E402
+
+from wand_calib_ros.io.errors import FormatError  # noqa: E402
+from wand_calib_ros.nodes.calibrator import CalibratorNode  # noqa: E402
+from wand_calib_ros.nodes.collector import CollectorNode  # noqa: E402
+from wand_calib_ros.nodes.detector import DetectorNode  # noqa: E402
+from wand_calib_ros.nodes.params import SettingsError  # noqa: E402
+from wand_calib_ros.nodes.runner import EXIT_SETTINGS  # noqa: E402
+
+
+@pytest.mark.parametrize(
+    ("node", "overrides", "message"),
+    [
+        (CollectorNode, {}, "parameter cameras_file is required"),
+        (CollectorNode, {"cameras_file": "missing.yaml"}, "no such file"),
+        (CollectorNode, {"sync_tolerance_ms": 5}, "sync_tolerance_ms must be a float (write 5.0, not 5)"),
+        (CollectorNode, {"buffer_capacity": 5}, "buffer_capacity must lie in [100"),
+        (CollectorNode, {"input": "video"}, "input must be one of images, points"),
+        (CollectorNode, {"min_image_fraction": 1.5}, "min_image_fraction must lie in [0.0, 1.0]"),
+        (CalibratorNode, {"commit_to_drivers": "yes"}, "commit_to_drivers must be a bool"),
+        (DetectorNode, {}, "parameter camera is required"),
+        (DetectorNode, {"camera": "cam7"}, "'cam7' is not in"),
+    ],
+)
+def test_bad_parameters_are_named(ros: Ros, tmp_path: Path, node: type, overrides: dict, message: str) -> None:
+    save_rig(paper_fisheye_scenario().rig, tmp_path / "cameras.yaml")
+    values = {"cameras_file": str(tmp_path / "cameras.yaml"), "output_dir": str(tmp_path / "out")}
+    if node is CollectorNode and not overrides:
+        values.pop("cameras_file")
+    values |= {k: (str(tmp_path / v) if k == "cameras_file" else v) for k, v in overrides.items()}
+    with pytest.raises(SettingsError) as raised:
+        node(context=ros.context, parameter_overrides=[Parameter(k, value=v) for k, v in values.items()])
+    assert message in str(raised.value)
+
+
+def test_a_broken_rig_file_is_a_format_error(ros: Ros, tmp_path: Path) -> None:
+    (tmp_path / "cameras.yaml").write_text("wand: {L1: 400}\n")
+    with pytest.raises(FormatError, match="'wand' must be a mapping with L1 and L2"):
+        CollectorNode(
+            context=ros.context, parameter_overrides=[Parameter("cameras_file", value=str(tmp_path / "cameras.yaml"))]
+        )
+
+
+def test_main_turns_a_bad_parameter_into_exit_code_2(tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
+    from wand_calib_ros.nodes.collector import main
+
+    code = main(["collector", "--ros-args", "-p", f"cameras_file:={tmp_path / 'none.yaml'}"])
+    assert code == EXIT_SETTINGS
+    err = capfd.readouterr().err
+    assert "no such file" in err and "Traceback" not in err
