@@ -5,6 +5,7 @@ from __future__ import annotations
 from functools import cache
 
 import numpy as np
+from numpy.typing import NDArray
 
 from wand_calib_ros.core.bundle_adjustment import (
     BundleProblem,
@@ -16,8 +17,12 @@ from wand_calib_ros.core.bundle_adjustment import (
 from wand_calib_ros.core.camera_model import CameraModel
 from wand_calib_ros.core.geometry import Pose
 from wand_calib_ros.core.metrics import camera_errors, heldout_wand_rms, rereference
+from wand_calib_ros.core.pipeline import calibrate
 from wand_calib_ros.core.result import CalibrationResult
+from wand_calib_ros.core.rig import WandObservations
 from wand_calib_ros.sim.scenarios import SCENARIOS, Scenario, SimulatedData, simulate
+
+FloatArray = NDArray[np.float64]
 
 
 @cache
@@ -84,3 +89,53 @@ def errors_against_truth(
             out[f"{camera.spec.name} E_t"] = e.translation
     out["D_RMS"] = heldout_wand_rms(tuple(models), tuple(poses), held.observations.uv, scenario.wand)
     return out
+
+
+def compare_with_true_projections(
+    scenario: Scenario, drawn: FloatArray, observations: WandObservations, result: CalibrationResult, factor: float
+) -> list[str]:
+    """What makes ``result`` worse than calibrating the true projections of the same views.
+
+    The reference calibrates the drawn (true) pixels of the frames ``observations`` holds, with
+    Gaussian noise of the detection's own level. ``result`` must determine every camera's k1,
+    u0, v0 within ``factor`` x the reference's standard deviations, lie within 4 of its own
+    standard deviations of the truth, and reach a held-out wand-length error within
+    ``factor`` x the reference's.
+
+    Args:
+        scenario: the rig with its true cameras.
+        drawn: (F, C, 3, 2) true pixels of the recording's frames.
+        observations: what the nodes stored (frame ids of their own).
+        result: what they computed from it.
+        factor: allowed ratio.
+
+    Returns:
+        One line per failed check (empty: as good as the data allows).
+    """
+    found = np.isfinite(observations.uv)
+    rows = np.array([
+        int(np.argmin(np.nan_to_num(np.abs(drawn[:, seen] - uv[seen]), nan=np.inf).max(axis=1)))
+        for uv, seen in zip(observations.uv, found, strict=True)
+    ])  # fmt: skip
+    truth = drawn[rows]
+    sigma = float(np.sqrt(np.mean((observations.uv - truth)[found] ** 2)))
+    rng = np.random.default_rng(0)
+    synthetic = np.where(found, truth + rng.normal(scale=sigma, size=found.shape), np.nan)
+    reference = calibrate(scenario.rig, WandObservations(observations.frames, observations.camera_names, synthetic))
+    failures = []
+    for camera in scenario.cameras:
+        mine, best = result.camera(camera.spec.name), reference.camera(camera.spec.name)
+        true = {"k1": camera.model.k[0], "u0": camera.model.principal_point[0], "v0": camera.model.principal_point[1]}
+        value = {"k1": mine.model.k[0], "u0": mine.model.principal_point[0], "v0": mine.model.principal_point[1]}
+        for name in true:
+            std = mine.parameter_std[name]
+            if std > factor * best.parameter_std[name]:
+                failures.append(f"{camera.spec.name} {name}: std {std:.3g} vs {best.parameter_std[name]:.3g}")
+            if abs(value[name] - true[name]) > 4 * std:
+                failures.append(f"{camera.spec.name} {name}: off by {value[name] - true[name]:.3g}, std {std:.3g}")
+    held = simulate(scenario, 0.0, np.random.default_rng(99), n=200)
+    mine_rms = errors_against_truth(scenario, held, *in_truth_frame(result, scenario))["D_RMS"]
+    best_rms = errors_against_truth(scenario, held, *in_truth_frame(reference, scenario))["D_RMS"]
+    if mine_rms > factor * best_rms:
+        failures.append(f"held-out D_RMS {mine_rms:.3f} mm vs {best_rms:.3f} mm")
+    return failures

@@ -59,13 +59,20 @@ def _parser() -> argparse.ArgumentParser:
 
     ren = commands.add_parser("render", help="render a scenario's waved wand into a rosbag2 of images")
     ren.add_argument("scenario", choices=sorted(SCENARIOS), help="rig to simulate")
-    ren.add_argument("--out", required=True, type=Path, help="directory: bag/, cameras.yaml, truth.yaml, drawn.csv")
+    ren.add_argument(
+        "--out", required=True, type=Path, help="directory: bag/ (or bag.bag), cameras.yaml, truth.yaml, drawn.csv"
+    )
     ren.add_argument("--frames", type=int, default=300, help="frames per camera (default 300)")
     ren.add_argument("--fps", type=float, default=30.0, help="frame rate (default 30)")
     ren.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     ren.add_argument("--reflections", type=float, default=0.0, help="probability of a spurious spot per image")
     ren.add_argument("--occlusions", type=float, default=0.0, help="probability that an LED is hidden")
-    ren.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap", help="rosbag2 storage (default mcap)")
+    ren.add_argument(
+        "--storage",
+        choices=("mcap", "sqlite3", "ros1"),
+        default="mcap",
+        help="bag format (default mcap; ros1: bag.bag)",
+    )
     ren.add_argument("--independent", action="store_true", help="independent placements instead of a waved wand")
 
     det = commands.add_parser("detect", help="detect the wand in a rosbag2 of camera images")
@@ -241,9 +248,10 @@ def _render(args: argparse.Namespace) -> int:
     recording = render_recording(scenario, args.frames, args.fps, options, rng, independent=args.independent)
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
-    if (out / "bag").exists():
-        raise WandCalibError(f"{out / 'bag'} exists already; choose another --out")
-    write_image_bag(out / "bag", recording.frames, scenario.rig.camera_names, storage=args.storage)
+    bag = out / ("bag.bag" if args.storage == "ros1" else "bag")
+    if bag.exists():
+        raise WandCalibError(f"{bag} exists already; choose another --out")
+    write_image_bag(bag, recording.frames, scenario.rig.camera_names, storage=args.storage)
     save_rig(scenario.rig, out / "cameras.yaml")
     names = tuple(c.spec.name for c in scenario.cameras)
     write_observations(WandObservations(np.arange(args.frames), names, recording.drawn), out / "drawn.csv")
@@ -253,7 +261,7 @@ def _render(args: argparse.Namespace) -> int:
         "cameras": {c.spec.name: camera_entry(c.model, c.pose) for c in scenario.cameras},
     }
     write_yaml(truth, out / "truth.yaml")
-    print(f"rendered {args.frames} frames x {len(names)} cameras -> {out / 'bag'} ({args.storage})")
+    print(f"rendered {args.frames} frames x {len(names)} cameras -> {bag} ({args.storage})")
     return 0
 
 

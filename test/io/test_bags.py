@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import cv2
@@ -69,24 +72,8 @@ def test_corrupt_or_missing_bag_is_a_format_error(tmp_path: Path) -> None:
 
 
 def test_ros1_bag_reads_after_rosbags_convert(tmp_path: Path) -> None:
-    import shutil
-    import subprocess
-    import sys
-
-    from rosbags.rosbag1 import Writer as Ros1Writer
-
-    store = get_typestore(Stores.ROS1_NOETIC)
-    image = np.zeros((48, 64), np.uint8)
-    image[20:23, 30:33] = 220
-    with Ros1Writer(tmp_path / "in.bag") as writer:
-        connection = writer.add_connection("/cam0/image_raw", "sensor_msgs/msg/Image", typestore=store)
-        for i in range(3):
-            stamp = store.types["builtin_interfaces/msg/Time"](sec=10, nanosec=i * 1000)
-            header = store.types["std_msgs/msg/Header"](seq=i, stamp=stamp, frame_id="cam0")
-            message = store.types["sensor_msgs/msg/Image"](
-                header=header, height=48, width=64, encoding="mono8", is_bigendian=0, step=64, data=image.ravel()
-            )
-            writer.write(connection, 10 * 10**9 + i * 1000, store.serialize_ros1(message, "sensor_msgs/msg/Image"))
+    frames = _frames(np.random.default_rng(2))
+    write_image_bag(tmp_path / "in.bag", frames, ("cam0", "cam1"), storage="ros1")
     convert = shutil.which("rosbags-convert", path=str(Path(sys.executable).parent))
     assert convert is not None
     subprocess.run(
@@ -95,6 +82,6 @@ def test_ros1_bag_reads_after_rosbags_convert(tmp_path: Path) -> None:
         capture_output=True,
         timeout=120,
     )
-    frames = list(read_image_frames(tmp_path / "out", {"cam0": "/cam0/image_raw"}))
-    assert [f.stamp_ns for f in frames] == [10 * 10**9, 10 * 10**9 + 1000, 10 * 10**9 + 2000]
-    assert np.array_equal(frames[0].image, image)
+    back = list(read_image_frames(tmp_path / "out", {"cam0": "/cam0/image_raw", "cam1": "/cam1/image_raw"}))
+    assert [(f.camera, f.stamp_ns) for f in back] == [(camera, stamp) for camera, stamp, _ in frames]
+    assert all(np.array_equal(f.image, image) for f, (_, _, image) in zip(back, frames, strict=True))

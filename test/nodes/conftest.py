@@ -6,7 +6,7 @@ import os
 import threading
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -15,9 +15,10 @@ import pytest
 rclpy = pytest.importorskip("rclpy")
 
 from rclpy.context import Context  # noqa: E402
-from rclpy.executors import MultiThreadedExecutor  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
+
+from wand_calib_ros.nodes.runner import Spinner  # noqa: E402
 
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
 
@@ -29,18 +30,15 @@ def free_domain_id() -> int:
 
 @dataclass
 class Ros:
-    """A test's ROS world: context, executor in a thread, a helper node for publishers and clients."""
+    """A test's ROS world: context, nodes spun like ``main()`` spins them, a helper node."""
 
     context: Context
     domain_id: int
-    executor: MultiThreadedExecutor
+    spinner: Spinner
     helper: Node
-    nodes: list[Node] = field(default_factory=list)
 
     def add(self, node: Node) -> Node:
-        self.nodes.append(node)
-        self.executor.add_node(node)
-        return node
+        return self.spinner.add(node)
 
     def collect(self, msgtype: type, topic: str, qos: QoSProfile | int = 10) -> list[Any]:
         """Messages arriving on ``topic`` (appended as they come)."""
@@ -64,21 +62,12 @@ def ros() -> Iterator[Ros]:
     context = Context()
     domain_id = free_domain_id()
     rclpy.init(context=context, domain_id=domain_id)
-    executor = MultiThreadedExecutor(num_threads=6, context=context)
-    world = Ros(context, domain_id, executor, Node("test_helper", context=context))
-    executor.add_node(world.helper)
-    spinner = threading.Thread(target=executor.spin, daemon=True)
-    spinner.start()
+    spinner = Spinner(context)
+    world = Ros(context, domain_id, spinner, Node("test_helper", context=context))
+    spinner.add(world.helper)
     try:
         yield world
     finally:
-        for node in world.nodes:
-            close = getattr(node, "close", None)
-            if close is not None:
-                close()
-        executor.shutdown()
-        for node in [*world.nodes, world.helper]:
-            node.destroy_node()
+        spinner.close()
         rclpy.shutdown(context=context)
-        spinner.join(timeout=5)
-        assert not spinner.is_alive()
+        assert not any(thread.is_alive() for thread in threading.enumerate() if thread.name.startswith("spin "))

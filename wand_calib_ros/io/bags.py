@@ -1,6 +1,7 @@
 """rosbag2 image recordings (mcap or sqlite3) through the ``rosbags`` library, no ROS install needed.
 
-Writing: one ``sensor_msgs/Image`` topic per camera (``/<camera>/image_raw``).
+Writing: one ``sensor_msgs/Image`` topic per camera (``/<camera>/image_raw``), as
+rosbag2 (mcap, sqlite3) or as a ROS 1 ``.bag`` (for ROS 1 tools and conversion tests).
 Reading: ``sensor_msgs/Image`` or ``sensor_msgs/CompressedImage`` messages of
 the requested topics, decoded to numpy arrays with their encoding and header
 stamp. ROS 1 bags can be read after ``rosbags-convert --src x.bag --dst out``.
@@ -15,6 +16,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 from numpy.typing import NDArray
+from rosbags.rosbag1 import Writer as Ros1Writer
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
@@ -78,14 +80,17 @@ def image_message(image: NDArray[np.uint8], stamp_ns: int, frame_id: str, encodi
 def write_image_bag(
     path: Path, frames: Iterable[tuple[str, int, NDArray[np.uint8]]], cameras: Iterable[str], *, storage: str = "mcap"
 ) -> None:
-    """Write (camera, stamp_ns, mono8 image) frames to a new rosbag2 at ``path``.
+    """Write (camera, stamp_ns, mono8 image) frames to a new bag at ``path``.
 
     Args:
-        path: the bag directory to create (must not exist).
+        path: the rosbag2 directory (or ROS 1 ``.bag`` file) to create; must not exist.
         frames: in time order.
         cameras: camera names; topics are ``/<camera>/image_raw``.
-        storage: "mcap" or "sqlite3".
+        storage: "mcap" or "sqlite3" (rosbag2), or "ros1".
     """
+    if storage == "ros1":
+        _write_ros1(path, frames, cameras)
+        return
     plugin = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}[storage]
     with Writer(path, version=9, storage_plugin=plugin) as writer:
         connections = {
@@ -94,6 +99,26 @@ def write_image_bag(
         for camera, stamp_ns, image in frames:
             message = image_message(image, stamp_ns, camera)
             writer.write(connections[camera], stamp_ns, _TYPESTORE.serialize_cdr(message, IMAGE))
+
+
+def _write_ros1(path: Path, frames: Iterable[tuple[str, int, NDArray[np.uint8]]], cameras: Iterable[str]) -> None:
+    store = get_typestore(Stores.ROS1_NOETIC)
+    types = store.types
+    with Ros1Writer(path) as writer:
+        connections = {name: writer.add_connection(f"/{name}/image_raw", IMAGE, typestore=store) for name in cameras}
+        for seq, (camera, stamp_ns, image) in enumerate(frames):
+            stamp = types["builtin_interfaces/msg/Time"](sec=int(stamp_ns // 10**9), nanosec=int(stamp_ns % 10**9))
+            height, width = image.shape[:2]
+            message = types[IMAGE](
+                header=types["std_msgs/msg/Header"](seq=seq, stamp=stamp, frame_id=camera),
+                height=height,
+                width=width,
+                encoding="mono8",
+                is_bigendian=0,
+                step=width,
+                data=np.ascontiguousarray(image).reshape(-1),
+            )
+            writer.write(connections[camera], stamp_ns, store.serialize_ros1(message, IMAGE))
 
 
 def _decode(message: object, msgtype: str, where: str) -> tuple[NDArray, str]:

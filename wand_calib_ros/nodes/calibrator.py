@@ -61,6 +61,9 @@ LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, relia
 class CalibratorNode(Node):
     """``/calibrate`` on the persisted buffer; publishes and writes the result (module docstring)."""
 
+    #: A solve occupies one thread; another answers "in progress", a third takes driver answers.
+    EXECUTOR_THREADS = 3
+
     def __init__(self, *, before_calibrate: Callable[[], None] | None = None, **kwargs: Any) -> None:
         """
         Args:

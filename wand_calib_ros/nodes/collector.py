@@ -25,7 +25,6 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PolygonStamped
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.context import Context
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
@@ -101,29 +100,22 @@ class CollectorNode(Node):
         self.malformed = dict.fromkeys(self.rig.camera_names, 0)
         self.lock = threading.Lock()
         self._logged: tuple[bool, float] | None = None  # (ready, when) of the last coverage log line
-        # One group per camera: cameras are handled in parallel, each camera's messages in order
-        # (the A/C labeller follows the wand from one image to the next).
+        # A single-threaded executor runs these callbacks (see nodes.runner): each camera's
+        # messages in order, as the A/C labeller needs; /calibrate runs in the calibrator's executor.
         for name, endpoint in self.endpoints.items():
-            group = MutuallyExclusiveCallbackGroup()
             if values["input"] == "images":
                 qos = qos_profile_sensor_data if values["image_qos"] == "sensor_data" else QoSProfile(depth=100)
-                self.create_subscription(
-                    Image, endpoint.image_topic, lambda m, n=name: self._on_image(n, m), qos, callback_group=group
-                )
+                self.create_subscription(Image, endpoint.image_topic, lambda m, n=name: self._on_image(n, m), qos)
             else:
                 self.create_subscription(
-                    PolygonStamped,
-                    endpoint.points_topic,
-                    lambda m, n=name: self._on_points(n, m),
-                    POINTS_QOS,
-                    callback_group=group,
+                    PolygonStamped, endpoint.points_topic, lambda m, n=name: self._on_points(n, m), POINTS_QOS
                 )
-        self.create_service(Trigger, "reset", self._on_reset, callback_group=MutuallyExclusiveCallbackGroup())
+        self.create_service(Trigger, "reset", self._on_reset)
         self.diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.heat_maps = {
             name: self.create_publisher(Image, f"wand_calib/{name}/coverage", 1) for name in self.rig.camera_names
         }
-        self.create_timer(1.0, self._publish_feedback, callback_group=MutuallyExclusiveCallbackGroup())
+        self.create_timer(1.0, self._publish_feedback)
         source = {"images": "image topics", "points": "detector points"}[values["input"]]
         self.get_logger().info(
             f"collecting {', '.join(self.rig.camera_names)} from {source} into {self.buffer.path} "
@@ -231,7 +223,7 @@ def build(context: Context) -> list[Node]:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``ros2 run wand_calib_ros collector --ros-args --params-file config/<rig>.params.yaml``"""
-    return run("collector", build, argv, threads=6)
+    return run("collector", build, argv)
 
 
 if __name__ == "__main__":

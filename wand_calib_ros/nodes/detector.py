@@ -88,7 +88,7 @@ def build(context: Context) -> list[Node]:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``ros2 run wand_calib_ros detector --ros-args -p cameras_file:=... -p camera:=cam0``"""
-    return run("detector", build, argv, threads=2)
+    return run("detector", build, argv)
 
 
 if __name__ == "__main__":

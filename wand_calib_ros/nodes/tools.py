@@ -12,7 +12,7 @@ import argparse
 import sys
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -41,10 +41,12 @@ REPLAY_PARAMS = (
 
 
 class ReplayNode(Node):
-    """Plays a bag's images once on a worker thread, then shuts its context down."""
+    """Plays a bag's images once on a worker thread; ``done`` is set (and ``on_done`` called) at the end."""
 
-    def __init__(self, **kwargs: Any) -> None:
+    def __init__(self, *, on_done: Callable[[], object] | None = None, **kwargs: Any) -> None:
         super().__init__("wand_calib_replay", **kwargs)
+        self.on_done = on_done
+        self.done = threading.Event()
         values = declare(self, REPLAY_PARAMS)
         self.bag = Path(values["bag"]).expanduser()
         if not self.bag.exists():
@@ -80,8 +82,10 @@ class ReplayNode(Node):
             self.get_logger().info(f"played {self.published} images from {self.bag}")
         except WandCalibError as error:
             self.get_logger().error(f"cannot play {self.bag}: {error}")
-        time.sleep(0.5)  # let reliable subscribers take the last messages
-        self.context.try_shutdown()
+        self.done.set()
+        if self.on_done is not None:
+            time.sleep(0.5)  # let reliable subscribers take the last messages
+            self.on_done()
 
     def close(self) -> None:
         self._thread.join(timeout=2.0)
@@ -89,7 +93,7 @@ class ReplayNode(Node):
 
 def replay_main(argv: Sequence[str] | None = None) -> int:
     """``ros2 run wand_calib_ros replay --ros-args -p bag:=... -p cameras_file:=...``"""
-    return run("replay", lambda context: [ReplayNode(context=context)], argv, threads=2)
+    return run("replay", lambda context: [ReplayNode(context=context, on_done=context.try_shutdown)], argv)
 
 
 def call_trigger(service: str, timeout_s: float, context: Context | None = None) -> tuple[bool, str]:
