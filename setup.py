@@ -29,8 +29,8 @@ setup(
             "collector = wand_calib_ros.nodes.collector:main",
             "calibrator = wand_calib_ros.nodes.calibrator:main",
             "detector = wand_calib_ros.nodes.detector:main",
-            "wand-calib-replay = wand_calib_ros.nodes.tools:replay_main",
-            "wand-calib-trigger = wand_calib_ros.nodes.tools:trigger_main",
+            "wand-calib-replay = wand_calib_ros.nodes.replay:main",
+            "wand-calib-trigger = wand_calib_ros.nodes.trigger:main",
         ],
     },
 )

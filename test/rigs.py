@@ -100,7 +100,7 @@ def compare_with_true_projections(
     Gaussian noise of the detection's own level. ``result`` must determine every camera's k1,
     u0, v0 within ``factor`` x the reference's standard deviations, lie within 4 of its own
     standard deviations of the truth, and reach a held-out wand-length error within
-    ``factor`` x the reference's.
+    ``factor`` x the reference's (averaged over four noise draws).
 
     Args:
         scenario: the rig with its true cameras.
@@ -113,15 +113,31 @@ def compare_with_true_projections(
         One line per failed check (empty: as good as the data allows).
     """
     found = np.isfinite(observations.uv)
-    rows = np.array([
-        int(np.argmin(np.nan_to_num(np.abs(drawn[:, seen] - uv[seen]), nan=np.inf).max(axis=1)))
-        for uv, seen in zip(observations.uv, found, strict=True)
-    ])  # fmt: skip
+    rows = np.empty(len(observations.frames), dtype=np.int64)
+    for i, (uv, seen) in enumerate(zip(observations.uv, found, strict=True)):
+        # the drawn frame nearest to the stored one (either A/C order: a swapped view is still that view)
+        swapped = uv[:, ::-1]
+        distance = np.minimum(
+            np.nan_to_num(np.abs(drawn[:, seen] - uv[seen]), nan=np.inf).max(axis=1),
+            np.nan_to_num(np.abs(drawn[:, seen] - swapped[seen]), nan=np.inf).max(axis=1),
+        )
+        rows[i] = int(np.argmin(distance))
     truth = drawn[rows]
-    sigma = float(np.sqrt(np.mean((observations.uv - truth)[found] ** 2)))
+    inliers = found & (np.abs(observations.uv - truth) < 1.0)  # the detector's noise, without mistakes
+    sigma = float(np.sqrt(np.mean((observations.uv - truth)[inliers] ** 2)))
     rng = np.random.default_rng(0)
-    synthetic = np.where(found, truth + rng.normal(scale=sigma, size=found.shape), np.nan)
-    reference = calibrate(scenario.rig, WandObservations(observations.frames, observations.camera_names, synthetic))
+    references = [
+        calibrate(
+            scenario.rig,
+            WandObservations(
+                observations.frames,
+                observations.camera_names,
+                np.where(found, truth + rng.normal(scale=sigma, size=found.shape), np.nan),
+            ),
+        )
+        for _ in range(4)
+    ]  # one noise draw's D_RMS varies by about 2x: average four
+    reference = references[0]
     failures = []
     for camera in scenario.cameras:
         mine, best = result.camera(camera.spec.name), reference.camera(camera.spec.name)
@@ -135,7 +151,9 @@ def compare_with_true_projections(
                 failures.append(f"{camera.spec.name} {name}: off by {value[name] - true[name]:.3g}, std {std:.3g}")
     held = simulate(scenario, 0.0, np.random.default_rng(99), n=200)
     mine_rms = errors_against_truth(scenario, held, *in_truth_frame(result, scenario))["D_RMS"]
-    best_rms = errors_against_truth(scenario, held, *in_truth_frame(reference, scenario))["D_RMS"]
+    best_rms = float(
+        np.mean([errors_against_truth(scenario, held, *in_truth_frame(r, scenario))["D_RMS"] for r in references])
+    )
     if mine_rms > factor * best_rms:
         failures.append(f"held-out D_RMS {mine_rms:.3f} mm vs {best_rms:.3f} mm")
     return failures

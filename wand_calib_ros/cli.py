@@ -16,18 +16,18 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from wand_calib_ros.core.metrics import camera_errors, heldout_wand_rms, rereference
 from wand_calib_ros.core.pairwise import PairOptions
 from wand_calib_ros.core.pipeline import CalibrationOptions, calibrate
 from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.core.rig import WandObservations
 from wand_calib_ros.errors import WandCalibError
 from wand_calib_ros.io.observations_csv import read_observations, write_observations
-from wand_calib_ros.io.result_yaml import camera_entry, read_result, write_camera_infos, write_result, write_yaml
+from wand_calib_ros.io.result_yaml import CameraGeometry, camera_entry, write_camera_infos, write_result, write_yaml
 from wand_calib_ros.io.rig_yaml import load_rig, save_rig
 from wand_calib_ros.sim.outliers import corrupt
 from wand_calib_ros.sim.scenarios import SCENARIOS, image_placements, sample_placements, simulate
 from wand_calib_ros.sim.sweeps import paper_sweeps
+from wand_calib_ros.sim.truth import compare_with_truth
 
 log = logging.getLogger("wand_calib_ros")
 
@@ -139,31 +139,6 @@ def _print_summary(result: CalibrationResult, output: Path) -> None:
         print(f"  warning: {warning}")
 
 
-def _compare_with_truth(result: CalibrationResult, truth_path: Path) -> None:
-    _, truth = read_result(truth_path)
-    true_poses = rereference({name: g.pose for name, g in truth.items()}, result.reference_camera)
-    print(f"against the truth in {truth_path}:")
-    for camera in result.cameras:
-        if camera.name not in truth:
-            continue
-        e = camera_errors(camera.model, camera.pose, truth[camera.name].model, true_poses[camera.name])
-        extrinsic = (
-            f", E_r {e.rotation_deg:.4f} deg, E_t {e.translation:.5f}" if camera.name != result.reference_camera else ""
-        )
-        print(
-            f"  {camera.name}: focal error {e.focal_mm * 1000:.2f} um ({e.focal_px:.3f} px), "
-            f"principal point error {e.principal_point_px:.3f} px{extrinsic}"
-        )
-    heldout = truth_path.parent / "heldout.csv"
-    if heldout.exists():
-        names = tuple(c.name for c in result.cameras)
-        obs = read_observations(heldout, names)
-        rms = heldout_wand_rms(
-            tuple(c.model for c in result.cameras), tuple(c.pose for c in result.cameras), obs.uv, result.wand
-        )
-        print(f"  held-out wand length error D_RMS {rms:.3f} mm over {obs.uv.shape[0]} placements ({heldout})")
-
-
 def _calibrate(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     rig = load_rig(args.cameras)
@@ -183,7 +158,8 @@ def _calibrate(args: argparse.Namespace) -> int:
     log.info("done in %.2f s", time.perf_counter() - started)
     _print_summary(result, args.output)
     if args.truth:
-        _compare_with_truth(result, args.truth)
+        cameras = {c.name: CameraGeometry(c.model, c.pose) for c in result.cameras}
+        print("\n".join(compare_with_truth(result.reference_camera, cameras, result.wand, args.truth)))
     return 0
 
 

@@ -113,13 +113,30 @@ def test_other_cameras_settle_ambiguous_views_of_independent_placements() -> Non
     assert (errors[finite] > 3).sum() == 0
 
 
-def test_online_labeller_follows_a_live_stream() -> None:
-    from wand_calib_ros.detection.recording import OnlineLabeller
+def test_stream_labeller_holds_back_then_follows_a_live_stream() -> None:
+    from wand_calib_ros.detection.recording import StreamLabeller
 
     clear = WandDetection(np.array([[0.0, 0], [20, 0], [30, 0]]), 1.0, None, False, 2.0)
     ambiguous = WandDetection(np.array([[31.0, 0], [16, 0], [1, 0]]), 1.0, None, True, 1.0)
-    labeller = OnlineLabeller()
-    assert labeller.update(0, ambiguous) is None  # nothing to follow yet
-    assert np.allclose(labeller.update(33_000_000, clear)[0], [0, 0])
-    assert np.allclose(labeller.update(66_000_000, ambiguous)[0], [1, 0])  # continuity swaps it
-    assert labeller.update(10**9, ambiguous) is None  # too long after
+    labeller = StreamLabeller(max_hold_ns=100_000_000)
+    assert labeller.push(0, ambiguous) == []  # held: nothing decides it yet
+    assert labeller.push(33_000_000, clear) == []
+    released = labeller.push(100_000_000, ambiguous)  # the hold ends: the track is decided
+    assert [stamp for stamp, _ in released] == [0, 33_000_000, 100_000_000]
+    assert all(np.allclose(points[0], [0, 0], atol=1.5) for _, points in released)
+    follow = labeller.push(133_000_000, clear)  # a decided track releases at once
+    assert len(follow) == 1 and np.allclose(follow[0][1][0], [0, 0])
+    assert labeller.push(10**9, ambiguous) == []  # a new track after the gap
+    assert labeller.flush() == [(10**9, None)]
+
+
+def test_a_misleading_stretch_of_image_ratios_is_outvoted_by_its_track() -> None:
+    # The wand turns towards the camera: for a few frames the image ratio favours C, B, A.
+    truth = np.array([[0.0, 0], [20, 0], [30, 0]])
+    sequence = []
+    for i, ratio in enumerate([2.0, 1.8, 1.6, 1.3, 0.8, 0.65, 0.65, 0.8, 1.3, 1.8, 2.0]):
+        points = truth + np.array([i * 0.5, 0])
+        own = points if ratio >= 1 else points[::-1].copy()  # the detector orders by the image ratio
+        sequence.append((i * 33_000_000, WandDetection(own, 1.0, None, False, max(ratio, 1 / ratio))))
+    labelled = track_labels(sequence)
+    assert all(np.allclose(points, truth + np.array([i * 0.5, 0])) for i, points in enumerate(labelled))

@@ -27,7 +27,7 @@ from std_srvs.srv import Trigger  # noqa: E402
 
 from wand_calib_ros.nodes.calibrator import CalibratorNode  # noqa: E402
 from wand_calib_ros.nodes.collector import CollectorNode  # noqa: E402
-from wand_calib_ros.nodes.tools import ReplayNode  # noqa: E402
+from wand_calib_ros.nodes.replay import ReplayNode  # noqa: E402
 
 
 def _bag(tmp_path: Path, frames: list, cameras: tuple[str, ...], storage: str) -> Path:

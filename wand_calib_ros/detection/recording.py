@@ -33,9 +33,9 @@ from wand_calib_ros.detection.wand import (
 )
 from wand_calib_ros.io.bags import ImageFrame
 
-#: A previous detection older than this cannot settle an ambiguous one.
+#: Detections further apart in time than this do not belong to one continuity track.
 TRACK_GAP_NS = 200_000_000
-#: Image ratios |AB|/|BC| from which the labels are trusted without tracking (the wand's is L1/L2).
+#: A track's labels are decided once its votes (log image ratios) add up to log(ANCHOR_RATIO).
 ANCHOR_RATIO = 1.5
 
 
@@ -115,7 +115,7 @@ class CameraStream:
         wand_options: WandOptions,
         blob_options: BlobOptions = BlobOptions(),
         *,
-        max_hold_ns: int | None = 1_000_000_000,
+        max_hold_ns: int | None = 2_000_000_000,
     ) -> None:
         self.spec = spec
         self.wand_options = wand_options
@@ -209,80 +209,77 @@ def detect_recording(
     return Detections(observations, stats, ambiguous)
 
 
-class OnlineLabeller:
-    """Labels one camera's detections as they come (the forward pass of :func:`track_labels`)."""
-
-    def __init__(self) -> None:
-        self._last: tuple[int, NDArray[np.float64]] | None = None
-
-    def update(
-        self, stamp_ns: int, detection: WandDetection, known: NDArray[np.float64] | None = None
-    ) -> NDArray[np.float64] | None:
-        """A, B, C of the detection, or None when neither its image nor the previous detection settles them.
-
-        Only confident labellings (image ratio >= ANCHOR_RATIO) stand on their own: perspective can
-        shrink |AB| below |BC| when the wand points steeply at the camera. Others follow the previous
-        settled detection when it is at most TRACK_GAP_NS away. A chain never bridges a detection
-        it could not settle: the wand may have turned through the line of sight there, swapping
-        which image end is A. ``known`` labels from an earlier pass are taken as they are.
-        """
-        points = known
-        if points is None and detection.points is not None and detection.image_ratio >= ANCHOR_RATIO:
-            points = detection.points
-        elif points is None and self._last is not None and abs(stamp_ns - self._last[0]) <= TRACK_GAP_NS:
-            resolved = resolve_with_previous(detection, self._last[1])
-            points = None if resolved.ambiguous else resolved.points
-        self._last = None if points is None else (stamp_ns, points)
-        return points
-
-
 class StreamLabeller:
-    """Labels one camera's detections as they come, settling ambiguous ones from later ones too.
+    """Labels one camera's wand detections as they come: continuity tracks, then a vote per track.
 
-    The forward pass is :class:`OnlineLabeller`. Detections it cannot settle are held back until
-    a later detection settles them backwards in time (the same rule read backwards), the chain
-    breaks (a gap above TRACK_GAP_NS) or the oldest is ``max_hold_ns`` older than the newest;
-    then they are released unsettled (None). Results come out in time order, at most
-    ``max_hold_ns`` late. With an unbounded hold it labels exactly like :func:`track_labels`.
+    Consecutive detections at most TRACK_GAP_NS apart whose ends continuity pairs up clearly
+    (:func:`resolve_with_previous`) form a track; within a track the A/C labels can only all be
+    right or all be swapped. Each detection votes for its own order with log(|AB|/|BC|) in the
+    image (near 0 for ambiguous images), and the track takes the order the votes favour once
+    they sum to at least log(ANCHOR_RATIO) either way. One image's ratio alone can mislead:
+    when the wand points towards the camera, perspective shrinks the far segment until the
+    image ratio favours the wrong order for a stretch of frames; the rest of the track outvotes
+    that stretch.
+
+    Live, a track's detections are held until ``max_hold_ns`` after its first one (or until the
+    track ends), then decided and released; later ones of a decided track are released at once.
+    Held detections the vote cannot decide come out unsettled (None). Results come out in time
+    order. With ``max_hold_ns=None`` every track is decided on all its detections (recordings).
     """
 
-    def __init__(self, max_hold_ns: int | None = 1_000_000_000) -> None:
+    def __init__(self, max_hold_ns: int | None = 2_000_000_000) -> None:
         self.max_hold_ns = max_hold_ns
-        self._forward = OnlineLabeller()
-        self._held: list[tuple[int, WandDetection]] = []
+        self._held: list[tuple[int, NDArray[np.float64], float]] = []  # stamp, points in track order, vote
+        self._last: tuple[int, NDArray[np.float64]] | None = None  # newest stamp and points in track order
+        self._vote = 0.0
+        self._forward: bool | None = None  # None: undecided; True: the track order is A, B, C
 
     def push(self, stamp_ns: int, detection: WandDetection) -> list[tuple[int, NDArray[np.float64] | None]]:
         """Add a detection (in time order); returns the (stamp, A B C or None) results it releases."""
-        points = self._forward.update(stamp_ns, detection)
+        assert detection.points is not None
         released: list[tuple[int, NDArray[np.float64] | None]] = []
-        if points is None:
-            if self._held and stamp_ns - self._held[-1][0] > TRACK_GAP_NS:
-                released += self.flush()
-            self._held.append((stamp_ns, detection))
-            while self.max_hold_ns is not None and stamp_ns - self._held[0][0] > self.max_hold_ns:
-                released.append((self._held.pop(0)[0], None))
+        linked = None
+        if self._last is not None and stamp_ns - self._last[0] <= TRACK_GAP_NS:
+            linked = resolve_with_previous(detection, self._last[1])
+        if linked is None or linked.ambiguous:
+            released += self.flush()
+            points = detection.points
+        else:
+            points = linked.points
+        assert points is not None
+        same = bool(np.array_equal(points, detection.points))
+        vote = float(np.clip(np.log(max(detection.image_ratio, 1e-6)), -1.0, 1.0)) * (1.0 if same else -1.0)
+        self._vote += vote
+        self._last = (stamp_ns, points)
+        if self._forward is not None:
+            released.append((stamp_ns, points if self._forward else points[::-1].copy()))
             return released
-        if self._held:
-            backward = OnlineLabeller()
-            backward.update(stamp_ns, detection, known=points)
-            settled = [backward.update(stamp, held) for stamp, held in reversed(self._held)]
-            released += [(stamp, labels) for (stamp, _), labels in zip(self._held, reversed(settled), strict=True)]
-            self._held = []
-        released.append((stamp_ns, points))
+        self._held.append((stamp_ns, points, vote))
+        if self.max_hold_ns is not None and stamp_ns - self._held[0][0] >= self.max_hold_ns:
+            released += self._decide()
         return released
 
     def flush(self) -> list[tuple[int, NDArray[np.float64] | None]]:
-        """Release every held detection unsettled (end of a recording, a /calibrate call)."""
-        released: list[tuple[int, NDArray[np.float64] | None]] = [(stamp, None) for stamp, _ in self._held]
+        """End the current track: decide and release what it holds (end of a recording, /calibrate)."""
+        released = self._decide()
+        self._held, self._last, self._vote, self._forward = [], None, 0.0, None
+        return released
+
+    def _decide(self) -> list[tuple[int, NDArray[np.float64] | None]]:
+        if abs(self._vote) >= np.log(ANCHOR_RATIO):
+            self._forward = self._vote > 0
+            forward = self._forward
+            released = [(stamp, points if forward else points[::-1].copy()) for stamp, points, _ in self._held]
+        else:  # too little evidence so far: release unsettled, keep voting on what follows
+            released = [(stamp, None) for stamp, _, _ in self._held]
         self._held = []
         return released
 
 
 def track_labels(sequence: list[tuple[int, WandDetection]]) -> list[NDArray[np.float64] | None]:
-    """A, B, C of each detection of one camera, ambiguous ones settled by their neighbours in time.
+    """A, B, C of each detection of one camera of a recording (None where the vote cannot decide).
 
-    A forward pass of :class:`OnlineLabeller` with a backward pass over what it left (a
-    :class:`StreamLabeller` that holds back without limit). Detections nothing settles are None.
+    A :class:`StreamLabeller` that holds each track until it ends.
     """
     labeller = StreamLabeller(max_hold_ns=None)
     released = [labels for stamp, detection in sequence for _, labels in labeller.push(stamp, detection)]

@@ -24,6 +24,7 @@ import rclpy
 from rclpy.context import Context
 from rclpy.executors import Executor, ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
 
 from wand_calib_ros.errors import WandCalibError
 
@@ -84,7 +85,11 @@ def run(name: str, build: Callable[[Context], list[Node]], argv: Sequence[str] |
         The process exit code.
     """
     context = Context()
-    rclpy.init(args=list(argv) if argv is not None else sys.argv, context=context)
+    rclpy.init(
+        args=list(argv) if argv is not None else sys.argv,
+        context=context,
+        signal_handler_options=SignalHandlerOptions.ALL,  # SIGINT and SIGTERM shut the context down
+    )
     try:
         nodes = build(context)
     except WandCalibError as error:

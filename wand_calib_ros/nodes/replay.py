@@ -1,14 +1,11 @@
-"""Small ROS tools this machine lacks the ``ros2`` CLI for: play a bag's images, call a Trigger.
+"""Play a bag's camera images on the rig's image topics (``ros2 bag play`` for images, without ROS installed).
 
-``replay``: publish a rosbag2's camera images (sensor_msgs/Image; compressed ones
-decoded) on the rig's image topics at their recorded pace (or ``rate`` times it),
-then exit. ``trigger``: call a std_srvs/Trigger service (``/calibrate``,
-``/reset``), print its answer, exit 0 on success and 1 otherwise.
+Publishes sensor_msgs/Image (compressed images decoded) at the recorded pace
+(or ``rate`` times it) and exits when the bag ends.
 """
 
 from __future__ import annotations
 
-import argparse
 import sys
 import threading
 import time
@@ -16,13 +13,9 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-import rclpy
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from sensor_msgs.msg import Image
-from std_srvs.srv import Trigger
 
 from wand_calib_ros.errors import WandCalibError
 from wand_calib_ros.io.bags import read_image_frames
@@ -91,48 +84,10 @@ class ReplayNode(Node):
         self._thread.join(timeout=2.0)
 
 
-def replay_main(argv: Sequence[str] | None = None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     """``ros2 run wand_calib_ros replay --ros-args -p bag:=... -p cameras_file:=...``"""
     return run("replay", lambda context: [ReplayNode(context=context, on_done=context.try_shutdown)], argv)
 
 
-def call_trigger(service: str, timeout_s: float, context: Context | None = None) -> tuple[bool, str]:
-    """Call a std_srvs/Trigger service; (success, message), or (False, why) when it is not there."""
-    own = context is None
-    context = context or Context()
-    if own:
-        rclpy.init(context=context)
-    node = Node("wand_calib_trigger", context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    spinner = threading.Thread(target=executor.spin, daemon=True)
-    spinner.start()
-    try:
-        client = node.create_client(Trigger, service)
-        if not client.wait_for_service(timeout_sec=min(timeout_s, 30.0)):
-            return False, f"service {service} is not available"
-        response = client.call(Trigger.Request(), timeout_sec=timeout_s)
-        if response is None:
-            return False, f"{service} did not answer within {timeout_s:.0f} s"
-        return bool(response.success), str(response.message)
-    finally:
-        executor.shutdown()
-        node.destroy_node()
-        if own:
-            rclpy.try_shutdown(context=context)
-        spinner.join(timeout=5)
-
-
-def trigger_main(argv: Sequence[str] | None = None) -> int:
-    """``trigger /calibrate``: call a std_srvs/Trigger service and print its answer."""
-    parser = argparse.ArgumentParser(prog="trigger", description=__doc__.split("\n\n")[0])
-    parser.add_argument("service", help="e.g. /calibrate or /reset")
-    parser.add_argument("--timeout", type=float, default=600.0, help="seconds to wait for the answer")
-    args = parser.parse_args(list(argv) if argv is not None else rclpy.utilities.remove_ros_args(sys.argv)[1:])
-    success, message = call_trigger(args.service, args.timeout)
-    print(f"{args.service}: {'success' if success else 'failure'}: {message}")
-    return 0 if success else 1
-
-
 if __name__ == "__main__":
-    sys.exit(trigger_main())
+    sys.exit(main())
