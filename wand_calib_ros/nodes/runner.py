@@ -7,6 +7,14 @@ images/s) while the single-threaded one took every one. A node whose callbacks
 must overlap (the calibrator answers "in progress" while it solves) sets
 ``EXECUTOR_THREADS`` above 1.
 
+Camera images are large: unless the user chose a Fast DDS profile, the nodes load
+``fastdds_large_images.xml`` (a 64 MB shared-memory segment instead of 0.5 MB).
+Fast DDS puts a sample into its sender's segment, so this matters for the
+images a node publishes (``wand-calib-replay``); camera drivers on the same
+machine need the same profile for best-effort 1280x1024 images (measured
+here at 4 x 30 fps: 51 % dropped without it, none with it; reliable delivery
+dropped none either way).
+
 Ctrl-C and SIGTERM shut the context down; the nodes' ``close()`` hooks run (the
 collector flushes its buffer), the executor threads are joined and the process
 exits 0. A :class:`WandCalibError` while building the nodes (a bad parameter, an
@@ -16,9 +24,11 @@ unreadable rig file) is one FATAL log line and exit code 2.
 from __future__ import annotations
 
 import contextlib
+import os
 import sys
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, MutableMapping, Sequence
+from pathlib import Path
 
 import rclpy
 from rclpy.context import Context
@@ -73,6 +83,19 @@ class Spinner:
             thread.join(timeout=10)
 
 
+#: Fast DDS profile for large images on one machine (see the module docstring).
+LARGE_IMAGES_PROFILE = Path(__file__).with_name("fastdds_large_images.xml")
+
+
+def use_large_image_transport(environ: MutableMapping[str, str]) -> None:
+    """Point Fast DDS at :data:`LARGE_IMAGES_PROFILE` unless another RMW or profile was chosen."""
+    if environ.get("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp") != "rmw_fastrtps_cpp":
+        return
+    if "FASTRTPS_DEFAULT_PROFILES_FILE" in environ or "FASTDDS_DEFAULT_PROFILES_FILE" in environ:
+        return
+    environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(LARGE_IMAGES_PROFILE)
+
+
 def run(name: str, build: Callable[[Context], list[Node]], argv: Sequence[str] | None = None) -> int:
     """Run the nodes ``build`` makes until Ctrl-C, SIGTERM or their context shuts down.
 
@@ -84,6 +107,7 @@ def run(name: str, build: Callable[[Context], list[Node]], argv: Sequence[str] |
     Returns:
         The process exit code.
     """
+    use_large_image_transport(os.environ)  # before the first participant reads the profile
     context = Context()
     rclpy.init(
         args=list(argv) if argv is not None else sys.argv,

@@ -1,0 +1,161 @@
+"""Sustained image rate of the live collector, and /calibrate latency.
+
+Publishes 4 cameras x 1280x1024 mono8 x 30 fps (a rendered waved wand, looped)
+from this process into a ``collector`` process for ``--seconds``, reads the
+collector's per camera "received" counts from /diagnostics, and reports dropped
+frames and the collector's CPU use; then times ``/calibrate`` on what it stored.
+Runs with the image QoS the collector uses by default (sensor data, best effort)
+and with reliable delivery, once with the publishing "drivers" on Fast DDS's
+default transport and once with the package's large-image profile
+(``wand_calib_ros/nodes/fastdds_large_images.xml``), each in its own process.
+
+Run: .venv/bin/python benchmarks/live_collector.py [--seconds 20]
+Target on this 2-core machine: no dropped frames at 4 x 1280x1024 x 30 fps.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, qos_profile_sensor_data
+from sensor_msgs.msg import Image
+
+from wand_calib_ros.io.rig_yaml import save_rig
+from wand_calib_ros.nodes.launch import free_domain_id, start, stop
+from wand_calib_ros.nodes.messages import array_to_image
+from wand_calib_ros.nodes.runner import use_large_image_transport
+from wand_calib_ros.nodes.trigger import call_trigger
+from wand_calib_ros.sim.render import RenderOptions, render_recording
+from wand_calib_ros.sim.scenarios import mocap_scenario
+
+FPS = 30.0
+
+
+def _cpu_seconds(pid: int) -> float:
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def run(folder: Path, frames: list, names: tuple[str, ...], qos_name: str, seconds: float) -> None:
+    domain_id = free_domain_id()
+    out = folder / f"out_{qos_name}"
+    params = {
+        "cameras_file": str(folder / "cameras.yaml"),
+        "output_dir": str(out),
+        "image_qos": qos_name,
+        "require_coverage": False,
+        "write_report": False,
+    }
+    collector = start("wand_calib_ros.nodes.collector", params, domain_id=domain_id, log=folder / f"{qos_name}.log")
+    context = Context()
+    rclpy.init(context=context, domain_id=domain_id)
+    node = Node("benchmark_camera_drivers", context=context)
+    qos = qos_profile_sensor_data if qos_name == "sensor_data" else QoSProfile(depth=10)
+    publishers = {name: node.create_publisher(Image, f"/{name}/image_raw", qos) for name in names}
+    received: dict[str, int] = {}
+
+    def on_diagnostics(array: DiagnosticArray) -> None:
+        for status in array.status:
+            values = {v.key: v.value for v in status.values}
+            if "received" in values:
+                received[status.hardware_id] = int(values["received"])
+
+    node.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, 10)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
+    try:
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline and not all(p.get_subscription_count() for p in publishers.values()):
+            time.sleep(0.05)
+        time.sleep(1.0)
+        cpu0, begin = _cpu_seconds(collector.pid), time.monotonic()
+        period = 1.0 / FPS
+        n_frames = int(seconds * FPS)
+        published = 0
+        for k in range(n_frames):
+            target = begin + k * period
+            delay = target - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+            stamp = int(1e9 * (100 + k * period))
+            for name in names:
+                message = frames[k % len(frames)][name]
+                message.header.stamp.sec, message.header.stamp.nanosec = divmod(stamp, 10**9)
+                publishers[name].publish(message)
+                published += 1
+        elapsed = time.monotonic() - begin
+        cpu = _cpu_seconds(collector.pid) - cpu0
+        settled = -1
+        while settled != sum(received.values()):  # until two diagnostics in a row agree
+            settled = sum(received.values())
+            time.sleep(2.2)
+        got = sum(received.values())
+        rate = published / elapsed
+        print(
+            f"{qos_name:>11}: published {published} images in {elapsed:.1f} s ({rate:.0f}/s, "
+            f"{rate * 1280 * 1024 / 1e6:.0f} MB/s); collector received {got} "
+            f"({published - got} dropped, {100 * (published - got) / published:.2f} %), "
+            f"collector CPU {100 * cpu / elapsed:.0f} % of one core"
+        )
+        began = time.perf_counter()
+        success, message = call_trigger("/calibrate", 300.0, context)
+        latency = time.perf_counter() - began
+        print(f"{'':>11}  /calibrate answered in {latency:.2f} s: {message[:110]}")
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.shutdown(context=context)
+        spinner.join(timeout=5)
+        code = stop(collector)
+        print(f"{'':>11}  collector exit code {code}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seconds", type=float, default=20.0, help="publishing time per run")
+    parser.add_argument("--drivers", choices=("default", "large-images"), help="run one transport set-up only")
+    args = parser.parse_args()
+    if args.drivers is None:  # Fast DDS reads its profile once per process: one child per set-up
+        for drivers in ("default", "large-images"):
+            command = [sys.executable, __file__, "--seconds", str(args.seconds), "--drivers", drivers]
+            subprocess.run(command, check=True)
+        return
+    if args.drivers == "large-images":
+        use_large_image_transport(os.environ)
+    else:
+        os.environ.pop("FASTRTPS_DEFAULT_PROFILES_FILE", None)  # the collector still loads its own
+    print(f"camera drivers on the {args.drivers} Fast DDS transport")
+    mocap = mocap_scenario()
+    scenario = dataclasses.replace(mocap, cameras=mocap.cameras[:4], min_views=2)
+    names = scenario.rig.camera_names
+    print(f"  rendering 150 frames x {len(names)} cameras at {scenario.rig.cameras[0].image_size} ...")
+    recording = render_recording(scenario, 150, FPS, RenderOptions(), np.random.default_rng(0))
+    frames: list[dict[str, Image]] = [{} for _ in range(150)]
+    index = {int(s): k for k, s in enumerate(recording.stamps_ns)}
+    for camera, stamp, pixels in recording.frames:
+        frames[index[int(stamp)]][camera] = array_to_image(pixels, stamp, camera)
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        save_rig(scenario.rig, folder / "cameras.yaml")
+        for qos_name in ("sensor_data", "reliable"):
+            run(folder, frames, names, qos_name, args.seconds)
+
+
+if __name__ == "__main__":
+    main()
