@@ -114,7 +114,7 @@ def run(folder: Path, frames: list, names: tuple[str, ...], qos_name: str, secon
             f"collector CPU {100 * cpu / elapsed:.0f} % of one core"
         )
         began = time.perf_counter()
-        success, message = call_trigger("/calibrate", 300.0, context)
+        _, message = call_trigger("/calibrate", 300.0, context)
         latency = time.perf_counter() - began
         print(f"{'':>11}  /calibrate answered in {latency:.2f} s: {message[:110]}")
     finally:
