@@ -1,11 +1,14 @@
-"""The package installs with plain pip (console script on PATH) and carries its ament resources."""
+"""The package installs with plain pip (console scripts on PATH) and builds with colcon (ros2 run finds it)."""
 
 from __future__ import annotations
 
 import os
+import random
 import shutil
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -41,12 +44,65 @@ def test_plain_pip_install_puts_the_console_script_and_ament_resources_in_place(
     )
     script = prefix / "bin" / "wand-calib"
     assert script.exists()
+    for node in ("collector", "calibrator", "detector", "wand-calib-replay", "wand-calib-trigger"):
+        assert (prefix / "bin" / node).exists(), node
     assert (prefix / "share" / "ament_index" / "resource_index" / "packages" / "wand_calib_ros").exists()
     assert (prefix / "share" / "wand_calib_ros" / "package.xml").exists()
     assert (prefix / "share" / "wand_calib_ros" / "config" / "paper_fisheye_pair.yaml").exists()
     site = next(prefix.glob("lib/python3*/site-packages"))
+    assert (site / "wand_calib_ros" / "nodes" / "fastdds_large_images.xml").exists()
     env = {**os.environ, "PYTHONPATH": str(site)}
     completed = subprocess.run(
         [sys.executable, str(script), "--help"], capture_output=True, text=True, env=env, timeout=120
     )
     assert completed.returncode == 0 and "calibrate" in completed.stdout
+
+
+def test_colcon_build_then_start_the_collector_as_ros2_run_would(tmp_path: Path) -> None:
+    colcon = Path(sys.executable).parent / "colcon"
+    assert colcon.exists(), "colcon-common-extensions is a development requirement"
+    package = tmp_path / "ws" / "src" / "wand_calib_ros"
+    package.mkdir(parents=True)
+    for name in SOURCES:
+        (shutil.copytree if (ROOT / name).is_dir() else shutil.copy)(ROOT / name, package / name)
+    shutil.copytree(ROOT / "wand_calib_ros", package / "wand_calib_ros", ignore=shutil.ignore_patterns("__pycache__"))
+    workspace = tmp_path / "ws"
+    built = subprocess.run([str(colcon), "build"], cwd=workspace, capture_output=True, text=True, timeout=600)
+    assert built.returncode == 0, built.stdout + built.stderr
+    # `ros2 run wand_calib_ros collector`: the ament index gives the prefix, the executable is lib/<pkg>/<exe>.
+    resolve = (
+        "source install/setup.bash && python -c 'from ament_index_python.packages import get_package_prefix, "
+        'get_package_share_directory as share; print(get_package_prefix("wand_calib_ros")); '
+        'print(share("wand_calib_ros"))\' && env -0'
+    )
+    env_path = f"{Path(sys.executable).parent}:{os.environ['PATH']}"
+    shell = subprocess.run(
+        ["bash", "-c", resolve], cwd=workspace, capture_output=True, env={**os.environ, "PATH": env_path}, timeout=120
+    )
+    assert shell.returncode == 0, shell.stderr.decode()
+    prefix, share, environ = shell.stdout.decode().split("\n", 2)
+    environment = dict(item.split("=", 1) for item in environ.split("\0") if "=" in item)
+    executable = Path(prefix) / "lib" / "wand_calib_ros" / "collector"
+    assert executable.exists() and Path(prefix) == workspace / "install" / "wand_calib_ros"
+    rig = Path(share) / "config" / "paper_fisheye_pair.yaml"
+    assert rig.exists() and (Path(share) / "config" / "collector.params.yaml").exists()
+    environment["ROS_DOMAIN_ID"] = str(random.SystemRandom().randrange(30, 200))
+    log = tmp_path / "collector.log"
+    with log.open("wb") as output:
+        process = subprocess.Popen(
+            [str(executable), "--ros-args", "-p", f"cameras_file:={rig}", "-p", f"output_dir:={tmp_path / 'out'}"],
+            env=environment,
+            stdout=output,
+            stderr=subprocess.STDOUT,
+        )
+    try:
+        deadline = time.monotonic() + 60
+        while "/calibrate reads" not in log.read_text() and time.monotonic() < deadline:
+            assert process.poll() is None, log.read_text()
+            time.sleep(0.2)
+        assert "collecting cam0, cam1" in log.read_text() and "/calibrate reads" in log.read_text()
+    finally:
+        process.send_signal(signal.SIGTERM)
+        code = process.wait(timeout=30)
+    assert code == 0, log.read_text()
+    assert (tmp_path / "out" / "observations.csv").read_text().startswith("frame,camera,point,u,v")

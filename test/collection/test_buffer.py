@@ -64,3 +64,10 @@ def test_reset_keeps_a_backup_and_a_corrupt_file_is_refused(tmp_path: Path) -> N
     path.write_text("frame,camera,point,u,v\n0,cam0,A,nan,1\n")
     with pytest.raises(FormatError, match="cannot resume the buffer"):
         ObservationBuffer.open(path, scenario.rig)
+
+
+def test_a_buffer_that_never_stored_anything_reopens_empty(tmp_path: Path) -> None:
+    rig = paper_fisheye_scenario().rig
+    ObservationBuffer.open(tmp_path / "observations.csv", rig)  # a collector that saw no wand
+    again = ObservationBuffer.open(tmp_path / "observations.csv", rig)
+    assert again.frames == [] and again.next_frame == 0

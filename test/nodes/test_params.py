@@ -62,3 +62,21 @@ def test_main_turns_a_bad_parameter_into_exit_code_2(tmp_path: Path, capfd: pyte
     assert code == EXIT_SETTINGS
     err = capfd.readouterr().err
     assert "no such file" in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("name", ["collector", "calibrator", "detector"])
+def test_shipped_params_files_name_only_declared_parameters(name: str) -> None:
+    import yaml
+
+    from wand_calib_ros.nodes import calibrator, collector, detector
+
+    declared = {
+        "wand_calib_collector": {p.name for p in collector.PARAMS},
+        "wand_calib_calibrator": {p.name for p in calibrator.PARAMS},
+        "wand_calib_detector": {p.name for p in detector.PARAMS},
+    }
+    document = yaml.safe_load((Path(__file__).parents[2] / "config" / f"{name}.params.yaml").read_text())
+    for node, section in document.items():
+        keys = set(section["ros__parameters"])
+        allowed = set.union(*declared.values()) if node == "/**" else declared[node]
+        assert keys <= allowed, (node, keys - allowed)

@@ -128,3 +128,19 @@ def test_kill_9_mid_replay_then_restart_loses_nothing(rendered: tuple[Path, np.n
     assert after.startswith(before)  # every row written before the kill is still there, in order
     assert f"({kept} frames resumed)" in (tmp_path / "second.log").read_text()
     assert _frames_in(buffer) > kept + 30  # and the restarted collector went on adding
+
+
+@pytest.mark.parametrize(
+    ("sig", "moment"),
+    [(signal.SIGTERM, "collecting"), (signal.SIGINT, "collecting"), (signal.SIGTERM, "/calibrate reads")],
+)
+def test_a_signal_while_starting_or_running_stops_the_collector_cleanly(tmp_path: Path, sig: int, moment: str) -> None:
+    # "collecting" is logged while the calibrator node is still being built (ROS is up by then;
+    # a signal during the interpreter's own start-up, before any ROS, ends it the default way).
+    save_rig(paper_fisheye_scenario().rig, tmp_path / "cameras.yaml")
+    params = {"cameras_file": str(tmp_path / "cameras.yaml"), "output_dir": str(tmp_path / "out")}
+    log = tmp_path / "log"
+    collector = start("wand_calib_ros.nodes.collector", params, domain_id=free_domain_id(), log=log)
+    assert wait_until(lambda: moment in log.read_text(), 60, step_s=0.005)
+    assert stop(collector, sig, timeout_s=30) == 0
+    assert "Traceback" not in log.read_text()

@@ -61,7 +61,7 @@ class ObservationBuffer:
         """A buffer persisted at ``path``; resumes from the file when it exists (a corrupt file is an error)."""
         buffer = ObservationBuffer(Path(path), rig, capacity, min_motion_px)
         buffer._cells = np.zeros((len(rig.cameras), GRID, GRID), dtype=np.int64)
-        if buffer.path.exists() and buffer.path.stat().st_size > 0:
+        if buffer.path.exists() and _has_rows(buffer.path):
             try:
                 existing = read_observations(buffer.path, rig.camera_names)
             except FormatError as error:
@@ -148,3 +148,9 @@ class ObservationBuffer:
                     if np.isfinite(u) and np.isfinite(v):
                         writer.writerow([frame, name, label, f"{u:.6f}", f"{v:.6f}"])
             handle.flush()
+
+
+def _has_rows(path: Path) -> bool:
+    """Whether the file holds more than a header (a collector that saw no wand leaves just the header)."""
+    with path.open() as handle:
+        return sum(1 for line, _ in zip(handle, range(2), strict=False) if line.strip()) > 1

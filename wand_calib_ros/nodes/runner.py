@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import signal
 import sys
 import threading
 from collections.abc import Callable, MutableMapping, Sequence
@@ -96,6 +97,12 @@ def use_large_image_transport(environ: MutableMapping[str, str]) -> None:
     environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(LARGE_IMAGES_PROFILE)
 
 
+def _shutdown(context: Context) -> None:
+    """Shut the context down unless the signal handler is doing it at the same moment."""
+    with contextlib.suppress(RuntimeError):  # "rcl_shutdown already called"
+        rclpy.try_shutdown(context=context)
+
+
 def run(name: str, build: Callable[[Context], list[Node]], argv: Sequence[str] | None = None) -> int:
     """Run the nodes ``build`` makes until Ctrl-C, SIGTERM or their context shuts down.
 
@@ -118,8 +125,15 @@ def run(name: str, build: Callable[[Context], list[Node]], argv: Sequence[str] |
         nodes = build(context)
     except WandCalibError as error:
         rclpy.logging.get_logger(name).fatal(str(error))
-        rclpy.try_shutdown(context=context)
+        _shutdown(context)
         return EXIT_SETTINGS
+    except KeyboardInterrupt:  # Ctrl-C while the nodes were being built: a clean stop
+        _shutdown(context)
+        return 0
+    except Exception:  # rclpy's RCLError, NotInitializedException, ... once a signal shut the context down
+        if context.ok():
+            raise
+        return 0  # SIGTERM while the nodes were being built: a clean stop
     stopped = threading.Event()
     context.on_shutdown(stopped.set)
     spinner = Spinner(context)
@@ -131,6 +145,8 @@ def run(name: str, build: Callable[[Context], list[Node]], argv: Sequence[str] |
     except KeyboardInterrupt:
         pass
     finally:
+        for sig in (signal.SIGINT, signal.SIGTERM):  # a second Ctrl-C must not interrupt the clean-up
+            signal.signal(sig, signal.SIG_IGN)
         spinner.close()
-        rclpy.try_shutdown(context=context)
+        _shutdown(context)
     return 0
