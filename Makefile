@@ -1,12 +1,13 @@
 # wand_calib_ros: the two entry points of the README.
-#   make demo  - create .venv, install, simulate the paper's two-fisheye rig, calibrate it, write the report
+#   make demo  - create .venv, install, replay a rendered mixed rig through the live ROS 2 nodes, /calibrate
+#   make demo-offline - the core without ROS on the paper's simulated two-fisheye rig
 #   make test  - create .venv, install with test tools, run ruff and the test suite
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 DEMO_DIR := demo_output
 
-.PHONY: demo test setup lint clean
+.PHONY: demo demo-offline test setup lint clean
 
 $(BIN)/activate:
 	$(PYTHON) -m venv $(VENV)
@@ -20,6 +21,9 @@ $(VENV)/.installed: $(BIN)/activate requirements.txt requirements-dev.txt setup.
 setup: $(VENV)/.installed
 
 demo: setup
+	$(BIN)/python -m wand_calib_ros.nodes.demo --out $(DEMO_DIR)/live
+
+demo-offline: setup
 	$(BIN)/wand-calib simulate paper --seed 1 --noise 1.0 --out $(DEMO_DIR)
 	$(BIN)/wand-calib calibrate --cameras $(DEMO_DIR)/cameras.yaml \
 		--observations $(DEMO_DIR)/observations.csv --output $(DEMO_DIR)/result.yaml \
