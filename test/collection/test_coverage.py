@@ -44,3 +44,16 @@ def test_disconnected_groups_are_reported() -> None:
     status = tracker.status()
     assert not status.connected
     assert any("cam0, cam1, cam2 | cam3, cam4, cam5" in m for m in status.messages())
+
+
+def test_a_wand_always_level_and_equally_far_is_told_to_turn_and_move() -> None:
+    scenario = paper_fisheye_scenario()
+    rng = np.random.default_rng(3)
+    tracker = CoverageTracker(scenario.rig, CoverageThresholds(min_placements=1, min_image_fraction=0.0))
+    for _ in range(100):  # level, 200 px long, anywhere in the images
+        start = rng.uniform([20, 20], [400, 460])
+        points = start + np.array([[0.0, 0.0], [133.3, 0.0], [200.0, 0.0]])
+        tracker.add(np.stack([points, points]))
+    message = tracker.status().messages()[0]
+    assert "wand held in 1 of 6 directions in the image: turn it" in message
+    assert "always about as far (image length ratio 1.00)" in message

@@ -3,8 +3,10 @@
 Per camera: placements seen completely, the share of an 8 x 8 image grid the
 wand's points reached, which of the nine image regions (corners, edges,
 centre) are still empty, and the widest off-axis angle reached (under the
-nominal lens model) against what the image offers. For the rig: placements
-each camera pair shares and whether those pairs connect every camera.
+nominal lens model) against what the image offers, the directions the wand
+was held in (image sectors) and how much nearer and farther it went (spread of
+its image length). For the rig: placements each camera pair shares and whether
+those pairs connect every camera.
 """
 
 from __future__ import annotations
@@ -21,6 +23,10 @@ from wand_calib_ros.detection.recording import nominal_model
 FloatArray = NDArray[np.float64]
 
 GRID = 8
+#: Sectors of the wand's direction in the image (over 180 degrees).
+DIRECTIONS = 6
+#: Histogram of log2 |AC| in pixels: LENGTH_BINS bins from 2^0 to 2^LENGTH_OCTAVES.
+LENGTH_OCTAVES, LENGTH_BINS = 13, 260
 _REGIONS = {
     (0, 0): "top-left", (0, 1): "top", (0, 2): "top-right",
     (1, 0): "left", (1, 1): "centre", (1, 2): "right",
@@ -37,12 +43,18 @@ class CoverageThresholds:
         min_image_fraction: share of the 8 x 8 grid cells with wand points.
         min_theta_fraction: widest observed angle over the widest angle the image offers.
         min_pair_placements: placements a camera pair must share to link them.
+        min_directions: of DIRECTIONS 30-degree sectors of the wand's direction in the image,
+            how many it must have been held in (orientation diversity).
+        min_depth_ratio: 90th over 10th percentile of the wand's image length |AC| (it was seen
+            near and far: depth diversity).
     """
 
     min_placements: int = 100
     min_image_fraction: float = 0.5
     min_theta_fraction: float = 0.7
     min_pair_placements: int = 15
+    min_directions: int = 4
+    min_depth_ratio: float = 1.2
 
 
 @dataclass(frozen=True)
@@ -93,6 +105,8 @@ class CoverageTracker:
         self.placements = np.zeros(n, dtype=np.int64)
         self.shared = np.zeros((n, n), dtype=np.int64)
         self.max_theta = np.zeros(n)
+        self.directions = np.zeros((n, DIRECTIONS), dtype=np.int64)
+        self.lengths = np.zeros((n, LENGTH_BINS), dtype=np.int64)
         self._bearings = [nominal_model(spec) for spec in rig.cameras]
         self.reach = np.array([self._reach(c) for c in range(n)])
 
@@ -115,10 +129,22 @@ class CoverageTracker:
             width, height = self.rig.cameras[c].image_size
             cells = np.clip((uv[c] / [width, height] * GRID).astype(np.int64), 0, GRID - 1)
             np.add.at(self.cells[c], (cells[:, 1], cells[:, 0]), 1)
+            du, dv = uv[c, 2] - uv[c, 0]
+            self.directions[c, int(np.arctan2(dv, du) % np.pi / np.pi * DIRECTIONS) % DIRECTIONS] += 1
+            octave = np.log2(max(float(np.hypot(du, dv)), 1.0)) / LENGTH_OCTAVES
+            self.lengths[c, min(int(octave * LENGTH_BINS), LENGTH_BINS - 1)] += 1
             table = self._bearings[c]
             if table is not None:
                 theta = np.arccos(np.clip(table(uv[c])[:, 2], -1, 1))
                 self.max_theta[c] = max(self.max_theta[c], float(theta.max()))
+
+    def _depth_ratio(self, c: int) -> float:
+        """90th over 10th percentile of the camera's |AC| image lengths (1.0 without data)."""
+        cumulative = np.cumsum(self.lengths[c])
+        if cumulative[-1] == 0:
+            return 1.0
+        low, high = np.searchsorted(cumulative, [0.1 * cumulative[-1], 0.9 * cumulative[-1]])
+        return float(2.0 ** ((high - low) * LENGTH_OCTAVES / LENGTH_BINS))
 
     def status(self) -> CoverageStatus:
         """Current coverage against the thresholds."""
@@ -143,6 +169,12 @@ class CoverageTracker:
                     f"wand seen up to {np.degrees(self.max_theta[c]):.0f} deg off-axis of "
                     f"{np.degrees(self.reach[c]):.0f}: move it towards the image border"
                 )
+            sectors = int((self.directions[c] > 0).sum())
+            if self.placements[c] and sectors < t.min_directions:
+                missing.append(f"wand held in {sectors} of {DIRECTIONS} directions in the image: turn it")
+            depth = self._depth_ratio(c)
+            if self.placements[c] and depth < t.min_depth_ratio:
+                missing.append(f"wand always about as far (image length ratio {depth:.2f}): move it nearer and farther")
             cameras.append(
                 CameraCoverage(
                     spec.name,
