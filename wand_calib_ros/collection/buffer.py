@@ -61,7 +61,7 @@ class ObservationBuffer:
         """A buffer persisted at ``path``; resumes from the file when it exists (a corrupt file is an error)."""
         buffer = ObservationBuffer(Path(path), rig, capacity, min_motion_px)
         buffer._cells = np.zeros((len(rig.cameras), GRID, GRID), dtype=np.int64)
-        if buffer.path.exists() and _has_rows(buffer.path):
+        if buffer.path.exists() and has_rows(buffer.path):
             try:
                 existing = read_observations(buffer.path, rig.camera_names)
             except FormatError as error:
@@ -150,7 +150,7 @@ class ObservationBuffer:
             handle.flush()
 
 
-def _has_rows(path: Path) -> bool:
+def has_rows(path: Path) -> bool:
     """Whether the file holds more than a header (a collector that saw no wand leaves just the header)."""
     with path.open() as handle:
         return sum(1 for line, _ in zip(handle, range(2), strict=False) if line.strip()) > 1

@@ -35,7 +35,7 @@ from sensor_msgs.msg import CameraInfo
 from sensor_msgs.srv import SetCameraInfo
 from std_srvs.srv import Trigger
 
-from wand_calib_ros.collection.buffer import BUFFER_FILE
+from wand_calib_ros.collection.buffer import BUFFER_FILE, has_rows
 from wand_calib_ros.collection.job import run_calibration, summary
 from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.errors import WandCalibError
@@ -123,7 +123,7 @@ class CalibratorNode(Node):
         if self.before_calibrate is not None:
             self.before_calibrate()
         path = self.output_dir / BUFFER_FILE
-        if not path.exists() or sum(1 for _ in path.open()) <= 1:
+        if not path.exists() or not has_rows(path):
             return False, f"nothing collected yet in {path}: is the collector running and the wand in view?"
         try:
             observations = read_observations(path, self.rig.camera_names)

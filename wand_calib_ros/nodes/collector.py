@@ -142,6 +142,11 @@ class CollectorNode(Node):
             return
         with self.lock:
             self.received[camera] += 1
+            stats = self.streams[camera].stats  # the detector node labelled it: count it the same way
+            if points is None:
+                stats.rejected["no_wand"] += 1
+            else:
+                stats.detected += 1
             self._offer(camera, [Labelled(messages.stamp_ns(message.header), points)])
 
     def _offer(self, camera: str, outcomes: list[Labelled]) -> None:

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import shutil
 import subprocess
 import sys
 import time
@@ -47,9 +48,7 @@ def run_demo(out: Path, scenario: str, frames: int, seed: int, rate: float) -> i
     if not (out / "bag").exists():
         cli.main(["render", scenario, "--out", str(out), "--frames", str(frames), "--seed", str(seed)])
     output = out / "collector_output"
-    if output.exists():  # a fresh buffer each run
-        for path in sorted(output.rglob("*"), reverse=True):
-            path.unlink() if path.is_file() else path.rmdir()
+    shutil.rmtree(output, ignore_errors=True)  # a fresh buffer each run
     domain_id = free_domain_id()
     params = {"cameras_file": str(out / "cameras.yaml"), "output_dir": str(output), "image_qos": "reliable"}
     print(f"collector: ROS_DOMAIN_ID={domain_id}, log {out / 'collector.log'}")
