@@ -30,6 +30,7 @@ import sys
 import threading
 from collections.abc import Callable, MutableMapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import rclpy
 from rclpy.context import Context
@@ -52,6 +53,8 @@ class Spinner:
         self._running: list[tuple[Executor, threading.Thread]] = []
 
     def add(self, node: Node) -> Node:
+        if not self.context.ok():  # a signal came while the nodes were being built
+            raise ExternalShutdownException()
         threads = int(getattr(node, "EXECUTOR_THREADS", 1))
         executor: Executor = (
             MultiThreadedExecutor(num_threads=threads, context=self.context)
@@ -65,10 +68,14 @@ class Spinner:
         self._running.append((executor, thread))
         return node
 
-    @staticmethod
-    def _spin(executor: Executor) -> None:
-        with contextlib.suppress(ExternalShutdownException):
+    def _spin(self, executor: Executor) -> None:
+        try:
             executor.spin()
+        except ExternalShutdownException:
+            pass
+        except Exception:  # rclpy errors from a context a signal has just shut down
+            if self.context.ok():
+                raise
 
     def close(self) -> None:
         """Run the nodes' ``close()`` hooks, stop the executors, destroy the nodes, join the threads."""
@@ -97,6 +104,14 @@ def use_large_image_transport(environ: MutableMapping[str, str]) -> None:
     environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(LARGE_IMAGES_PROFILE)
 
 
+def _quiet_half_built_executors(unraisable: Any) -> None:
+    """sys.unraisablehook: drop rclpy's AttributeError from ``Executor.__del__`` of an executor whose
+    ``__init__`` failed because a signal had just shut the context down (an rclpy bug)."""
+    if isinstance(unraisable.exc_value, AttributeError) and "_sigint_gc" in str(unraisable.exc_value):
+        return
+    sys.__unraisablehook__(unraisable)
+
+
 def _shutdown(context: Context) -> None:
     """Shut the context down unless the signal handler is doing it at the same moment."""
     with contextlib.suppress(RuntimeError):  # "rcl_shutdown already called"
@@ -115,38 +130,35 @@ def run(name: str, build: Callable[[Context], list[Node]], argv: Sequence[str] |
         The process exit code.
     """
     use_large_image_transport(os.environ)  # before the first participant reads the profile
+    sys.unraisablehook = _quiet_half_built_executors
     context = Context()
     rclpy.init(
         args=list(argv) if argv is not None else sys.argv,
         context=context,
         signal_handler_options=SignalHandlerOptions.ALL,  # SIGINT and SIGTERM shut the context down
     )
+    spinner = Spinner(context)
+    stopped = threading.Event()
+    context.on_shutdown(stopped.set)
     try:
-        nodes = build(context)
+        for node in build(context):
+            spinner.add(node)
+        while context.ok() and not stopped.wait(0.2):
+            pass
     except WandCalibError as error:
         rclpy.logging.get_logger(name).fatal(str(error))
-        _shutdown(context)
-        return EXIT_SETTINGS
-    except KeyboardInterrupt:  # Ctrl-C while the nodes were being built: a clean stop
-        _shutdown(context)
-        return 0
+        code = EXIT_SETTINGS
+    except KeyboardInterrupt:  # Ctrl-C (also while the nodes were being built): a clean stop
+        code = 0
     except Exception:  # rclpy's RCLError, NotInitializedException, ... once a signal shut the context down
         if context.ok():
             raise
-        return 0  # SIGTERM while the nodes were being built: a clean stop
-    stopped = threading.Event()
-    context.on_shutdown(stopped.set)
-    spinner = Spinner(context)
-    for node in nodes:
-        spinner.add(node)
-    try:
-        while context.ok() and not stopped.wait(0.2):
-            pass
-    except KeyboardInterrupt:
-        pass
+        code = 0  # SIGTERM while the nodes were being built: a clean stop
+    else:
+        code = 0
     finally:
         for sig in (signal.SIGINT, signal.SIGTERM):  # a second Ctrl-C must not interrupt the clean-up
             signal.signal(sig, signal.SIG_IGN)
         spinner.close()
         _shutdown(context)
-    return 0
+    return code
