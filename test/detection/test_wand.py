@@ -140,3 +140,17 @@ def test_a_misleading_stretch_of_image_ratios_is_outvoted_by_its_track() -> None
         sequence.append((i * 33_000_000, WandDetection(own, 1.0, None, False, max(ratio, 1 / ratio))))
     labelled = track_labels(sequence)
     assert all(np.allclose(points, truth + np.array([i * 0.5, 0])) for i, points in enumerate(labelled))
+
+
+def test_a_camera_repeating_a_stamp_is_labelled_without_error() -> None:
+    from wand_calib_ros.detection.recording import CameraStream
+
+    scenario = paper_fisheye_scenario()
+    recording = render_recording(scenario, 20, 30.0, RenderOptions(), np.random.default_rng(5))
+    stream = CameraStream(scenario.cameras[0].spec, WandOptions(ratio=2.0))
+    out = []
+    for camera, stamp, image in recording.frames:
+        if camera == "cam0":
+            out += stream.push(stamp, image, "mono8") + stream.push(stamp, image, "mono8")  # a driver sent it twice
+    out += stream.flush()
+    assert len(out) == 40 and [o.stamp_ns for o in out] == sorted(o.stamp_ns for o in out)

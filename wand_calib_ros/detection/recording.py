@@ -10,7 +10,7 @@ live, the collector's synchroniser does that.
 
 from __future__ import annotations
 
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import NamedTuple
@@ -123,7 +123,7 @@ class CameraStream:
         self.model = nominal_model(spec)
         self.labeller = StreamLabeller(max_hold_ns)
         self.stats = CameraStats()
-        self._pending: dict[int, WandDetection] = {}
+        self._pending: deque[WandDetection] = deque()  # pushed, not yet released (release keeps the order)
 
     def detect(self, image: NDArray, encoding: str) -> tuple[Blobs | None, WandDetection | None, str | None]:
         """Blobs, wand and rejection reason (None when the wand was found) of one image."""
@@ -142,7 +142,7 @@ class CameraStream:
         if reason is not None or detection is None:
             self.stats.rejected[reason or "no_wand"] += 1
             return [Labelled(stamp_ns, None)]
-        self._pending[stamp_ns] = detection
+        self._pending.append(detection)
         return self._released(self.labeller.push(stamp_ns, detection))
 
     def push(self, stamp_ns: int, image: NDArray, encoding: str) -> list[Labelled]:
@@ -157,7 +157,7 @@ class CameraStream:
     def _released(self, results: list[tuple[int, NDArray[np.float64] | None]]) -> list[Labelled]:
         out = []
         for stamp, points in results:
-            detection = self._pending.pop(stamp)
+            detection = self._pending.popleft()
             if points is None:
                 self.stats.rejected["ambiguous"] += 1
                 out.append(Labelled(stamp, None, detection.points))
