@@ -11,7 +11,7 @@ import pytest
 import yaml
 from conftest import LATCHED, Ros, wait_until
 
-from wand_calib_ros.core.pipeline import calibrate
+from wand_calib_ros import cli
 from wand_calib_ros.io.observations_csv import read_observations
 from wand_calib_ros.io.result_yaml import read_result
 from wand_calib_ros.io.rig_yaml import save_rig
@@ -82,10 +82,19 @@ def test_collect_calibrate_and_publish(ros: Ros, tmp_path: Path) -> None:
 
     # wand-calib calibrate on the persisted buffer computes exactly what /calibrate did.
     out = tmp_path / "out"
-    again = calibrate(scenario.rig, read_observations(out / "observations.csv", scenario.rig.camera_names))
+    offline = [
+        "calibrate",
+        "--cameras",
+        str(tmp_path / "cameras.yaml"),
+        "--observations",
+        str(out / "observations.csv"),
+    ]
+    assert cli.main(["-q", *offline, "--output", str(tmp_path / "offline.yaml")]) == 0
     _, written = read_result(out / "result.yaml")
-    for camera in again.cameras:
-        assert np.allclose(written[camera.name].model.intrinsic_vector(), camera.model.intrinsic_vector(), rtol=1e-9)
+    _, again = read_result(tmp_path / "offline.yaml")
+    for name, camera in again.items():
+        assert np.array_equal(written[name].model.intrinsic_vector(), camera.model.intrinsic_vector())
+        assert np.array_equal(written[name].pose.translation, camera.pose.translation)
     assert yaml.safe_load((out / "camera_info" / "cam1.yaml").read_text())["distortion_model"] == "equidistant"
     assert (out / "report" / "index.html").exists()
 

@@ -1,7 +1,9 @@
-"""The collector as its own process: bag replay from another process, /calibrate from a third, kill -9."""
+"""The collector as its own process: bags (mcap, sqlite3, ROS 1 converted) played by another process,
+/calibrate from a third, kill -9 and restart, signals while starting and running."""
 
 from __future__ import annotations
 
+import shutil
 import signal
 import subprocess
 import sys
@@ -49,13 +51,19 @@ def rendered(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, np.ndarray
     scenario = paper_fisheye_scenario()
     recording = render_recording(scenario, 300, 30.0, RenderOptions(), np.random.default_rng(21))
     folder = tmp_path_factory.mktemp("rendered")
-    write_image_bag(folder / "bag", recording.frames, scenario.rig.camera_names)
+    for storage in ("mcap", "sqlite3"):
+        write_image_bag(folder / storage, recording.frames, scenario.rig.camera_names, storage=storage)
+    write_image_bag(folder / "in.bag", recording.frames, scenario.rig.camera_names, storage="ros1")
+    convert = shutil.which("rosbags-convert", path=str(Path(sys.executable).parent))
+    assert convert is not None
+    subprocess.run([convert, "--src", str(folder / "in.bag"), "--dst", str(folder / "ros1")], check=True, timeout=120)
     save_rig(scenario.rig, folder / "cameras.yaml")
     return folder, recording.drawn
 
 
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3", "ros1"])
 def test_collector_process_calibrates_what_another_process_plays(
-    rendered: tuple[Path, np.ndarray], tmp_path: Path
+    rendered: tuple[Path, np.ndarray], tmp_path: Path, storage: str
 ) -> None:
     folder, drawn = rendered
     scenario = paper_fisheye_scenario()
@@ -69,7 +77,7 @@ def test_collector_process_calibrates_what_another_process_plays(
     }
     collector = start("wand_calib_ros.nodes.collector", params, domain_id=domain_id, log=tmp_path / "collector.log")
     try:
-        replay = {"bag": str(folder / "bag"), "cameras_file": params["cameras_file"], "rate": 3.0}
+        replay = {"bag": str(folder / storage), "cameras_file": params["cameras_file"], "rate": 3.0}
         player = start("wand_calib_ros.nodes.replay", replay, domain_id=domain_id, log=tmp_path / "replay.log")
         assert player.wait(timeout=120) == 0
         answer = _trigger(domain_id)
@@ -102,7 +110,7 @@ def test_kill_9_mid_replay_then_restart_loses_nothing(rendered: tuple[Path, np.n
         "write_report": False,
     }
     first = start("wand_calib_ros.nodes.collector", params, domain_id=domain_id, log=tmp_path / "first.log")
-    replay = {"bag": str(folder / "bag"), "cameras_file": params["cameras_file"], "rate": 1.0}
+    replay = {"bag": str(folder / "mcap"), "cameras_file": params["cameras_file"], "rate": 1.0}
     player = start("wand_calib_ros.nodes.replay", replay, domain_id=domain_id, log=tmp_path / "replay.log")
     second = None
     try:
