@@ -115,7 +115,7 @@ class CameraStream:
         wand_options: WandOptions,
         blob_options: BlobOptions = BlobOptions(),
         *,
-        max_hold_ns: int | None = 2_000_000_000,
+        max_hold_ns: int | None = 1_000_000_000,
     ) -> None:
         self.spec = spec
         self.wand_options = wand_options
@@ -227,7 +227,7 @@ class StreamLabeller:
     order. With ``max_hold_ns=None`` every track is decided on all its detections (recordings).
     """
 
-    def __init__(self, max_hold_ns: int | None = 2_000_000_000) -> None:
+    def __init__(self, max_hold_ns: int | None = 1_000_000_000) -> None:
         self.max_hold_ns = max_hold_ns
         self._held: list[tuple[int, NDArray[np.float64], float]] = []  # stamp, points in track order, vote
         self._last: tuple[int, NDArray[np.float64]] | None = None  # newest stamp and points in track order

@@ -123,7 +123,7 @@ IMAGE_QOS = Param(
 )
 #: How long the labeller may hold an A/C-ambiguous view back.
 LABEL_HOLD = Param(
-    "label_hold_ms", 2000.0, "how long an A/C-ambiguous view may wait for a later one to settle it (ms)", 0.0, 60000.0
+    "label_hold_ms", 1000.0, "how long an A/C-ambiguous view may wait for a later one to settle it (ms)", 0.0, 60000.0
 )
 
 
