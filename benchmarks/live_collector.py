@@ -129,11 +129,13 @@ def run(folder: Path, frames: list, names: tuple[str, ...], qos_name: str, secon
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seconds", type=float, default=20.0, help="publishing time per run")
+    parser.add_argument("--keep", type=Path, help="keep the collectors' output here (default: a temporary folder)")
     parser.add_argument("--drivers", choices=("default", "large-images"), help="run one transport set-up only")
     args = parser.parse_args()
     if args.drivers is None:  # Fast DDS reads its profile once per process: one child per set-up
         for drivers in ("default", "large-images"):
             command = [sys.executable, __file__, "--seconds", str(args.seconds), "--drivers", drivers]
+            command += ["--keep", str(args.keep / drivers)] if args.keep else []
             subprocess.run(command, check=True)
         return
     if args.drivers == "large-images":
@@ -151,7 +153,8 @@ def main() -> None:
     for camera, stamp, pixels in recording.frames:
         frames[index[int(stamp)]][camera] = array_to_image(pixels, stamp, camera)
     with tempfile.TemporaryDirectory() as tmp:
-        folder = Path(tmp)
+        folder = args.keep or Path(tmp)
+        folder.mkdir(parents=True, exist_ok=True)
         save_rig(scenario.rig, folder / "cameras.yaml")
         for qos_name in ("sensor_data", "reliable"):
             run(folder, frames, names, qos_name, args.seconds)

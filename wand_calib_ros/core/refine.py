@@ -48,6 +48,8 @@ DEGENERATE_SPREAD = 0.03
 #: a calibration meaningless.
 MAX_FOCAL_STD = 0.05
 MAX_CENTRE_STD = 0.1
+#: Fewest views a camera must keep in the final bundle adjustment (its 11 parameters need several).
+MIN_CAMERA_VIEWS = 5
 #: Image coverage: grid cells per side and the fraction that should see the wand.
 COVERAGE_GRID = 8
 MIN_COVERAGE = 0.25
@@ -161,7 +163,7 @@ def refine_calibration(
     points = triangulate_placements(models, poses, uv)
     errors = ac_length_errors(points, wand)
     threshold = gate_threshold(errors, wand)
-    keep = np.flatnonzero(np.isfinite(errors) & (np.abs(errors) <= threshold))
+    keep = np.flatnonzero(_gate(rig, uv, errors, threshold))
     log.info("gate |AC| within %.1f mm: %d placements kept, %d set aside", threshold, keep.size, len(uv) - keep.size)
     _require(keep.size, min_placements, f"reconstruct to the wand length within {threshold:.1f} mm")
     # Coarse to fine: outliers and the distortion model are settled on a spread subset; the
@@ -201,6 +203,7 @@ def refine_calibration(
         )
         result = bundle_adjust(state, BundleProblem.from_dense(wand, uv_used), free)
     check_geometry(result.state.points(wand))
+    check_camera_views(rig, uv, uv_used)
     check_uncertainty(rig, result)
     warnings: list[str] = []
     for model, spec in zip(result.state.models, rig.cameras, strict=True):
@@ -225,6 +228,33 @@ def refine_calibration(
         rejected_views,
         warnings,
     )
+
+
+def _gate(rig: RigSpec, uv: FloatArray, errors: FloatArray, threshold: float) -> NDArray[np.bool_]:
+    """(P,) placements the |AC| gate keeps.
+
+    A camera whose chained start is off (its pair saw a shared camera's intrinsics differently)
+    makes every placement it sees reconstruct too long or too short by about the same amount.
+    Should the gate leave it fewer than half its views, its placements are gated around their
+    own median error instead, so the bundle adjustment can correct the camera rather than drop it.
+    """
+    keep = np.isfinite(errors) & (np.abs(errors) <= threshold)
+    seen = np.all(np.isfinite(uv), axis=(2, 3))
+    for c, spec in enumerate(rig.cameras):
+        mine = seen[:, c] & np.isfinite(errors)
+        if (keep & mine).sum() >= max(MIN_CAMERA_VIEWS, mine.sum() // 2) or not mine.any():
+            continue
+        centre = float(np.median(errors[mine]))
+        local = gate_threshold(errors[mine] - centre, rig.wand)
+        rescued = mine & ~keep & (np.abs(errors - centre) <= local)
+        log.info(
+            "%s: its placements reconstruct %.1f mm off the wand length: %d gated around that instead",
+            spec.name,
+            -centre,
+            rescued.sum(),
+        )
+        keep |= rescued
+    return keep
 
 
 def _require(count: int, needed: int, what: str) -> None:
@@ -419,6 +449,29 @@ def check_geometry(points: FloatArray) -> None:
         )
 
 
+def check_camera_views(rig: RigSpec, uv_seen: FloatArray, uv_used: FloatArray) -> None:
+    """Refuse a solution in which a camera kept fewer than MIN_CAMERA_VIEWS views.
+
+    Args:
+        rig: the rig description.
+        uv_seen: (P, C, 3, 2) every placement as observed.
+        uv_used: (P', C, 3, 2) the placements and views the solution uses (rejected views NaN).
+
+    Raises:
+        InsufficientDataError: naming the camera and how many of its views were left.
+    """
+    views = np.all(np.isfinite(uv_used), axis=(2, 3)).sum(axis=0)
+    seen = np.all(np.isfinite(uv_seen), axis=(2, 3)).sum(axis=0)
+    for c, spec in enumerate(rig.cameras):
+        if views[c] < MIN_CAMERA_VIEWS:
+            raise InsufficientDataError(
+                f"camera '{spec.name}': only {views[c]} of its {seen[c]} views fit the solution "
+                f"(need {MIN_CAMERA_VIEWS}); "
+                "the others failed the wand-length gate or were outliers. Wave the wand where it and the "
+                "other cameras see it together, through more of its view"
+            )
+
+
 def check_uncertainty(rig: RigSpec, result: BundleResult) -> None:
     """Refuse a solution whose focal lengths or principal points the data do not determine.
 
@@ -428,7 +481,7 @@ def check_uncertainty(rig: RigSpec, result: BundleResult) -> None:
     for c, (spec, model) in enumerate(zip(rig.cameras, result.state.models, strict=True)):
         focal = result.camera_std[c, 0] / model.k[0]
         centre = float(np.max(result.camera_std[c, 5:7]))
-        if focal > MAX_FOCAL_STD or centre > MAX_CENTRE_STD * spec.image_size[0]:
+        if not (focal <= MAX_FOCAL_STD and centre <= MAX_CENTRE_STD * spec.image_size[0]):  # NaN: undetermined
             raise DegenerateDataError(
                 f"camera '{spec.name}': the data do not determine its intrinsics (focal length +-{100 * focal:.0f} %, "
                 f"principal point +-{centre:.0f} px); wave the wand through more of its view, nearer and farther"
