@@ -21,22 +21,11 @@ from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from wand_calib_ros.io.errors import FormatError
+from wand_calib_ros.io.images import image_array
 
 IMAGE = "sensor_msgs/msg/Image"
 COMPRESSED = "sensor_msgs/msg/CompressedImage"
 _TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
-_BYTES_PER_PIXEL = {
-    "mono8": 1,
-    "mono16": 2,
-    "bgr8": 3,
-    "rgb8": 3,
-    "bgra8": 4,
-    "rgba8": 4,
-    "bayer_rggb8": 1,
-    "bayer_bggr8": 1,
-    "bayer_gbrg8": 1,
-    "bayer_grbg8": 1,
-}
 
 
 @dataclass(frozen=True, eq=False)
@@ -128,20 +117,10 @@ def _decode(message: object, msgtype: str, where: str) -> tuple[NDArray, str]:
         if image is None:
             raise FormatError(where, "compressed image could not be decoded")
         return image, "mono8"
-    encoding = message.encoding  # type: ignore[attr-defined]
-    if encoding not in _BYTES_PER_PIXEL:
-        return np.zeros((0, 0), np.uint8), encoding  # the detector reports the encoding
-    height, width, step = message.height, message.width, message.step  # type: ignore[attr-defined]
-    data = np.asarray(message.data, dtype=np.uint8)  # type: ignore[attr-defined]
-    per_pixel = _BYTES_PER_PIXEL[encoding]
-    if height * step > data.size or step < width * per_pixel:
-        raise FormatError(where, f"image data of {data.size} bytes do not fit {width}x{height} {encoding}")
-    rows = data[: height * step].reshape(height, step)[:, : width * per_pixel]
-    if encoding == "mono16":
-        dtype = ">u2" if message.is_bigendian else "<u2"  # type: ignore[attr-defined]
-        return rows.copy().view(dtype).reshape(height, width).astype(np.uint16), encoding
-    channels = per_pixel
-    return (rows.reshape(height, width, channels) if channels > 1 else rows.reshape(height, width)), encoding
+    try:
+        return image_array(message), message.encoding  # type: ignore[attr-defined]
+    except ValueError as error:
+        raise FormatError(where, str(error)) from None
 
 
 def count_images(path: Path, topics: dict[str, str]) -> int:

@@ -36,6 +36,7 @@ from wand_calib_ros.collection.coverage import CoverageTracker
 from wand_calib_ros.collection.sync import FrameSynchroniser
 from wand_calib_ros.detection.recording import CameraStream, Labelled
 from wand_calib_ros.detection.wand import WandOptions
+from wand_calib_ros.io.images import image_array
 from wand_calib_ros.io.rig_yaml import load_camera_endpoints, load_rig
 from wand_calib_ros.nodes import messages
 from wand_calib_ros.nodes.params import (
@@ -125,7 +126,7 @@ class CollectorNode(Node):
     def _on_image(self, camera: str, message: Image) -> None:
         stream = self.streams[camera]
         try:
-            _, detection, reason = stream.detect(messages.image_to_array(message), message.encoding)
+            _, detection, reason = stream.detect(image_array(message), message.encoding)
         except ValueError:
             detection, reason = None, "bad_image"
         with self.lock:

@@ -26,6 +26,7 @@ from std_msgs.msg import Header
 
 from wand_calib_ros.detection.recording import CameraStream, Labelled
 from wand_calib_ros.detection.wand import WandOptions
+from wand_calib_ros.io.images import image_array
 from wand_calib_ros.io.rig_yaml import load_camera_endpoints, load_rig
 from wand_calib_ros.nodes import messages
 from wand_calib_ros.nodes.collector import POINTS_QOS
@@ -65,7 +66,7 @@ class DetectorNode(Node):
     def _on_image(self, message: Image) -> None:
         self.frame_id = message.header.frame_id or self.frame_id
         try:
-            _, detection, reason = self.stream.detect(messages.image_to_array(message), message.encoding)
+            _, detection, reason = self.stream.detect(image_array(message), message.encoding)
         except ValueError:
             detection, reason = None, "bad_image"
         self._publish(self.stream.label(messages.stamp_ns(message.header), detection, reason))

@@ -22,8 +22,6 @@ from wand_calib_ros.collection.coverage import CoverageStatus
 from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.io.result_yaml import camera_info_dict
 
-_CHANNELS = {"mono8": 1, "mono16": 1, "bgr8": 3, "rgb8": 3, "bgra8": 4, "rgba8": 4}
-
 
 def stamp_ns(header: Header) -> int:
     """A header's stamp in nanoseconds."""
@@ -34,25 +32,6 @@ def time_message(nanoseconds: int) -> Time:
     """builtin_interfaces/Time of a stamp in nanoseconds."""
     sec, nanosec = divmod(int(nanoseconds), 10**9)
     return Time(sec=sec, nanosec=nanosec)
-
-
-def image_to_array(message: Image) -> NDArray:
-    """The pixels of a sensor_msgs/Image as a numpy array (no copy for 8-bit data).
-
-    Raises:
-        ValueError: the data is shorter than ``height * step`` or the step is too small.
-    """
-    data = np.frombuffer(message.data, dtype=np.uint8)
-    height, step, width = message.height, message.step, message.width
-    channels = _CHANNELS.get(message.encoding, 1)
-    depth = 2 if message.encoding == "mono16" else 1
-    if data.size < height * step or step < width * channels * depth:
-        raise ValueError(f"image data of {data.size} bytes does not hold {height} rows of step {step}")
-    rows = data[: height * step].reshape(height, step)
-    if depth == 2:
-        return rows[:, : width * 2].view(">u2" if message.is_bigendian else "<u2")
-    pixels = rows[:, : width * channels]
-    return pixels.reshape(height, width, channels) if channels > 1 else pixels
 
 
 def array_to_image(pixels: NDArray, stamp: int, frame_id: str, encoding: str = "mono8") -> Image:
