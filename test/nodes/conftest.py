@@ -2,30 +2,23 @@
 
 from __future__ import annotations
 
-import os
 import threading
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
 import pytest
 
 rclpy = pytest.importorskip("rclpy")
 
 from rclpy.context import Context  # noqa: E402
 from rclpy.node import Node  # noqa: E402
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
+from rclpy.qos import QoSProfile  # noqa: E402
 
+from wand_calib_ros.nodes.calibrator import LATCHED  # noqa: E402,F401  (tests subscribe like users do)
+from wand_calib_ros.nodes.launch import free_domain_id  # noqa: E402
 from wand_calib_ros.nodes.runner import Spinner  # noqa: E402
-
-LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
-
-
-def free_domain_id() -> int:
-    """A ROS_DOMAIN_ID unlikely to be used by a parallel test run (pid and randomness mixed)."""
-    return int((os.getpid() * 7 + np.random.default_rng().integers(0, 1000)) % 170) + 30
 
 
 @dataclass
