@@ -26,7 +26,6 @@ class Ros:
     """A test's ROS world: context, nodes spun like ``main()`` spins them, a helper node."""
 
     context: Context
-    domain_id: int
     spinner: Spinner
     helper: Node
 
@@ -53,10 +52,9 @@ def wait_until(condition: Callable[[], bool], timeout_s: float, step_s: float = 
 @pytest.fixture
 def ros() -> Iterator[Ros]:
     context = Context()
-    domain_id = free_domain_id()
-    rclpy.init(context=context, domain_id=domain_id)
+    rclpy.init(context=context, domain_id=free_domain_id())
     spinner = Spinner(context)
-    world = Ros(context, domain_id, spinner, Node("test_helper", context=context))
+    world = Ros(context, spinner, Node("test_helper", context=context))
     spinner.add(world.helper)
     try:
         yield world

@@ -82,7 +82,6 @@ class CalibratorNode(Node):
         self.commit = bool(values["commit_to_drivers"])
         self.driver_timeout = float(values["driver_timeout_s"])
         self.before_calibrate = before_calibrate
-        self.result: CalibrationResult | None = None
         self._running = threading.Lock()
         # Reentrant: a second /calibrate during a solve gets its "in progress" answer at once,
         # and driver answers arrive while the solve's thread waits for them.
@@ -136,7 +135,6 @@ class CalibratorNode(Node):
         for name in self.rig.camera_names:
             self.info_publishers[name].publish(messages.camera_info_message(result, name, stamp))
             self.extrinsics_publishers[name].publish(messages.extrinsics_message(result, name, stamp))
-        self.result = result
         answer = summary(result, files)
         if self.commit:
             failures = self._commit(result, stamp)

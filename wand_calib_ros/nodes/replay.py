@@ -34,12 +34,11 @@ REPLAY_PARAMS = (
 
 
 class ReplayNode(Node):
-    """Plays a bag's images once on a worker thread; ``done`` is set (and ``on_done`` called) at the end."""
+    """Plays a bag's images once on a worker thread, then calls ``on_done`` (if given)."""
 
     def __init__(self, *, on_done: Callable[[], object] | None = None, **kwargs: Any) -> None:
         super().__init__("wand_calib_replay", **kwargs)
         self.on_done = on_done
-        self.done = threading.Event()
         values = declare(self, REPLAY_PARAMS)
         self.bag = Path(values["bag"]).expanduser()
         if not self.bag.exists():
@@ -75,7 +74,6 @@ class ReplayNode(Node):
             self.get_logger().info(f"played {self.published} images from {self.bag}")
         except WandCalibError as error:
             self.get_logger().error(f"cannot play {self.bag}: {error}")
-        self.done.set()
         if self.on_done is not None:
             time.sleep(0.5)  # let reliable subscribers take the last messages
             self.on_done()
