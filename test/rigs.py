@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from functools import cache
 
 import numpy as np
@@ -17,9 +18,10 @@ from wand_calib_ros.core.bundle_adjustment import (
 from wand_calib_ros.core.camera_model import CameraModel
 from wand_calib_ros.core.geometry import Pose
 from wand_calib_ros.core.metrics import camera_errors, heldout_wand_rms, rereference
-from wand_calib_ros.core.pipeline import calibrate
+from wand_calib_ros.core.pipeline import CalibrationOptions, calibrate
 from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.core.rig import WandObservations
+from wand_calib_ros.sim.clocks import TakeOptions, film, observe, take_trajectory
 from wand_calib_ros.sim.scenarios import SCENARIOS, Scenario, SimulatedData, simulate
 
 FloatArray = NDArray[np.float64]
@@ -91,12 +93,32 @@ def errors_against_truth(
     return out
 
 
+def true_views(drawn: WandObservations, observations: WandObservations) -> FloatArray:
+    """(F, C, 3, 2) the drawn (true) pixels of the images ``observations`` holds, matched by camera and stamp."""
+    assert drawn.stamps is not None and observations.stamps is not None
+    out = np.full(observations.uv.shape, np.nan)
+    for c, name in enumerate(observations.camera_names):
+        d = drawn.camera_index(name)
+        stamps = drawn.stamps[:, d]
+        known = np.flatnonzero(np.isfinite(stamps))
+        order = known[np.argsort(stamps[known])]
+        mine = np.flatnonzero(np.isfinite(observations.stamps[:, c]))
+        at = np.clip(np.searchsorted(stamps[order], observations.stamps[mine, c]), 0, order.size - 1)
+        match = np.abs(stamps[order[at]] - observations.stamps[mine, c]) < 1e-6
+        out[mine[match], c] = drawn.uv[order[at[match]], d]
+    return out
+
+
 def compare_with_true_projections(
-    scenario: Scenario, drawn: FloatArray, observations: WandObservations, result: CalibrationResult, factor: float
+    scenario: Scenario,
+    drawn: WandObservations,
+    observations: WandObservations,
+    result: CalibrationResult,
+    factor: float,
 ) -> list[str]:
     """What makes ``result`` worse than calibrating the true projections of the same views.
 
-    The reference calibrates the drawn (true) pixels of the frames ``observations`` holds, with
+    The reference calibrates the drawn (true) pixels of the images ``observations`` holds, with
     Gaussian noise of the detection's own level. ``result`` must determine every camera's k1,
     u0, v0 within ``factor`` x the reference's standard deviations, lie within 4 of its own
     standard deviations of the truth, and reach a held-out wand-length error within
@@ -104,8 +126,8 @@ def compare_with_true_projections(
 
     Args:
         scenario: the rig with its true cameras.
-        drawn: (F, C, 3, 2) true pixels of the recording's frames.
-        observations: what the nodes stored (frame ids of their own).
+        drawn: the true pixels of the recording's images (with their stamps).
+        observations: what the nodes stored (frame ids of their own, the images' stamps).
         result: what they computed from it.
         factor: allowed ratio.
 
@@ -113,27 +135,14 @@ def compare_with_true_projections(
         One line per failed check (empty: as good as the data allows).
     """
     found = np.isfinite(observations.uv)
-    rows = np.empty(len(observations.frames), dtype=np.int64)
-    for i, (uv, seen) in enumerate(zip(observations.uv, found, strict=True)):
-        # the drawn frame nearest to the stored one (either A/C order: a swapped view is still that view)
-        swapped = uv[:, ::-1]
-        distance = np.minimum(
-            np.nan_to_num(np.abs(drawn[:, seen] - uv[seen]), nan=np.inf).max(axis=1),
-            np.nan_to_num(np.abs(drawn[:, seen] - swapped[seen]), nan=np.inf).max(axis=1),
-        )
-        rows[i] = int(np.argmin(distance))
-    truth = drawn[rows]
+    truth = true_views(drawn, observations)  # the same images' true pixels (a swapped view stays swapped)
     inliers = found & (np.abs(observations.uv - truth) < 1.0)  # the detector's noise, without mistakes
     sigma = float(np.sqrt(np.mean((observations.uv - truth)[inliers] ** 2)))
     rng = np.random.default_rng(0)
     references = [
         calibrate(
             scenario.rig,
-            WandObservations(
-                observations.frames,
-                observations.camera_names,
-                np.where(found, truth + rng.normal(scale=sigma, size=found.shape), np.nan),
-            ),
+            observations.with_uv(np.where(found, truth + rng.normal(scale=sigma, size=found.shape), np.nan)),
         )
         for _ in range(4)
     ]  # one noise draw's D_RMS varies by about 2x: average four
@@ -157,3 +166,74 @@ def compare_with_true_projections(
     if mine_rms > factor * best_rms:
         failures.append(f"held-out D_RMS {mine_rms:.3f} mm vs {best_rms:.3f} mm")
     return failures
+
+
+@cache
+def timed_take(name: str, seed: int, noise: float, options: TakeOptions) -> tuple[Scenario, WandObservations, tuple]:  # type: ignore[type-arg]
+    """A continuous take of a scenario filmed with ``options``' clocks: (scenario, observations, clocks).
+
+    The trajectory and the pixel noise depend on the seed only, so the same seed with other clocks
+    films the same wave (a synchronised twin of a free-running take). The scenario returned has the
+    volume the wand was waved in (held-out placements there judge the calibration where it has data).
+    """
+    scenario = SCENARIOS[name]()
+    trajectory = take_trajectory(scenario, options, np.random.default_rng(seed))
+    clocks = options.clocks(len(scenario.cameras), np.random.default_rng(seed + 1))
+    takes = film(scenario, trajectory, clocks, options.duration_s, np.random.default_rng(seed + 2))
+    observations = observe(scenario.rig.camera_names, takes, noise, np.random.default_rng(seed + 3))
+    waved = np.stack([trajectory.middle - trajectory.half, trajectory.middle + trajectory.half])
+    return replace(scenario, volume=waved), observations, clocks
+
+
+@cache
+def timed_calibration(
+    name: str, seed: int, noise: float, options: TakeOptions, timing: tuple[str, str] = ("auto", "auto")
+) -> dict[str, list[float]]:
+    """Errors against the truth of calibrating a :func:`timed_take` (pooled over cameras per metric).
+
+    Keys: focal, principal point, curve (px, every camera), E_r (deg), E_t (cameras but the first),
+    D_RMS (mm, held-out noise-free placements), and for free-running clocks the errors of the time
+    offsets between cameras (s, cameras but the reference) and of the readout times (s, every
+    camera) with their z-scores (error / reported standard deviation), and the z-scores of every
+    camera's k1, u0, v0.
+    """
+    scenario, observations, clocks = timed_take(name, seed, noise, options)
+    result = calibrate(
+        scenario.rig, observations, CalibrationOptions(time_offsets=timing[0], rolling_shutter=timing[1])
+    )
+    models, poses = in_truth_frame(result, scenario)
+    out: dict[str, list[float]] = {k: [] for k in ("focal", "principal point", "curve", "E_r", "E_t", "D_RMS")}
+    for c, camera in enumerate(scenario.cameras):
+        e = camera_errors(models[c], poses[c], camera.model, camera.pose)
+        out["focal"].append(e.focal_px)
+        out["principal point"].append(e.principal_point_px)
+        out["curve"].append(e.curve_px)
+        if c > 0:
+            out["E_r"].append(e.rotation_deg)
+            out["E_t"].append(e.translation)
+    held = simulate(scenario, 0.0, np.random.default_rng(99), n=200)
+    out["D_RMS"].append(heldout_wand_rms(tuple(models), tuple(poses), held.observations.uv, scenario.wand))
+    latency = {n: clock.latency_s for n, clock in zip(scenario.rig.camera_names, clocks, strict=True)}
+    readout = {n: clock.readout_s for n, clock in zip(scenario.rig.camera_names, clocks, strict=True)}
+    for key in ("offset", "offset z", "readout", "readout z", "intrinsics z"):
+        out[key] = []
+    for camera in scenario.cameras:
+        mine = result.camera(camera.spec.name)
+        true = np.r_[camera.model.k[0], camera.model.principal_point]
+        value = np.r_[mine.model.k[0], mine.model.principal_point]
+        std = np.array([mine.parameter_std[k] for k in ("k1", "u0", "v0")])
+        out["intrinsics z"].extend((value - true) / std)
+    for camera in result.cameras:
+        std = camera.parameter_std
+        if camera.name != result.reference_camera:
+            error = camera.time_offset - (latency[camera.name] - latency[result.reference_camera])
+            out["offset"].append(error)
+            out["offset z"].append(error / std["time_offset"] if "time_offset" in std else (np.inf if error else 0.0))
+        error = camera.readout - readout[camera.name]
+        out["readout"].append(error)
+        out["readout z"].append(error / std["readout"] if "readout" in std else (np.inf if error else 0.0))
+    return out
+
+
+def rms(values: list[float]) -> float:
+    return float(np.sqrt(np.mean(np.square(values))))

@@ -1,41 +1,91 @@
-"""Time synchronisation of per-camera detections."""
+"""Grouping per-camera detections into frames by nearest stamps."""
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
-from wand_calib_ros.collection.sync import FrameSynchroniser
+from wand_calib_ros.collection.sync import FrameSynchroniser, group_by_stamps
 
 POINTS = np.arange(6, dtype=float).reshape(3, 2)
+MS = 1_000_000
+PERIOD = 33_333_333  # 30 fps
+
+
+def _stream(sync: FrameSynchroniser, items: list[tuple[str, int]]) -> list:  # type: ignore[type-arg]
+    frames = []
+    for camera, stamp in sorted(items, key=lambda item: item[1]):
+        frames += sync.add(camera, stamp, POINTS + stamp / 1e9)
+    return frames
 
 
 def test_identical_stamps_form_a_frame_as_soon_as_every_camera_reported() -> None:
     sync = FrameSynchroniser(("a", "b"))
-    assert sync.add("a", 100, POINTS) == []
-    (frame,) = sync.add("b", 100, None)
-    assert frame.stamp_ns == 100 and frame.reported.all()
-    assert np.array_equal(frame.uv[0], POINTS) and np.all(np.isnan(frame.uv[1]))
-    assert sync.stats.complete == 1
+    frames = []
+    for k in range(6):
+        frames += sync.add("a", k * PERIOD, POINTS)
+        assert len(frames) == (0 if k < 4 else k)  # the first frames wait until the rates are learned
+        frames += sync.add("b", k * PERIOD, None)
+        assert len(frames) == (0 if k < 3 else k + 1)  # then each is out once both cameras reported
+    assert len(frames) == 6 and all(f.reported.all() for f in frames)
+    assert [f.stamp_ns for f in frames] == [k * PERIOD for k in range(6)]
+    assert np.array_equal(frames[0].uv[0], POINTS) and np.all(np.isnan(frames[0].uv[1]))
+    assert sync.stats.complete == 6
 
 
-def test_stamps_within_the_slop_join_and_stragglers_are_counted() -> None:
-    sync = FrameSynchroniser(("a", "b", "c"), slop_ns=5, max_delay_ns=50)
-    sync.add("a", 1000, POINTS)
-    sync.add("b", 1003, POINTS)
-    frames = sync.add("a", 1100, POINTS)  # c never came: the first frame is emitted incomplete
-    assert len(frames) == 1 and frames[0].reported.tolist() == [True, True, False]
-    sync.add("c", 1001, POINTS)  # for a frame already emitted
-    assert sync.stats.late == 1 and sync.stats.out_of_order == 1
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_free_running_cameras_pair_each_image_with_the_nearest_anchor_image(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    names = ("a", "b", "c")
+    phases = {"a": 0, "b": int(rng.uniform(-0.49, 0.49) * PERIOD), "c": int(rng.uniform(-0.49, 0.49) * PERIOD)}
+    stamps = {n: phases[n] + np.arange(10, 70) * PERIOD + rng.normal(0, 0.2 * MS, 60).astype(np.int64) for n in names}
+    sync = FrameSynchroniser(names)
+    frames = _stream(sync, [(n, int(s)) for n in names for s in stamps[n]])
+    frames += sync.flush_all()
+    grouped = [f for f in frames if f.reported.sum() > 1]
+    assert len(grouped) >= 58
+    for frame in grouped:
+        assert frame.reported[0]  # every camera has the same rate: the first camera anchors
+        for c, name in enumerate(names[1:], start=1):
+            nearest = stamps[name][np.argmin(np.abs(stamps[name] - frame.stamp_ns))]
+            assert frame.stamps_ns[c] == nearest
+    assert sum(sync.stats.late.values()) == 0
 
 
-def test_out_of_order_within_the_window_still_joins() -> None:
-    sync = FrameSynchroniser(("a", "b"), slop_ns=5, max_delay_ns=1000)
-    sync.add("a", 2000, POINTS)
-    sync.add("a", 1000, POINTS)  # older stamp arrives second
-    frames = sync.add("b", 1002, POINTS) + sync.add("b", 2001, POINTS)
-    assert [f.stamp_ns for f in frames] == [1000, 2000]
-    assert sync.stats.out_of_order == 2 and sync.stats.late == 0  # 1000 and 1002 came after 2000
-    sync.add("a", 3000, POINTS)
-    sync.add("a", 3000, POINTS)
-    assert sync.stats.duplicates == 1
-    assert [f.stamp_ns for f in sync.flush_all()] == [3000]
+def test_a_slower_camera_anchors_and_the_faster_ones_extra_images_stand_alone() -> None:
+    fast = [("fast", k * PERIOD // 2 + 3 * MS) for k in range(80)]
+    slow = [("slow", k * PERIOD) for k in range(40)]
+    frames = group_by_stamps(("fast", "slow"), [(n, s, POINTS) for n, s in fast + slow])
+    paired = [f for f in frames if f.reported.all()]
+    assert len(paired) == 40
+    assert all(abs(int(f.stamps_ns[0]) - f.stamp_ns) == 3 * MS for f in paired)
+    assert sum(f.reported[0] and not f.reported[1] for f in frames) == 40
+
+
+def test_a_dropped_anchor_image_still_groups_the_other_cameras() -> None:
+    anchor = [("a", k * PERIOD) for k in range(20) if k != 10]
+    other = [(n, k * PERIOD + 5 * MS) for n in ("b", "c") for k in range(20)]
+    frames = group_by_stamps(("a", "b", "c"), [(n, s, POINTS) for n, s in anchor + other])
+    predicted = [f for f in frames if f.stamp_ns == 10 * PERIOD]
+    assert len(predicted) == 1 and predicted[0].reported.tolist() == [False, True, True]
+    assert sum(f.reported.sum() for f in frames) == 59
+
+
+def test_a_silent_camera_delays_frames_by_at_most_max_delay() -> None:
+    sync = FrameSynchroniser(("a", "b", "c"), max_delay_ns=100 * MS)
+    frames = _stream(sync, [(n, k * PERIOD) for n in ("a", "b") for k in range(30)])
+    assert len(frames) >= 25 and all(f.reported.tolist() == [True, True, False] for f in frames)
+    assert frames[-1].stamp_ns >= 29 * PERIOD - 100 * MS - PERIOD
+
+
+def test_out_of_order_duplicate_and_late_images_are_counted_per_camera() -> None:
+    sync = FrameSynchroniser(("a", "b"), max_delay_ns=50 * MS)
+    _stream(sync, [(n, k * PERIOD) for n in ("a", "b") for k in range(10)])
+    sync.add("b", 9 * PERIOD, POINTS)  # the same image again
+    sync.add("b", 5 * PERIOD, POINTS)  # older than its newest
+    assert sync.stats.duplicates == {"a": 0, "b": 1}
+    assert sync.stats.out_of_order == {"a": 0, "b": 1}
+    late = FrameSynchroniser(("a", "b"), max_delay_ns=50 * MS)
+    _stream(late, [("a", k * PERIOD) for k in range(10)] + [("b", k * PERIOD) for k in range(3)])
+    late.add("b", 4 * PERIOD, POINTS)  # its frame went out without it 150 ms ago
+    assert late.stats.late == {"a": 0, "b": 1}

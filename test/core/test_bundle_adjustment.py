@@ -6,8 +6,11 @@ import numpy as np
 
 from wand_calib_ros.core.bundle_adjustment import (
     N_CAMERA_PARAMS,
+    READOUT,
+    TIME_OFFSET,
     BundleProblem,
     BundleState,
+    PlacementTiming,
     _apply_step,
     _linearise,
     bundle_adjust,
@@ -35,16 +38,34 @@ def test_residuals_vanish_at_the_truth_without_noise() -> None:
     assert np.max(np.abs(residuals(state, problem))) < 1e-9
 
 
+def _with_timing(scenario, data, state, seed: int):  # type: ignore[no-untyped-def]
+    """The same views seen at random instants around their placements, the wand moving."""
+    rng = np.random.default_rng(seed)
+    n_placements, n_cameras = data.observations.uv.shape[:2]
+    timing = PlacementTiming(
+        rng.uniform(-0.02, 0.02, (n_placements, n_cameras)),
+        np.array([c.spec.image_size[1] for c in scenario.cameras], dtype=float),
+        rng.normal(scale=800.0, size=(n_placements, 3, 3)),
+        rng.normal(scale=5000.0, size=(n_placements, 3, 3)),
+        rng.normal(scale=50000.0, size=(n_placements, 3, 3)),
+    )
+    timed = BundleState(state.models, state.poses, state.wand_a, state.wand_direction, rng.normal(0.004, 0.003, (3, 2)))
+    return timed, BundleProblem.from_dense(scenario.wand, data.observations.uv, timing)
+
+
 def test_jacobians_match_finite_differences() -> None:
-    _, _, state, problem = _setup(1.0, 8, 1, n_cameras=3)
-    _, jc, jp = _linearise(state, problem)
+    scenario, data, state, _ = _setup(1.0, 8, 1, n_cameras=3)
+    state, problem = _with_timing(scenario, data, state, 7)
+    every = np.array([TIME_OFFSET, READOUT])
+    _, jc, jp = _linearise(state, problem, timing=every)
+    assert jc.shape[2] == N_CAMERA_PARAMS
     h = 1e-6
     for c in range(3):
         for i in range(N_CAMERA_PARAMS):
             delta = np.zeros((3, N_CAMERA_PARAMS))
             delta[c, i] = h
-            plus = residuals(_apply_step(state, delta, np.zeros((8, 5))), problem)
-            minus = residuals(_apply_step(state, -delta, np.zeros((8, 5))), problem)
+            plus = residuals(_apply_step(state, delta, np.zeros((8, 5)), every), problem)
+            minus = residuals(_apply_step(state, -delta, np.zeros((8, 5)), every), problem)
             numeric = (plus - minus) / (2 * h)
             analytic = np.where((problem.camera == c)[:, None], jc[:, :, i], 0.0)
             assert np.allclose(analytic, numeric, atol=1e-4 * max(1.0, np.max(np.abs(numeric))))
@@ -52,8 +73,8 @@ def test_jacobians_match_finite_differences() -> None:
         delta = np.zeros((8, 5))
         delta[:, j] = h
         numeric = (
-            residuals(_apply_step(state, np.zeros((3, 13)), delta), problem)
-            - residuals(_apply_step(state, np.zeros((3, 13)), -delta), problem)
+            residuals(_apply_step(state, np.zeros((3, 15)), delta, every), problem)
+            - residuals(_apply_step(state, np.zeros((3, 15)), -delta, every), problem)
         ) / (2 * h)
         assert np.allclose(jp[:, :, j], numeric, atol=1e-5)
 

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
+from rigs import true_views
 
 from wand_calib_ros.core.pipeline import calibrate
-from wand_calib_ros.core.rig import WandObservations
 from wand_calib_ros.detection.recording import detect_recording
 from wand_calib_ros.io.bags import ImageFrame
 from wand_calib_ros.sim.render import RenderOptions, render_recording
@@ -35,11 +35,11 @@ def test_calibration_from_rendered_images_is_as_good_as_its_noise_allows() -> No
     assert result.sigma_px < 0.1  # the detector's centre noise
     # The true projections with Gaussian noise of the detector's level, on the same frames:
     # the detected data must determine the cameras within 1.2x as well.
-    rows = observations.frames
     found = np.isfinite(observations.uv)
-    sigma = float(np.sqrt(np.mean((observations.uv - recording.drawn[rows])[found] ** 2)))
-    synthetic = np.where(found, recording.drawn[rows] + rng.normal(scale=sigma, size=found.shape), np.nan)
-    reference = calibrate(scenario.rig, WandObservations(rows, observations.camera_names, synthetic))
+    truth = true_views(recording.drawn, observations)
+    sigma = float(np.sqrt(np.mean((observations.uv - truth)[found] ** 2)))
+    synthetic = np.where(found, truth + rng.normal(scale=sigma, size=found.shape), np.nan)
+    reference = calibrate(scenario.rig, observations.with_uv(synthetic))
     for camera in scenario.cameras:
         mine, best = result.camera(camera.spec.name), reference.camera(camera.spec.name)
         for name in ("k1", "u0", "v0"):

@@ -64,3 +64,44 @@ def test_bad_files_name_file_row_and_problem(tmp_path: Path, text: str, message:
     with pytest.raises(FormatError, match=message) as error:
         read_observations(path, ("cam0", "cam1"))
     assert str(path) in str(error.value)
+
+
+STAMPED = "frame,camera,point,u,v,stamp\n"
+
+
+def test_stamps_round_trip_to_the_nanosecond(tmp_path: Path) -> None:
+    rng = np.random.default_rng(1)
+    uv = rng.uniform(0, 640, size=(6, 2, 3, 2))
+    stamps = 1_700_000_000.0 + np.arange(6)[:, None] / 30.0 + np.array([0.0, 0.0123456789])
+    uv[2, 1] = np.nan
+    stamps[2, 1] = np.nan
+    write_observations(WandObservations(np.arange(6), ("a", "b"), uv, stamps), tmp_path / "obs.csv")
+    back = read_observations(tmp_path / "obs.csv", ("a", "b"))
+    assert back.stamps is not None
+    assert np.allclose(back.stamps, stamps, rtol=0, atol=1e-9, equal_nan=True)
+    assert b"\r" not in (tmp_path / "obs.csv").read_bytes()
+
+
+def test_without_a_stamp_column_there_are_no_stamps(tmp_path: Path) -> None:
+    path = tmp_path / "obs.csv"
+    path.write_text(HEADER + ROWS)
+    assert read_observations(path, ("cam0", "cam1")).stamps is None
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        (STAMPED + "0,cam0,A,1,2,\n", "row 2: camera 'cam0' frame 0: stamp must be a number of seconds, got ''"),
+        (STAMPED + "0,cam0,A,1,2,nan\n", "row 2: camera 'cam0' frame 0: stamp must be finite"),
+        (STAMPED + "0,cam0,A,1,2,1700000000123456789\n", "row 2: .*not in seconds \\(nanoseconds\\?\\)"),
+        (STAMPED + "0,cam0,A,1,2,10.0\n0,cam0,B,3,4,10.5\n", "row 3: camera 'cam0' frame 0: stamp 10.5 differs"),
+        (STAMPED + "0,cam1,A,1,2,10.0\n1,cam1,A,1,2,9.9\n", "row 3: camera 'cam1': its stamp goes backwards"),
+        (STAMPED + "0,cam1,A,1,2,10.0\n1,cam1,A,1,2,10.0\n", "row 3: camera 'cam1': its stamp repeats"),
+    ],
+)
+def test_bad_stamps_name_file_row_and_camera(tmp_path: Path, text: str, message: str) -> None:
+    path = tmp_path / "obs.csv"
+    path.write_text(text)
+    with pytest.raises(FormatError, match=message) as error:
+        read_observations(path, ("cam0", "cam1"))
+    assert str(path) in str(error.value)

@@ -7,12 +7,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from rigs import scenario_data
+from rigs import scenario_data, timed_take
 
 from wand_calib_ros.core.camera_model import to_opencv_fisheye
 from wand_calib_ros.core.pipeline import calibrate
 from wand_calib_ros.io.errors import FormatError
 from wand_calib_ros.io.result_yaml import read_result, write_camera_infos, write_result
+from wand_calib_ros.sim.clocks import TakeOptions
 
 
 @pytest.fixture(scope="module")
@@ -56,3 +57,35 @@ def test_reading_something_else_is_a_format_error(tmp_path: Path) -> None:
     path.write_text("a: 1\n")
     with pytest.raises(FormatError, match="not a wand_calib_ros result"):
         read_result(path)
+
+
+def test_results_without_stamps_give_their_timing_in_frames(tmp_path: Path, result) -> None:  # type: ignore[no-untyped-def]
+    write_result(result, tmp_path / "result.yaml")
+    document = yaml.safe_load((tmp_path / "result.yaml").read_text())
+    # simulated independent placements: no continuous motion, so nothing could be estimated
+    assert document["timing"]["time_offsets"] == "fixed" and document["timing"]["unit"] == "frames"
+    assert "continuous motion" in document["timing"]["notes"][0]
+    for entry in document["cameras"].values():
+        assert entry["time_offset_frames"] == 0.0 and entry["rolling_shutter_readout_frames"] == 0.0
+        assert "time_offset_frames" not in entry["std"]
+
+
+def test_estimated_time_offsets_are_written_in_seconds_with_their_std(tmp_path: Path) -> None:
+    scenario, observations, _ = timed_take("paper3", 0, 0.5, TakeOptions(duration_s=10.0, readout_s=0.02))
+    result = calibrate(scenario.rig, observations)
+    write_result(result, tmp_path / "result.yaml")
+    document = yaml.safe_load((tmp_path / "result.yaml").read_text())
+    timing = document["timing"]
+    assert timing["unit"] == "s" and timing["time_offsets"] == "estimated"
+    assert set(timing["rolling_shutter"].values()) == {"estimated"}
+    assert timing["frame_period_s"] == pytest.approx(1 / 30, rel=0.01)
+    reference = document["reference_camera"]
+    assert document["cameras"][reference]["time_offset_s"] == 0.0
+    for name, entry in document["cameras"].items():
+        assert entry["rolling_shutter_readout_s"] == pytest.approx(0.02, abs=0.003)
+        assert 0 < entry["std"]["rolling_shutter_readout_s"] < 0.003
+        if name != reference:
+            assert 0 < entry["std"]["time_offset_s"] < 0.001
+    _, cameras = read_result(tmp_path / "result.yaml")
+    assert cameras["cam1"].time_offset == document["cameras"]["cam1"]["time_offset_s"]
+    assert cameras["cam1"].readout == document["cameras"]["cam1"]["rolling_shutter_readout_s"]

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
 
+from wand_calib_ros.core.rig import RigSpec
 from wand_calib_ros.io.errors import FormatError
 from wand_calib_ros.io.rig_yaml import load_rig, save_rig
 from wand_calib_ros.sim.scenarios import mixed_pair_scenario
@@ -31,6 +33,10 @@ def test_write_read_round_trip(tmp_path: Path) -> None:
     rig = mixed_pair_scenario().rig
     save_rig(rig, tmp_path / "rig.yaml")
     assert load_rig(tmp_path / "rig.yaml") == rig
+    rolling = RigSpec(rig.wand, (replace(rig.cameras[0], readout_ms=18.5), rig.cameras[1]))
+    save_rig(rolling, tmp_path / "rolling.yaml")
+    back = load_rig(tmp_path / "rolling.yaml")
+    assert back == rolling and back.cameras[0].readout_ms == 18.5 and back.cameras[1].readout_ms is None
 
 
 @pytest.mark.parametrize(
@@ -51,6 +57,8 @@ def test_write_read_round_trip(tmp_path: Path) -> None:
             "pixel_size_um must be a list of two numbers",
         ),
         (GOOD.replace("name: cam1", "name: cam0"), "repeated: cam0"),
+        (GOOD.replace("lens: fisheye", "lens: fisheye, readout_ms: -3"), "camera 'cam1' readout_ms is the rolling"),
+        (GOOD.replace("lens: fisheye", "lens: fisheye, readout_ms: fast"), "camera 'cam1' readout_ms must be a number"),
         ("cameras: [", "not valid YAML"),
         ("- 1\n- 2\n", "expected a mapping"),
     ],

@@ -1,8 +1,8 @@
 """A bounded, persisted buffer of synchronised wand observations.
 
-Every accepted frame is appended to an observations CSV (the core's format) and
-flushed at once, so a crash loses at most the frame being written and a restart
-resumes from the file. A frame in which no camera's wand moved by more than
+Every accepted frame is appended to an observations CSV (the core's format, each
+view with its image's stamp) and flushed at once, so a crash loses at most the frame
+being written and a restart resumes from the file. A frame in which no camera's wand moved by more than
 ``min_motion_px`` since the last accepted frame is a near-duplicate (the wand
 held still) and is skipped; once ``capacity`` frames are stored, a frame is only
 accepted when it shows a camera the wand in an image cell with few
@@ -20,9 +20,9 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.rig import POINT_LABELS, RigSpec, WandObservations
+from wand_calib_ros.core.rig import RigSpec, WandObservations
 from wand_calib_ros.io.errors import FormatError
-from wand_calib_ros.io.observations_csv import COLUMNS, read_observations
+from wand_calib_ros.io.observations_csv import header, observation_rows, read_observations
 
 FloatArray = NDArray[np.float64]
 
@@ -53,25 +53,35 @@ class ObservationBuffer:
     min_motion_px: float
     frames: list[int] = field(default_factory=list)
     uv: list[FloatArray] = field(default_factory=list)
+    stamps: list[FloatArray] = field(default_factory=list)
     stats: BufferStats = field(default_factory=BufferStats)
+    with_stamps: bool = True
     _cells: NDArray[np.int64] | None = None
 
     @staticmethod
-    def open(path: Path, rig: RigSpec, *, capacity: int = 20_000, min_motion_px: float = 2.0) -> ObservationBuffer:
-        """A buffer persisted at ``path``; resumes from the file when it exists (a corrupt file is an error)."""
-        buffer = ObservationBuffer(Path(path), rig, capacity, min_motion_px)
+    def open(
+        path: Path, rig: RigSpec, *, capacity: int = 20_000, min_motion_px: float = 2.0, with_stamps: bool = True
+    ) -> ObservationBuffer:
+        """A buffer persisted at ``path``; resumes from the file when it exists (a corrupt file is an error).
+
+        Args:
+            with_stamps: a new file stores each view's stamp (a resumed file keeps what it has: one
+                written without stamps, by an older version, is continued without them).
+        """
+        buffer = ObservationBuffer(Path(path), rig, capacity, min_motion_px, with_stamps=with_stamps)
         buffer._cells = np.zeros((len(rig.cameras), GRID, GRID), dtype=np.int64)
         if buffer.path.exists() and has_rows(buffer.path):
             try:
                 existing = read_observations(buffer.path, rig.camera_names)
             except FormatError as error:
                 raise FormatError(buffer.path, f"cannot resume the buffer ({error}); move the file away") from None
-            for frame, uv in zip(existing.frames, existing.uv, strict=True):
-                buffer._remember(int(frame), uv)
+            buffer.with_stamps = existing.stamps is not None
+            stamps = existing.stamps if existing.stamps is not None else np.full(existing.uv.shape[:2], np.nan)
+            for frame, uv, stamp in zip(existing.frames, existing.uv, stamps, strict=True):
+                buffer._remember(int(frame), uv, stamp)
         else:
             buffer.path.parent.mkdir(parents=True, exist_ok=True)
-            with buffer.path.open("w", newline="") as handle:
-                csv.writer(handle).writerow(COLUMNS)
+            buffer._start_file()
         return buffer
 
     @property
@@ -79,8 +89,12 @@ class ObservationBuffer:
         """Frame id for the next accepted frame (continues after a resume)."""
         return self.frames[-1] + 1 if self.frames else 0
 
-    def offer(self, uv: FloatArray) -> bool:
-        """Consider one synchronised frame ((C, 3, 2), NaN where unseen); True when it was stored."""
+    def offer(self, uv: FloatArray, stamps: FloatArray | None = None) -> bool:
+        """Consider one synchronised frame ((C, 3, 2), NaN where unseen) with its views' stamps ((C,) s,
+        NaN where a camera has no image in it); True when it was stored."""
+        if stamps is None and self.with_stamps:
+            raise ValueError("this buffer stores the views' stamps: offer them with the frame")
+        stamps = np.full(uv.shape[0], np.nan) if stamps is None else np.asarray(stamps, dtype=np.float64)
         complete = np.all(np.isfinite(uv), axis=(1, 2))
         if complete.sum() < 1:
             self.stats.empty += 1
@@ -96,15 +110,17 @@ class ObservationBuffer:
             self.stats.full += 1
             return False
         frame = self.next_frame
-        self._append_rows(frame, uv)
-        self._remember(frame, uv)
+        self._append_rows(frame, uv, stamps)
+        self._remember(frame, uv, stamps)
         self.stats.accepted += 1
         return True
 
     def observations(self) -> WandObservations:
         """Everything stored, in the core's observation type."""
-        uv = np.array(self.uv) if self.uv else np.zeros((0, len(self.rig.cameras), 3, 2))
-        return WandObservations(np.array(self.frames, dtype=np.int64), self.rig.camera_names, uv)
+        n = len(self.rig.cameras)
+        uv = np.array(self.uv) if self.uv else np.zeros((0, n, 3, 2))
+        stamps = (np.array(self.stamps) if self.stamps else np.zeros((0, n))) if self.with_stamps else None
+        return WandObservations(np.array(self.frames, dtype=np.int64), self.rig.camera_names, uv, stamps)
 
     def reset(self) -> Path | None:
         """Move the file to a timestamped backup and start empty; returns the backup path."""
@@ -112,11 +128,14 @@ class ObservationBuffer:
         if self.path.exists():
             backup = self.path.with_name(f"{self.path.stem}.{time.strftime('%Y%m%d-%H%M%S')}.bak{self.path.suffix}")
             shutil.move(self.path, backup)
-        self.frames, self.uv, self.stats = [], [], BufferStats()
+        self.frames, self.uv, self.stamps, self.stats = [], [], [], BufferStats()
         self._cells = np.zeros((len(self.rig.cameras), GRID, GRID), dtype=np.int64)
-        with self.path.open("w", newline="") as handle:
-            csv.writer(handle).writerow(COLUMNS)
+        self._start_file()
         return backup
+
+    def _start_file(self) -> None:
+        with self.path.open("w", newline="") as handle:
+            csv.writer(handle, lineterminator="\n").writerow(header(self.with_stamps))
 
     def _cell_index(self, c: int, points: FloatArray) -> NDArray[np.int64]:
         width, height = self.rig.cameras[c].image_size
@@ -131,22 +150,19 @@ class ObservationBuffer:
                 return True
         return False
 
-    def _remember(self, frame: int, uv: FloatArray) -> None:
+    def _remember(self, frame: int, uv: FloatArray, stamps: FloatArray) -> None:
         assert self._cells is not None
         self.frames.append(frame)
         self.uv.append(np.asarray(uv, dtype=np.float64))
+        self.stamps.append(np.where(np.any(np.isfinite(uv), axis=(1, 2)), stamps, np.nan))
         for c in np.flatnonzero(np.all(np.isfinite(uv), axis=(1, 2))):
             cells = self._cell_index(c, uv[c])
             np.add.at(self._cells[c], (cells[:, 1], cells[:, 0]), 1)
 
-    def _append_rows(self, frame: int, uv: FloatArray) -> None:
+    def _append_rows(self, frame: int, uv: FloatArray, stamps: FloatArray) -> None:
         with self.path.open("a", newline="") as handle:
-            writer = csv.writer(handle)
-            for c, name in enumerate(self.rig.camera_names):
-                for p, label in enumerate(POINT_LABELS):
-                    u, v = uv[c, p]
-                    if np.isfinite(u) and np.isfinite(v):
-                        writer.writerow([frame, name, label, f"{u:.6f}", f"{v:.6f}"])
+            rows = observation_rows(frame, self.rig.camera_names, uv, stamps if self.with_stamps else None)
+            csv.writer(handle, lineterminator="\n").writerows(rows)
             handle.flush()
 
 

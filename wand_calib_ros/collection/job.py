@@ -89,6 +89,11 @@ def run_calibration(
 
 
 def summary(result: CalibrationResult, files: CalibrationFiles) -> str:
-    """One line for a service answer: per camera RMS, wand-length RMS, where the result is."""
+    """One line for a service answer: per camera RMS, wand-length RMS, estimated time offsets, where the result is."""
     cameras = ", ".join(f"{c.name} {c.rms_reprojection_px:.2f} px" for c in result.cameras)
-    return f"RMS {cameras}; wand {result.wand_length_rms_mm:.2f} mm RMS; {files.result}"
+    timing = ""
+    if result.timing is not None and result.timing.time_offsets == "estimated":
+        scale, unit = (1000.0, "ms") if result.timing.unit == "s" else (1.0, "frames")
+        offsets = ", ".join(f"{c.name} {scale * c.time_offset:+.2f}" for c in result.cameras)
+        timing = f"; time offsets ({unit}, reference {result.reference_camera}) {offsets}"
+    return f"RMS {cameras}; wand {result.wand_length_rms_mm:.2f} mm RMS{timing}; {files.result}"

@@ -1,18 +1,28 @@
 """Step 4 of the paper (and Step 2 of Section III-B): wand bundle adjustment.
 
-Unknowns: per camera the intrinsics k1..k5, u0, v0 (m fixed) and the pose
-(reference camera's pose fixed), per wand placement j the point A_j and the
-wand direction n_j; B_j = A_j + L1 n_j and C_j = A_j + L n_j (paper eq.
-orientation). The paper writes n_j with spherical angles (phi_j, theta_j); the
-solver updates n_j in its tangent plane instead, which is the same 2 degrees of
-freedom without the pole singularity. Poses are updated as R <- exp([d]x) R.
+Unknowns: per camera the intrinsics k1..k5, u0, v0 (m fixed), the pose
+(reference camera's pose fixed) and, for cameras that are not hardware-triggered,
+a time offset and a rolling-shutter readout time; per wand placement j the point
+A_j and the wand direction n_j; B_j = A_j + L1 n_j and C_j = A_j + L n_j (paper
+eq. orientation). The paper writes n_j with spherical angles (phi_j, theta_j);
+the solver updates n_j in its tangent plane instead, which is the same 2 degrees
+of freedom without the pole singularity. Poses are updated as R <- exp([d]x) R.
 
 The residual of one observation (camera c sees point p of placement j) is
-``project(c, R_c (A_j + offset_p n_j) + T_c) - uv`` in px. The solver is a
-Levenberg-Marquardt with exact Jacobians that eliminates the independent
-5-dof placement blocks by a Schur complement, so each iteration only solves a
-system of size 13 x cameras. Observation arrays are flat and sorted by
-placement (the structure the Schur complement needs is computed once).
+``project(c, R_c X + T_c) - uv`` in px with ``X = A_j + offset_p n_j``. Cameras
+that are not synchronised see the moving wand at their own instants: with timing,
+the point is carried along the wand's motion to the instant its camera saw it,
+``X + tau V + tau^2 / 2 Acc + tau^3 / 6 Jerk``, ``tau = time - dt_c + readout_c * v / H`` (``time``
+the stamp of the observation's image relative to its placement's time, ``dt_c`` the
+camera's time offset: exposure = stamp - dt_c; v the observed row, H the image
+height; V, Acc and Jerk the point's velocity and its derivatives at the placement's
+time, held fixed during one adjustment).
+
+The solver is a Levenberg-Marquardt with exact Jacobians that eliminates the
+independent 5-dof placement blocks by a Schur complement, so each iteration only
+solves a system of size 13 (plus the timing parameters in use) x cameras.
+Observation arrays are flat and sorted by placement (the structure the Schur
+complement needs is computed once).
 """
 
 from __future__ import annotations
@@ -38,12 +48,82 @@ FloatArray = NDArray[np.float64]
 log = logging.getLogger(__name__)
 IntArray = NDArray[np.int64]
 
-#: Parameters per camera: k1..k5, u0, v0, rotation (3), translation (3).
-N_CAMERA_PARAMS = N_INTRINSIC + 6
+#: Geometric parameters per camera: k1..k5, u0, v0, rotation (3), translation (3).
+N_GEOMETRIC = N_INTRINSIC + 6
+#: Parameters per camera: the geometric ones, then the time offset and the rolling-shutter readout time.
+N_CAMERA_PARAMS = N_GEOMETRIC + 2
+#: Indices of the timing parameters in a camera's parameter vector.
+TIME_OFFSET, READOUT = N_GEOMETRIC, N_GEOMETRIC + 1
 #: Parameters per placement: A (3), wand direction (2, tangent plane).
 N_PLACEMENT_PARAMS = 5
-#: Names of the per-camera parameters in order (rotation as a small-angle update, rad).
-CAMERA_PARAM_NAMES = ("k1", "k2", "k3", "k4", "k5", "u0", "v0", "rx", "ry", "rz", "tx", "ty", "tz")
+#: Names of the per-camera parameters in order (rotation as a small-angle update, rad; the timing
+#: parameters in the time unit of the observations).
+CAMERA_PARAM_NAMES = (
+    "k1", "k2", "k3", "k4", "k5", "u0", "v0", "rx", "ry", "rz", "tx", "ty", "tz", "time_offset", "readout",
+)  # fmt: skip
+
+
+@dataclass(frozen=True, eq=False)
+class ObservationTiming:
+    """When each observation of a :class:`BundleProblem` was seen, and how its point moved.
+
+    Attributes:
+        time: (M,) stamp of the observation's image relative to its placement's time.
+        row: (M,) observed v / image height (0 at the top row).
+        velocity: (M, 3) velocity of the observed point at its placement's time, reference frame.
+        acceleration: (M, 3) its acceleration.
+        jerk: (M, 3) its jerk (the derivative of the acceleration).
+    """
+
+    time: FloatArray
+    row: FloatArray
+    velocity: FloatArray
+    acceleration: FloatArray
+    jerk: FloatArray
+
+
+@dataclass(frozen=True, eq=False)
+class PlacementTiming:
+    """When each camera saw each placement, and how the wand moved there.
+
+    Attributes:
+        times: (P, C) stamp of each camera's image relative to the placement's time (0 for
+            synchronised cameras; any value where unseen), in the time unit of the observations.
+        heights: (C,) image heights, px (a rolling shutter reads row v at v / H of its readout time).
+        velocity: (P, 3, 3) velocity of A, B, C at the placement's time, reference frame, mm per time unit.
+        acceleration: (P, 3, 3) their acceleration, mm per time unit squared.
+        jerk: (P, 3, 3) their jerk, mm per time unit cubed.
+    """
+
+    times: FloatArray
+    heights: FloatArray
+    velocity: FloatArray
+    acceleration: FloatArray
+    jerk: FloatArray
+
+    def __post_init__(self) -> None:
+        n_placements, n_cameras = self.times.shape
+        if self.heights.shape != (n_cameras,):
+            raise ValueError(f"heights must have shape ({n_cameras},), got {self.heights.shape}")
+        for name in ("velocity", "acceleration", "jerk"):
+            if getattr(self, name).shape != (n_placements, 3, 3):
+                raise ValueError(f"{name} must have shape ({n_placements}, 3, 3), got {getattr(self, name).shape}")
+
+    def subset(self, index: IntArray | NDArray[np.bool_]) -> PlacementTiming:
+        """The timing of some placements (an index or mask over axis 0)."""
+        return PlacementTiming(
+            self.times[index], self.heights, self.velocity[index], self.acceleration[index], self.jerk[index]
+        )
+
+    def observations(self, placement: IntArray, camera: IntArray, point: IntArray, uv: FloatArray) -> ObservationTiming:
+        """The flat per-observation arrays of the views ``(placement, camera, point)`` seen at ``uv`` (M, 2)."""
+        return ObservationTiming(
+            self.times[placement, camera],
+            uv[:, 1] / self.heights[camera],
+            self.velocity[placement, point],
+            self.acceleration[placement, point],
+            self.jerk[placement, point],
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -58,6 +138,8 @@ class BundleProblem:
         placement: (M,) placement index (non-decreasing).
         point: (M,) 0, 1, 2 for A, B, C.
         uv: (M, 2) observed pixels.
+        timing: when each observation was seen and how its point moved (None: every camera saw a
+            placement at one instant, as hardware-triggered global shutters do).
     """
 
     wand: WandSpec
@@ -67,21 +149,24 @@ class BundleProblem:
     placement: IntArray
     point: IntArray
     uv: FloatArray
+    timing: ObservationTiming | None = None
 
     @staticmethod
-    def from_dense(wand: WandSpec, uv: FloatArray) -> BundleProblem:
-        """Problem from dense (P, C, 3, 2) pixels with NaN for unseen points."""
+    def from_dense(wand: WandSpec, uv: FloatArray, timing: PlacementTiming | None = None) -> BundleProblem:
+        """Problem from dense (P, C, 3, 2) pixels with NaN for unseen points, and their timing."""
         n_placements, n_cameras = uv.shape[:2]
         seen = np.all(np.isfinite(uv), axis=-1)  # (P, C, 3)
-        placement, camera, point = np.nonzero(seen)
+        placement, camera, point = (i.astype(np.int64) for i in np.nonzero(seen))
+        observed = uv[placement, camera, point]
         return BundleProblem(
             wand,
             n_cameras,
             n_placements,
-            camera.astype(np.int64),
-            placement.astype(np.int64),
-            point.astype(np.int64),
-            uv[placement, camera, point],
+            camera,
+            placement,
+            point,
+            observed,
+            None if timing is None else timing.observations(placement, camera, point, observed),
         )
 
     @property
@@ -98,12 +183,20 @@ class BundleState:
         poses: per camera pose (X_cam = R X_ref + T).
         wand_a: (P, 3) point A of each placement in the reference frame, mm.
         wand_direction: (P, 3) unit vector from A to C.
+        timing: (C, 2) per camera time offset (exposure = stamp - offset) and rolling-shutter readout
+            time, in the time unit of the observations; None: all zero.
     """
 
     models: tuple[CameraModel, ...]
     poses: tuple[Pose, ...]
     wand_a: FloatArray
     wand_direction: FloatArray
+    timing: FloatArray | None = None
+
+    @property
+    def camera_timing(self) -> FloatArray:
+        """(C, 2) time offset and readout time per camera (zeros when not modelled)."""
+        return np.zeros((len(self.models), 2)) if self.timing is None else self.timing
 
     def points(self, wand: WandSpec) -> FloatArray:
         """(P, 3, 3) A, B, C of every placement in the reference frame, mm."""
@@ -119,9 +212,9 @@ class BundleResult:
         residuals: (M, 2) reprojection residuals (projected minus observed), px.
         iterations: LM iterations done.
         converged: whether a convergence criterion was met.
-        camera_std: (C, 13) standard deviations of the camera parameters
+        camera_std: (C, 15) standard deviations of the camera parameters
             (:data:`CAMERA_PARAM_NAMES` order; 0 for fixed ones), from the final Jacobian.
-        camera_covariance: (C*13, C*13) covariance of all camera parameters (0 rows/cols for fixed).
+        camera_covariance: (C*15, C*15) covariance of all camera parameters (0 rows/cols for fixed).
         sigma: estimated pixel noise sqrt(sum r^2 / (m - p)), px.
         dof: (m, p) residual scalars and free parameters.
     """
@@ -135,6 +228,12 @@ class BundleResult:
     sigma: float
     dof: tuple[int, int]
 
+    def camera_block(self, camera: int, parameters: slice) -> FloatArray:
+        """The covariance of some of one camera's parameters (a slice of :data:`CAMERA_PARAM_NAMES`)."""
+        first = camera * N_CAMERA_PARAMS
+        block = slice(first + (parameters.start or 0), first + (parameters.stop or N_CAMERA_PARAMS))
+        return self.camera_covariance[block, block]
+
 
 def _camera_arrays(state: BundleState) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
     k = np.stack([m.k for m in state.models])
@@ -145,9 +244,18 @@ def _camera_arrays(state: BundleState) -> tuple[FloatArray, FloatArray, FloatArr
     return k, mm, pp, rotations, translations
 
 
-def _world_points(state: BundleState, problem: BundleProblem) -> FloatArray:
+def _world_points(state: BundleState, problem: BundleProblem) -> tuple[FloatArray, FloatArray | None]:
+    """(M, 3) observed points where their cameras saw them, and d(point)/d(tau) (None without timing)."""
     offsets = problem.wand.offsets[problem.point]
-    return state.wand_a[problem.placement] + offsets[:, None] * state.wand_direction[problem.placement]
+    world = state.wand_a[problem.placement] + offsets[:, None] * state.wand_direction[problem.placement]
+    timing = problem.timing
+    if timing is None:
+        return world, None
+    dt, readout = state.camera_timing[problem.camera].T
+    tau = timing.time - dt + readout * timing.row
+    half = (0.5 * tau * tau)[:, None]
+    world = world + tau[:, None] * (timing.velocity + half / 3.0 * timing.jerk) + half * timing.acceleration
+    return world, timing.velocity + tau[:, None] * timing.acceleration + half * timing.jerk
 
 
 def residuals(state: BundleState, problem: BundleProblem) -> FloatArray:
@@ -155,13 +263,32 @@ def residuals(state: BundleState, problem: BundleProblem) -> FloatArray:
     return _linearise(state, problem, jacobians=False)[0]
 
 
+def timing_columns(free: NDArray[np.bool_]) -> IntArray:
+    """Timing parameters (indices into :data:`CAMERA_PARAM_NAMES`) free for at least one camera.
+
+    The adjustment carries the 13 geometric parameters of every camera and only these timing
+    ones, so a synchronised rig costs what it did before timing was modelled.
+    """
+    return (np.flatnonzero(free[:, N_GEOMETRIC:].any(axis=0)) + N_GEOMETRIC).astype(np.int64)
+
+
+#: No timing parameter carried.
+_NO_TIMING = np.empty(0, dtype=np.int64)
+
+
 def _linearise(
-    state: BundleState, problem: BundleProblem, *, jacobians: bool = True, cameras: bool = True
+    state: BundleState,
+    problem: BundleProblem,
+    *,
+    jacobians: bool = True,
+    cameras: bool = True,
+    timing: IntArray = _NO_TIMING,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Residuals (M, 2), camera Jacobians (M, 2, 13; empty unless ``cameras``) and placement Jacobians (M, 2, 5)."""
+    """Residuals (M, 2), camera Jacobians (M, 2, 13 + len(timing); empty unless ``cameras``) and
+    placement Jacobians (M, 2, 5)."""
     k, mm, pp, rotations, translations = _camera_arrays(state)
     c = problem.camera
-    world = _world_points(state, problem)
+    world, d_tau = _world_points(state, problem)
     camera_rotations = rotations[c]
     rotated = (camera_rotations @ world[..., None])[..., 0]
     projection = project_with_jacobian_arrays(k[c], mm[c], pp[c], rotated + translations[c])
@@ -169,13 +296,20 @@ def _linearise(
     if not jacobians:
         return res, np.empty(0), np.empty(0)
     dp = projection.d_point  # (M, 2, 3)
-    jc = np.empty((0, 2, N_CAMERA_PARAMS))
+    dp_r = dp @ camera_rotations  # d uv / d world point
+    width = N_GEOMETRIC + timing.size
+    jc = np.empty((0, 2, width))
     if cameras:
-        jc = np.empty((res.shape[0], 2, N_CAMERA_PARAMS))
+        jc = np.empty((res.shape[0], 2, width))
         jc[:, :, :N_INTRINSIC] = projection.d_intrinsics
         jc[:, :, N_INTRINSIC : N_INTRINSIC + 3] = -(dp @ skew(rotated))
-        jc[:, :, N_INTRINSIC + 3 :] = dp
-    dp_r = dp @ camera_rotations  # d uv / d world point
+        jc[:, :, N_INTRINSIC + 3 : N_GEOMETRIC] = dp
+        if timing.size:
+            if d_tau is None or problem.timing is None:
+                raise ValueError("timing parameters need the observations' timing")
+            along = (dp_r @ d_tau[..., None])[..., 0]  # d uv / d tau, (M, 2)
+            for i, column in enumerate(timing):
+                jc[:, :, N_GEOMETRIC + i] = -along if column == TIME_OFFSET else problem.timing.row[:, None] * along
     basis = tangent_basis(state.wand_direction)[problem.placement]  # (M, 3, 2)
     offsets = problem.wand.offsets[problem.point]
     jp = np.empty((res.shape[0], 2, N_PLACEMENT_PARAMS))
@@ -184,16 +318,21 @@ def _linearise(
     return res, jc, jp
 
 
-def _apply_step(state: BundleState, delta_c: FloatArray, delta_p: FloatArray) -> BundleState:
+def _apply_step(state: BundleState, delta_c: FloatArray, delta_p: FloatArray, timing: IntArray) -> BundleState:
+    """The state moved by camera steps (C, 13 + len(timing)) and placement steps (P, 5)."""
     models, poses = [], []
     for model, pose, d in zip(state.models, state.poses, delta_c, strict=True):
         models.append(model.with_intrinsic_vector(model.intrinsic_vector() + d[:N_INTRINSIC]))
         rotation = rotation_from_rotvec(d[N_INTRINSIC : N_INTRINSIC + 3]) @ pose.rotation
-        poses.append(Pose(rotation, pose.translation + d[N_INTRINSIC + 3 :]))
+        poses.append(Pose(rotation, pose.translation + d[N_INTRINSIC + 3 : N_GEOMETRIC]))
+    camera_timing = state.timing
+    if timing.size:
+        camera_timing = state.camera_timing.copy()
+        camera_timing[:, timing - N_GEOMETRIC] += delta_c[:, N_GEOMETRIC:]
     basis = tangent_basis(state.wand_direction)
     direction = state.wand_direction + np.einsum("pij,pj->pi", basis, delta_p[:, 3:])
     direction /= np.linalg.norm(direction, axis=1, keepdims=True)
-    return BundleState(tuple(models), tuple(poses), state.wand_a + delta_p[:, :3], direction)
+    return BundleState(tuple(models), tuple(poses), state.wand_a + delta_p[:, :3], direction, camera_timing)
 
 
 @dataclass(frozen=True, eq=False)
@@ -262,7 +401,7 @@ def robust_cost(res: FloatArray, loss_scale: float | None) -> float:
 def _normal_equations(
     res: FloatArray, jc: FloatArray, jp: FloatArray, weights: FloatArray, structure: _Structure, n_cameras: int
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
-    """U (C,13,13), V (P,5,5), W (B,13,5), gc (C,13), gp (P,5) of the weighted problem, g = -J^T W r."""
+    """U (C,K,K), V (P,5,5), W (B,K,5), gc (C,K), gp (P,5) of the weighted problem, g = -J^T W r (K = jc width)."""
     if not np.all(weights == 1.0):
         root = np.sqrt(weights)[:, None, None]
         jc, jp, res = jc * root[: jc.shape[0]], jp * root, res * root[:, :, 0]
@@ -272,13 +411,14 @@ def _normal_equations(
     gp = -(structure.obs_to_placement @ (jp_t @ res[..., None])[..., 0])
     if jc.shape[0] == 0:  # placements only
         return np.empty((0,)), v, np.empty((0,)), np.empty((0,)), gp
-    u = np.empty((n_cameras, N_CAMERA_PARAMS, N_CAMERA_PARAMS))
-    gc = np.empty((n_cameras, N_CAMERA_PARAMS))
+    width = jc.shape[2]
+    u = np.empty((n_cameras, width, width))
+    gc = np.empty((n_cameras, width))
     for c in range(n_cameras):
-        rows = jc[structure.observations_of_camera[c]].reshape(-1, N_CAMERA_PARAMS)
+        rows = jc[structure.observations_of_camera[c]].reshape(-1, width)
         u[c] = rows.T @ rows
         gc[c] = -(rows.T @ res[structure.observations_of_camera[c]].reshape(-1))
-    w = (structure.obs_to_block @ (jc.transpose(0, 2, 1) @ jp).reshape(m, -1)).reshape(-1, N_CAMERA_PARAMS, 5)
+    w = (structure.obs_to_block @ (jc.transpose(0, 2, 1) @ jp).reshape(m, -1)).reshape(-1, width, 5)
     return u, v, w, gc, gp
 
 
@@ -306,14 +446,15 @@ def _reduced_system(
     structure: _Structure,
     n_cameras: int,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Schur complement S = U - W V^-1 W^T (dense, 13C square), its right-hand side and V^-1.
+    """Schur complement S = U - W V^-1 W^T (dense, KC square), its right-hand side and V^-1.
 
     With L L^T = V_j^-1 and Z_b = W_b L_j, S = U - Z Z^T where Z is the dense
     (13C x 5P) matrix of the blocks Z_b: one BLAS product per chunk of placements.
     """
     v_inv, root = _inverse_and_root(v)
     z = w @ root[structure.block_placement]  # (B, 13, 5)
-    size = n_cameras * N_CAMERA_PARAMS
+    width = u.shape[1]
+    size = n_cameras * width
     s = scipy.linalg.block_diag(*u) if n_cameras > 1 else u[0].copy()
     n_placements = v.shape[0]
     for first in range(0, n_placements, _SCHUR_CHUNK):
@@ -322,7 +463,7 @@ def _reduced_system(
             structure.placement_block_starts[first],
             structure.placement_block_starts[last] if last < n_placements else z.shape[0],
         )
-        dense = np.zeros((n_cameras, N_CAMERA_PARAMS, last - first, N_PLACEMENT_PARAMS))
+        dense = np.zeros((n_cameras, width, last - first, N_PLACEMENT_PARAMS))
         dense[structure.block_camera[blocks], :, structure.block_placement[blocks] - first, :] = z[blocks]
         dense = dense.reshape(size, -1)
         s -= dense @ dense.T
@@ -363,9 +504,10 @@ def _solve_free(s: FloatArray, rhs: FloatArray, free: NDArray[np.bool_]) -> Floa
 
 
 def default_free_mask(n_cameras: int, reference: int = 0) -> NDArray[np.bool_]:
-    """(C, 13) mask: every intrinsic free, every pose but the reference camera's free."""
+    """(C, 15) mask: every intrinsic free, every pose but the reference camera's free, no timing."""
     free = np.ones((n_cameras, N_CAMERA_PARAMS), dtype=bool)
     free[reference, N_INTRINSIC:] = False
+    free[:, N_GEOMETRIC:] = False
     return free
 
 
@@ -383,7 +525,8 @@ def bundle_adjust(
     Args:
         state: initial values (Step 3 result, placements from triangulation).
         problem: the observations, sorted by placement then camera.
-        free: (C, 13) which camera parameters are estimated (see :func:`default_free_mask`).
+        free: (C, 15) which camera parameters are estimated (see :func:`default_free_mask`); the
+            timing ones need ``problem.timing``.
         loss_scale: Huber threshold on each observation's 2D residual (px), or None for least
             squares. The robust problem is solved by iteratively reweighted least squares.
         max_iterations: LM iteration cap.
@@ -394,10 +537,12 @@ def bundle_adjust(
     """
     structure = _structure(problem)
     n_cameras = problem.n_cameras
-    free_flat = free.reshape(-1)
+    timing = timing_columns(free)
+    columns = np.concatenate([np.arange(N_GEOMETRIC), timing])  # the camera parameters carried
+    free_flat = free[:, columns].reshape(-1)
     cameras = bool(free_flat.any())
     lam = 1e-6
-    res, jc, jp = _linearise(state, problem, cameras=cameras)
+    res, jc, jp = _linearise(state, problem, cameras=cameras, timing=timing)
     if not np.all(np.isfinite(res)):
         raise CalibrationFailedError("the bundle adjustment starts from non-finite reprojections")
     cost = robust_cost(res, loss_scale)
@@ -410,18 +555,18 @@ def bundle_adjust(
         for _ in range(30):
             if cameras:
                 s, rhs, v_inv = _reduced_system(_damp(u, lam), _damp(v, lam), w, gc, gp, structure, n_cameras)
-                delta_c = _solve_free(s, rhs, free_flat).reshape(n_cameras, N_CAMERA_PARAMS)
+                delta_c = _solve_free(s, rhs, free_flat).reshape(n_cameras, columns.size)
                 delta_p = _back_substitute(delta_c, v_inv, w, gp, structure)
             else:  # placements only: independent 5x5 systems
-                delta_c = np.zeros((n_cameras, N_CAMERA_PARAMS))
+                delta_c = np.zeros((n_cameras, columns.size))
                 delta_p = np.linalg.solve(_damp(v, lam), gp[..., None])[..., 0]
             try:
-                candidate = _apply_step(state, delta_c, delta_p)
+                candidate = _apply_step(state, delta_c, delta_p, timing)
             except ModelError:  # e.g. k1 <= 0: not a camera, reject the step
                 lam *= 10.0
                 continue
             # Jacobians come with the trial residuals: steps are rarely rejected near a solution.
-            new_res, new_jc, new_jp = _linearise(candidate, problem, cameras=cameras)
+            new_res, new_jc, new_jp = _linearise(candidate, problem, cameras=cameras, timing=timing)
             new_cost = robust_cost(new_res, loss_scale) if np.all(np.isfinite(new_res)) else np.inf
             if new_cost < cost:
                 accepted = True
@@ -449,7 +594,8 @@ def bundle_adjust(
     if cameras:
         u, v, w, gc, gp = _normal_equations(res, jc, jp, weights, structure, n_cameras)
         s, _, _ = _reduced_system(u, _damp(v, 0.0), w, gc, gp, structure, n_cameras)
-        covariance[np.ix_(free_flat, free_flat)] = np.linalg.pinv(s[np.ix_(free_flat, free_flat)], hermitian=True)
+        carried = (np.arange(n_cameras)[:, None] * N_CAMERA_PARAMS + columns[None, :]).reshape(-1)[free_flat]
+        covariance[np.ix_(carried, carried)] = np.linalg.pinv(s[np.ix_(free_flat, free_flat)], hermitian=True)
         covariance *= sigma**2
     camera_std = np.sqrt(np.clip(np.diag(covariance), 0.0, None)).reshape(n_cameras, N_CAMERA_PARAMS)
     return BundleResult(state, res, iterations, converged, camera_std, covariance, sigma, (m, p))

@@ -23,3 +23,7 @@ class DegenerateDataError(CoreError):
 
 class CalibrationFailedError(CoreError):
     """An optimisation step failed to produce a usable result."""
+
+
+class TimingError(CoreError):
+    """Stamps or time offsets that cannot describe when the cameras saw the wand."""

@@ -7,9 +7,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.camera_model import CameraModel
+from wand_calib_ros.core.camera_model import CameraModel, inverse_radius, radius
 from wand_calib_ros.core.geometry import Pose, rotation_error_deg, translation_error
-from wand_calib_ros.core.refine import ac_length_errors, triangulate_placements
+from wand_calib_ros.core.placements import triangulate_placements
+from wand_calib_ros.core.refine import ac_length_errors
 from wand_calib_ros.core.rig import WandSpec
 
 FloatArray = NDArray[np.float64]
@@ -25,6 +26,8 @@ class CameraErrors:
         principal_point_px: distance between estimated and true principal point, px.
         rotation_deg: the paper's E_r (0 for the reference camera).
         translation: the paper's E_t (NaN for the reference camera).
+        curve_px: RMS of m (r(theta) - r_true(theta)) over the angles the image's inscribed circle
+            reaches (CURVE_SAMPLES angles), px: the distortion curve's error.
     """
 
     focal_px: float
@@ -32,6 +35,20 @@ class CameraErrors:
     principal_point_px: float
     rotation_deg: float
     translation: float
+    curve_px: float
+
+
+#: Angles at which the distortion curves are compared.
+CURVE_SAMPLES = 50
+
+
+def curve_error_px(model: CameraModel, true_model: CameraModel) -> float:
+    """RMS (px) of m_u (r(theta) - r_true(theta)) for theta up to where the true image radius reaches half
+    the image's shorter side (the inscribed circle: every direction of the image sees it)."""
+    inscribed = 0.5 * min(true_model.image_size) / float(true_model.m[0])
+    limit = float(inverse_radius(true_model.k, np.array(inscribed)))
+    theta = np.linspace(0.0, limit if np.isfinite(limit) else 0.5, CURVE_SAMPLES)
+    return float(true_model.m[0] * np.sqrt(np.mean((radius(model.k, theta) - radius(true_model.k, theta)) ** 2)))
 
 
 def camera_errors(model: CameraModel, pose: Pose, true_model: CameraModel, true_pose: Pose) -> CameraErrors:
@@ -43,6 +60,7 @@ def camera_errors(model: CameraModel, pose: Pose, true_model: CameraModel, true_
         principal_point_px=float(np.linalg.norm(model.principal_point - true_model.principal_point)),
         rotation_deg=rotation_error_deg(true_pose.rotation, pose.rotation),
         translation=translation_error(true_pose.translation, pose.translation) if t_norm > 1e-6 else float("nan"),
+        curve_px=curve_error_px(model, true_model),
     )
 
 

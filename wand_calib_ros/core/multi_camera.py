@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wand_calib_ros.core.camera_model import CameraModel
+from wand_calib_ros.core.errors import DegenerateDataError
 from wand_calib_ros.core.geometry import Pose
 from wand_calib_ros.core.intrinsics_init import PROJECTIONS
 from wand_calib_ros.core.pairwise import PairOptions, initialise_pair
@@ -83,14 +84,21 @@ def initialise_rig(
     for parent, child in graph.edges:
         both = complete[:, parent] & complete[:, child]
         log.info("pair %s-%s: %d common placements", rig.cameras[parent].name, rig.cameras[child].name, both.sum())
-        init = initialise_pair(
-            (rig.cameras[parent], _with_lens_of_twin(rig, child, starts)),
-            uv[both, parent],
-            uv[both, child],
-            rig.wand,
-            options,
-            known=(starts[parent], starts[child]),
-        )
+        try:
+            init = initialise_pair(
+                (rig.cameras[parent], _with_lens_of_twin(rig, child, starts)),
+                uv[both, parent],
+                uv[both, child],
+                rig.wand,
+                options,
+                known=(starts[parent], starts[child]),
+            )
+        except DegenerateDataError as error:  # the starts carried over from earlier pairs do not fit this one
+            log.info("pair %s-%s from the earlier starts failed (%s): every lens start instead",
+                     rig.cameras[parent].name, rig.cameras[child].name, error)  # fmt: skip
+            init = initialise_pair(
+                (rig.cameras[parent], rig.cameras[child]), uv[both, parent], uv[both, child], rig.wand, options
+            )
         trials.extend(init.trials)
         parent_pose = poses[parent]
         assert parent_pose is not None  # edges are ordered parents first

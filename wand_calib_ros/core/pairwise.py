@@ -26,7 +26,8 @@ from wand_calib_ros.core.errors import CoreError, DegenerateDataError, Insuffici
 from wand_calib_ros.core.essential import RelativePose, epipolar_angles, relative_pose
 from wand_calib_ros.core.geometry import Pose, wand_directions
 from wand_calib_ros.core.intrinsics_init import initial_model, lens_candidates
-from wand_calib_ros.core.refine import robust_adjustment, triangulate_placements
+from wand_calib_ros.core.placements import triangulate_placements
+from wand_calib_ros.core.refine import robust_adjustment
 from wand_calib_ros.core.result import LensTrial
 from wand_calib_ros.core.rig import CameraSpec, WandSpec, spread_subset
 from wand_calib_ros.core.wand_lm import WandFit, optimise_wand_lengths

@@ -14,6 +14,7 @@ from wand_calib_ros.core.pairwise import PairOptions
 from wand_calib_ros.core.refine import refine_calibration
 from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.core.rig import RigSpec, WandObservations, spread_subset
+from wand_calib_ros.core.timing import align_views, offset_warnings, rate_warnings, timing_input
 from wand_calib_ros.core.vision_graph import build_vision_graph
 
 log = logging.getLogger(__name__)
@@ -29,11 +30,17 @@ class CalibrationOptions:
         pair: settings of the pairwise initialisation (Steps 1-3).
         max_placements: use at most this many placements, spread evenly over the recording
             (consecutive frames of a slowly waved wand are redundant): a time budget.
+        time_offsets: "auto" (estimated when they differ significantly from zero), "estimate" or
+            "fixed" (synchronised cameras: zero).
+        rolling_shutter: "auto" (per camera, estimated when significant), "estimate" or "fixed"
+            (zero, or the rig description's ``readout_ms``).
     """
 
     reference_camera: str | None = None
     pair: PairOptions = field(default_factory=PairOptions)
     max_placements: int | None = None
+    time_offsets: str = "auto"
+    rolling_shutter: str = "auto"
 
 
 def calibrate(
@@ -62,6 +69,7 @@ def calibrate(
         if name not in observations.camera_names:
             raise InsufficientDataError(f"camera '{name}' has no observations")
     obs = observations.select_cameras(names)
+    timing = timing_input(rig, obs, offsets=options.time_offsets, rolling_shutter=options.rolling_shutter)
     complete = obs.complete
     usable = np.flatnonzero(complete.sum(axis=1) >= 2)  # a placement seen by one camera only constrains nothing
     if options.max_placements is not None and usable.size > options.max_placements:
@@ -77,7 +85,8 @@ def calibrate(
         names[graph.reference],
         ", ".join(f"{names[a]}-{names[b]}" for a, b in graph.edges),
     )
-    init = initialise_rig(rig, uv, graph, options.pair)
+    line = timing.line.subset(usable)
+    init = initialise_rig(rig, align_views(uv, line), graph, options.pair)  # free-running views nearly simultaneous
     result = refine_calibration(
         rig,
         uv,
@@ -86,6 +95,10 @@ def calibrate(
         reference=graph.reference,
         initial_projections=init.projections,
         lens_trials=init.trials,
+        timing=replace(timing, line=line),
     )
-    offsets = clock_offsets(result, obs)
-    return replace(result, clock_offsets=offsets, warnings=result.warnings + tuple(clock_warnings(offsets)))
+    warnings = [*result.warnings, *rate_warnings(obs, timing.line), *offset_warnings(result)]
+    if result.timing is not None and result.timing.time_offsets == "estimated":
+        return replace(result, warnings=tuple(warnings))
+    offsets = clock_offsets(result, obs)  # not modelled: say when the residuals show them
+    return replace(result, clock_offsets=offsets, warnings=(*warnings, *clock_warnings(offsets)))

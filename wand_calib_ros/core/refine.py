@@ -1,23 +1,25 @@
 """Step 4 around the solver: gate placements, bundle-adjust, keep r(theta) sane, report.
 
 Works for any number of cameras once every camera has initial intrinsics and
-a pose in the reference frame.
+a pose in the reference frame. Cameras that are not synchronised get their time
+offsets and readout times estimated with everything else (:mod:`wand_calib_ros.core.timing`).
 """
 
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
 from wand_calib_ros.core.bundle_adjustment import (
     CAMERA_PARAM_NAMES,
-    N_CAMERA_PARAMS,
+    N_GEOMETRIC,
     BundleProblem,
     BundleResult,
     BundleState,
+    PlacementTiming,
     bundle_adjust,
     default_free_mask,
     residuals,
@@ -28,12 +30,20 @@ from wand_calib_ros.core.camera_model import (
     max_image_radius_mm,
     monotonic_limit,
     turns_over_in_image,
-    unproject,
 )
-from wand_calib_ros.core.errors import DegenerateDataError, InsufficientDataError
-from wand_calib_ros.core.geometry import Pose, triangulate, wand_directions
-from wand_calib_ros.core.result import CalibrationResult, CameraCalibration, LensTrial
+from wand_calib_ros.core.errors import DegenerateDataError, InsufficientDataError, ModelError
+from wand_calib_ros.core.geometry import Pose, wand_directions
+from wand_calib_ros.core.placements import fit_placements, triangulate_placements
+from wand_calib_ros.core.result import CalibrationResult, CameraCalibration, LensTrial, TimingSummary
 from wand_calib_ros.core.rig import CameraSpec, RigSpec, WandSpec, spread_subset
+from wand_calib_ros.core.timing import (
+    ClockModel,
+    TimingInput,
+    align_views,
+    reduce_timing,
+    refresh_motion,
+    start_clocks,
+)
 
 FloatArray = NDArray[np.float64]
 log = logging.getLogger(__name__)
@@ -63,27 +73,14 @@ HUBER_SIGMAS = 2.0
 VIEW_GATE_SIGMAS = 5.0
 #: The highest free radial coefficient is fixed to zero while |k| / std(k) is below this (Wald test).
 SIGNIFICANCE = 2.0
+#: Rounds of refitting the wand's motion and re-adjusting, at most, until the timing parameters move by
+#: less than MOTION_SETTLED of their standard deviations.
+MOTION_ROUNDS = 3
+MOTION_SETTLED = 0.1
 #: Uncertainty of r(theta) at the widest observed angle (px) above which a camera gets a warning.
 WEAK_CURVE_PX = 0.5
 #: A camera whose observations stop below this fraction of the angle its image reaches gets a warning.
 COVERAGE_FRACTION = 0.8
-
-
-def triangulate_placements(models: tuple[CameraModel, ...], poses: tuple[Pose, ...], uv: FloatArray) -> FloatArray:
-    """Linear n-view triangulation of every wand point.
-
-    Args:
-        models, poses: per camera intrinsics and pose (reference frame).
-        uv: (P, C, 3, 2) pixels of A, B, C, NaN where not seen.
-
-    Returns:
-        (P, 3, 3) A, B, C in the reference frame (NaN where fewer than two views).
-    """
-    n_placements, n_cameras = uv.shape[:2]
-    bearings = np.stack([unproject(models[c], uv[:, c]) for c in range(n_cameras)], axis=2)  # (P, 3, C, 3)
-    rotations = np.stack([p.rotation for p in poses])
-    translations = np.stack([p.translation for p in poses])
-    return triangulate(bearings.reshape(-1, n_cameras, 3), rotations, translations).reshape(n_placements, 3, 3)
 
 
 def ac_length_errors(points: FloatArray, wand: WandSpec) -> FloatArray:
@@ -98,17 +95,24 @@ def gate_threshold(errors: FloatArray, wand: WandSpec) -> float:
     return max(GATE_FRACTION * wand.L, GATE_SIGMAS * mad_sigma)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class _Fixed:
-    """Radial coefficients held at zero per camera (indices into k1..k5)."""
+    """Radial coefficients held at zero per camera (indices into k1..k5), and the timing estimated.
+
+    Attributes:
+        per_camera: per camera the fixed radial indices.
+        timing: (C, 2) whether each camera's time offset and readout time are estimated.
+    """
 
     per_camera: tuple[tuple[int, ...], ...]
+    timing: NDArray[np.bool_]
 
 
 def _free_mask(n_cameras: int, reference: int, fixed: _Fixed) -> NDArray[np.bool_]:
     free = default_free_mask(n_cameras, reference)
     for camera, indices in enumerate(fixed.per_camera):
         free[camera, list(indices)] = False
+    free[:, N_GEOMETRIC:] = fixed.timing
     return free
 
 
@@ -143,6 +147,7 @@ def refine_calibration(
     initial_projections: tuple[str, ...],
     lens_trials: tuple[LensTrial, ...] = (),
     min_placements: int = 10,
+    timing: TimingInput | None = None,
 ) -> CalibrationResult:
     """Gate, bundle-adjust and report (paper Step 4 / Section III-B Step 2).
 
@@ -155,12 +160,16 @@ def refine_calibration(
         initial_projections: per camera, the Step 1 projection it started from.
         lens_trials: Step 1-3 candidate scores to carry into the result.
         min_placements: fewest placements the bundle adjustment accepts.
+        timing: when the cameras saw the placements (None: synchronised cameras, frames in no time order).
     """
     wand = rig.wand
     n_cameras = len(rig.cameras)
     full = default_free_mask(n_cameras, reference)
     models = tuple(m.with_intrinsic_vector(np.r_[m.k[:2], 0.0, 0.0, 0.0, m.principal_point]) for m in models)
-    points = triangulate_placements(models, poses, uv)
+    # The gate and the starting placements use views moved to their placement's time along each camera's
+    # image track (free-running cameras); the adjustments model the timing on the observed pixels.
+    points = triangulate_placements(models, poses, uv if timing is None else align_views(uv, timing.line))
+    clocks = start_clocks(rig, timing, points, reference)
     errors = ac_length_errors(points, wand)
     threshold = gate_threshold(errors, wand)
     keep = np.flatnonzero(_gate(rig, uv, errors, threshold))
@@ -169,39 +178,43 @@ def refine_calibration(
     # Coarse to fine: outliers and the distortion model are settled on a spread subset; the
     # other placements join through the re-admission below and the final adjustment uses all.
     keep = keep[spread_subset(keep.size, COARSE_PLACEMENTS)]
-    state = BundleState(models, poses, points[keep, 0], wand_directions(points[keep, 0], points[keep, 2]))
 
     # 1. Robust adjustment (Huber), then views with a point off by more than VIEW_GATE_SIGMAS are rejected.
     # k3..k5 stay at zero here: the robust pass only has to find the outliers, and the
     # low-order model converges in a few iterations even from a rough start.
     low_order = full.copy()
     low_order[:, 2:5] = False
-    robust, sigma = robust_adjustment(state, BundleProblem.from_dense(wand, uv[keep]), low_order)
+    robust, sigma, clocks, keep = _robust_pass(wand, uv, points, models, poses, keep, low_order, clocks)
     clean, rejected = gate_views(uv[keep], robust.residuals, VIEW_GATE_SIGMAS * sigma)
     still = _enough_views(clean)
     log.info("robust pass: sigma %.3f px, %d views rejected, %d placements left", sigma, rejected.sum(), still.sum())
     _require(int(still.sum()), min_placements, "keep two clean views after outlier rejection")
     used, uv_used = keep[still], clean[still]
     state = _subset(robust.state, still)
+    clocks = refresh_motion(clocks, wand, robust.state, uv, HUBER_SIGMAS * sigma)
 
-    # 2. Least squares on the clean data, dropping the distortion terms the data do not support.
-    result, fixed = _adjust_with_model_selection(rig, uv_used, state, reference)
+    # 2. Least squares on the clean data, dropping the distortion terms (and the timing) the data do not support.
+    result, fixed = _adjust_with_model_selection(rig, uv_used, state, reference, clocks, used)
     free = _free_mask(n_cameras, reference, fixed)
 
     # 3. Placements set aside so far come back with their clean views if they fit the solution.
-    aside = np.setdiff1d(np.arange(len(uv)), used)
-    admitted, admitted_uv, admitted_state = _readmit(rig, uv[aside], result)
+    clocks = refresh_motion(clocks, wand, result.state, uv, HUBER_SIGMAS * max(result.sigma, MIN_SIGMA_PX))
+    aside = np.setdiff1d(np.flatnonzero(clocks.placeable(len(uv))), used)
+    admitted, admitted_uv, admitted_state = _readmit(rig, uv[aside], result, clocks.placements(aside))
     if admitted.any():
         log.info("%d more placements fit the solution: admitted", admitted.sum())
         used = np.concatenate([used, aside[admitted]])
         uv_used = np.concatenate([uv_used, admitted_uv])
+    if admitted.any() or clocks.modelled:  # with timing, the refreshed motion changes the problem
         state = BundleState(
             result.state.models,
             result.state.poses,
             np.concatenate([result.state.wand_a, admitted_state.wand_a]),
             np.concatenate([result.state.wand_direction, admitted_state.wand_direction]),
+            result.state.timing,
         )
-        result = bundle_adjust(state, BundleProblem.from_dense(wand, uv_used), free)
+        result = bundle_adjust(state, BundleProblem.from_dense(wand, uv_used, clocks.placements(used)), free)
+        result, clocks = _settle_motion(rig, uv, uv_used, used, result, clocks, free)
     check_geometry(result.state.points(wand))
     check_camera_views(rig, uv, uv_used)
     check_uncertainty(rig, result)
@@ -214,7 +227,7 @@ def refine_calibration(
             )
     seen = np.any(np.isfinite(uv[used]), axis=(2, 3))
     rejected_views = (seen & ~np.any(np.isfinite(uv_used), axis=(2, 3))).sum(axis=0)
-    problem = BundleProblem.from_dense(wand, uv_used)
+    problem = BundleProblem.from_dense(wand, uv_used, clocks.placements(used))
     return _assemble(
         rig,
         uv_used,
@@ -227,7 +240,94 @@ def refine_calibration(
         len(uv) - used.size,
         rejected_views,
         warnings,
+        clocks,
     )
+
+
+def _robust_pass(
+    wand: WandSpec,
+    uv: FloatArray,
+    points: FloatArray,
+    models: tuple[CameraModel, ...],
+    poses: tuple[Pose, ...],
+    keep: NDArray[np.int64],
+    free: NDArray[np.bool_],
+    clocks: ClockModel,
+) -> tuple[BundleResult, float, ClockModel, NDArray[np.int64]]:
+    """The robust adjustment of the placements ``keep``, with the timing parameters the clock model estimates.
+
+    A tentative model (``auto`` on simultaneous views) is tested first: the pass runs as for
+    synchronised cameras, then adjustments from its solution with the timing parameters free tell
+    whether the data hold readout times and offsets (:func:`reduce_timing`, finer term first).
+    Without them the refinement goes on exactly as for synchronised cameras; with them the pass is
+    redone with the timing (outliers are decided with it) on the placements whose motion is known.
+
+    Args:
+        uv: (P, C, 3, 2) every placement of the timeline; ``points`` (P, 3, 3) their starting triangulation.
+        keep: the placements the gate kept; ``free`` the geometric parameters to estimate.
+
+    Returns:
+        The pass, its robust pixel noise, the clock model and the placements it adjusted.
+    """
+
+    def start(index: NDArray[np.int64], timing: FloatArray | None) -> BundleState:
+        return BundleState(models, poses, points[index, 0], wand_directions(points[index, 0], points[index, 2]), timing)
+
+    if clocks.tentative:
+        robust, sigma = robust_adjustment(start(keep, None), BundleProblem.from_dense(wand, uv[keep]), free)
+        problem = BundleProblem.from_dense(wand, uv[keep], clocks.placements(keep))
+        timing, tested = clocks.free, replace(robust.state, timing=clocks.start)
+        while timing.any():
+            test_free = free.copy()
+            test_free[:, N_GEOMETRIC:] = timing
+            fit = bundle_adjust(tested, problem, test_free, tolerance=1e-5)
+            kept = reduce_timing(clocks, fit, timing)
+            if np.array_equal(kept, timing):
+                break
+            values = fit.state.camera_timing.copy()
+            values[timing & ~kept] = clocks.start[timing & ~kept]
+            tested, timing = replace(fit.state, timing=values), kept
+        if not timing.any():
+            log.info("the views are synchronised: no time offsets or readout times")
+            note = "time offsets and readout times tested: not significant (synchronised global shutters)"
+            return robust, sigma, clocks.without_timing(note), keep
+        clocks = replace(clocks, free=timing, tentative=False)
+    keep = keep[clocks.placeable(len(uv))[keep]]
+    with_timing = free.copy()
+    with_timing[:, N_GEOMETRIC:] = clocks.free
+    problem = BundleProblem.from_dense(wand, uv[keep], clocks.placements(keep))
+    robust, sigma = robust_adjustment(start(keep, clocks.start), problem, with_timing)
+    return robust, sigma, clocks, keep
+
+
+def _settle_motion(
+    rig: RigSpec,
+    uv: FloatArray,
+    uv_used: FloatArray,
+    used: NDArray[np.int64],
+    result: BundleResult,
+    clocks: ClockModel,
+    free: NDArray[np.bool_],
+) -> tuple[BundleResult, ClockModel]:
+    """Refit the wand's motion to the adjusted placements and re-adjust until the timing settles.
+
+    The motion is held fixed during an adjustment; moving cameras and offsets move the placements
+    it is fitted to. A few rounds bring the timing parameters to within MOTION_SETTLED of their
+    standard deviations (usually one).
+    """
+    if not clocks.modelled:
+        return result, clocks
+    for _ in range(MOTION_ROUNDS):
+        before = result.state.camera_timing.copy()
+        clocks = refresh_motion(clocks, rig.wand, result.state, uv, HUBER_SIGMAS * max(result.sigma, MIN_SIGMA_PX))
+        result = bundle_adjust(result.state, BundleProblem.from_dense(rig.wand, uv_used, clocks.placements(used)), free)
+        std = result.camera_std[:, N_GEOMETRIC:]
+        change = np.abs(result.state.camera_timing - before)
+        log.info("motion refitted: timing moved by %.3g (at most %.2f sigma)", change.max(),
+                 float(np.max(change[std > 0] / std[std > 0], initial=0.0)))  # fmt: skip
+        if np.all(change[std > 0] <= MOTION_SETTLED * std[std > 0]):
+            break
+    return result, clocks
 
 
 def _gate(rig: RigSpec, uv: FloatArray, errors: FloatArray, threshold: float) -> NDArray[np.bool_]:
@@ -294,7 +394,7 @@ def _enough_views(uv: FloatArray) -> NDArray[np.bool_]:
 
 
 def _subset(state: BundleState, mask: NDArray[np.bool_]) -> BundleState:
-    return BundleState(state.models, state.poses, state.wand_a[mask], state.wand_direction[mask])
+    return BundleState(state.models, state.poses, state.wand_a[mask], state.wand_direction[mask], state.timing)
 
 
 def robust_adjustment(
@@ -314,19 +414,24 @@ def robust_adjustment(
 
 
 def _adjust_with_model_selection(
-    rig: RigSpec, uv: FloatArray, initial: BundleState, reference: int
+    rig: RigSpec, uv: FloatArray, initial: BundleState, reference: int, clocks: ClockModel, used: NDArray[np.int64]
 ) -> tuple[BundleResult, _Fixed]:
-    """Bundle-adjust with every k3..k5 free, then drop what the data do not support and re-adjust.
+    """Bundle-adjust with every k3..k5 (and the timing) free, then drop what the data do not support and re-adjust.
 
     Per camera the highest free coefficient among k3..k5 is fixed to zero while it
     is insignificant (|k| < SIGNIFICANCE sigma) or makes r(theta) turn over inside
     the image. The decisions are made on the linearised problem: fixing k_h = 0
     moves the other parameters to their conditional mean
     ``x - cov[:, h] / cov[h, h] * x[h]`` and shrinks the covariance accordingly, so
-    one re-adjustment (from that better start) usually settles the model.
+    one re-adjustment (from that better start) usually settles the model. Time
+    offsets and readout times under ``auto`` are kept only when significant
+    (:func:`wand_calib_ros.core.timing.reduce_timing`).
+
+    Args:
+        uv: (P, C, 3, 2) the placements to adjust, ``used`` (P,) their indices in the timeline.
     """
-    problem = BundleProblem.from_dense(rig.wand, uv)
-    fixed = _Fixed(tuple(() for _ in rig.cameras))
+    problem = BundleProblem.from_dense(rig.wand, uv, clocks.placements(used))
+    fixed = _Fixed(tuple(() for _ in rig.cameras), clocks.free.copy())
     start = initial
     while True:
         result = bundle_adjust(start, problem, _free_mask(len(rig.cameras), reference, fixed))
@@ -335,11 +440,14 @@ def _adjust_with_model_selection(
         models = list(result.state.models)
         for c, spec in enumerate(rig.cameras):
             per_camera[c], models[c] = _reduce_radial(spec, result, c, per_camera[c])
-        if tuple(per_camera) == fixed.per_camera:
+        timing = reduce_timing(clocks, result, fixed.timing)
+        if tuple(per_camera) == fixed.per_camera and np.array_equal(timing, fixed.timing):
             return result, fixed
-        fixed = _Fixed(tuple(per_camera))
         state = result.state
-        start = BundleState(_zero_fixed(tuple(models), fixed), state.poses, state.wand_a, state.wand_direction)
+        values = state.camera_timing.copy()
+        values[fixed.timing & ~timing] = clocks.start[fixed.timing & ~timing]
+        fixed = _Fixed(tuple(per_camera), timing)
+        start = BundleState(_zero_fixed(tuple(models), fixed), state.poses, state.wand_a, state.wand_direction, values)
 
 
 def _reduce_radial(
@@ -351,9 +459,8 @@ def _reduce_radial(
         The camera's fixed radial indices and its intrinsics moved to the conditional estimate.
     """
     model = result.state.models[camera]
-    block = slice(camera * N_CAMERA_PARAMS, camera * N_CAMERA_PARAMS + 7)
     estimate = model.intrinsic_vector()
-    covariance = result.camera_covariance[block, block].copy()
+    covariance = result.camera_block(camera, slice(0, 7)).copy()
     fixed_now = list(fixed)
     for highest in (4, 3, 2):
         if highest in fixed_now:
@@ -379,10 +486,17 @@ def _reduce_radial(
             covariance = covariance - np.outer(gain, covariance[highest])
         estimate[highest] = 0.0
         fixed_now.append(highest)
-    return tuple(fixed_now), model.with_intrinsic_vector(estimate)
+    try:
+        return tuple(fixed_now), model.with_intrinsic_vector(estimate)
+    except ModelError:  # the linearised shift leaves the camera model (k1 <= 0): re-adjust from the zeros instead
+        vector = model.intrinsic_vector()
+        vector[fixed_now] = 0.0
+        return tuple(fixed_now), model.with_intrinsic_vector(vector)
 
 
-def _readmit(rig: RigSpec, uv: FloatArray, result: BundleResult) -> tuple[NDArray[np.bool_], FloatArray, BundleState]:
+def _readmit(
+    rig: RigSpec, uv: FloatArray, result: BundleResult, timing: PlacementTiming | None
+) -> tuple[NDArray[np.bool_], FloatArray, BundleState]:
     """Placements outside the adjustment that fit the solved cameras once their outlying views are removed.
 
     Each placement is triangulated with the solved cameras, its five wand
@@ -394,27 +508,11 @@ def _readmit(rig: RigSpec, uv: FloatArray, result: BundleResult) -> tuple[NDArra
         (S,) mask over the given placements, the admitted ones' clean pixels
         (A, C, 3, 2) and their fitted wand parameters.
     """
-    models, poses = result.state.models, result.state.poses
     admitted = np.zeros(uv.shape[0], dtype=bool)
-    empty = (admitted, uv[:0], BundleState(models, poses, np.zeros((0, 3)), np.zeros((0, 3))))
-    if uv.shape[0] == 0:
-        return empty
-    points = triangulate_placements(models, poses, uv)
-    usable = np.all(np.isfinite(points), axis=(1, 2)) & (np.linalg.norm(points[:, 2] - points[:, 0], axis=1) > 0)
-    usable &= _enough_views(uv)
-    if not usable.any():
-        return empty
-    index = np.flatnonzero(usable)
-    start = BundleState(models, poses, points[index, 0], wand_directions(points[index, 0], points[index, 2]))
-    fitted = bundle_adjust(
-        start,
-        BundleProblem.from_dense(rig.wand, uv[index]),
-        np.zeros((len(models), N_CAMERA_PARAMS), dtype=bool),
-        loss_scale=HUBER_SIGMAS * max(result.sigma, MIN_SIGMA_PX),
-        max_iterations=10,
-        tolerance=1e-5,  # only deciding which views fit; the final adjustment refines everything
-    )
-    clean, _ = gate_views(uv[index], fitted.residuals, VIEW_GATE_SIGMAS * max(result.sigma, MIN_SIGMA_PX))
+    sigma = max(result.sigma, MIN_SIGMA_PX)
+    # only deciding which views fit: a loose tolerance; the final adjustment refines everything
+    index, fitted = fit_placements(rig.wand, result.state, uv, timing, loss_scale=HUBER_SIGMAS * sigma)
+    clean, _ = gate_views(uv[index], fitted.residuals, VIEW_GATE_SIGMAS * sigma)
     ok = _enough_views(clean)
     admitted[index[ok]] = True
     return admitted, clean[ok], _subset(fitted.state, ok)
@@ -509,8 +607,7 @@ def _coverage_warnings(
             f"{spec.name}: the wand covered only {100 * covered:.0f} % of the image ({COVERAGE_GRID}x{COVERAGE_GRID} "
             "cells); wave it through the rest of the view"
         )
-    block = slice(camera * N_CAMERA_PARAMS, camera * N_CAMERA_PARAMS + 5)
-    band = radial_std_px(model, result.camera_covariance[block, block], max_theta)
+    band = radial_std_px(model, result.camera_block(camera, slice(0, 5)), max_theta)
     if band > WEAK_CURVE_PX:
         out.append(
             f"{spec.name}: the distortion curve is uncertain by {band:.1f} px at {np.degrees(max_theta):.0f} deg, "
@@ -539,6 +636,7 @@ def _assemble(
     rejected: int,
     rejected_views: NDArray[np.int64],
     warnings: list[str],
+    clocks: ClockModel,
 ) -> CalibrationResult:
     state = result.state
     max_theta = _max_theta(result, problem)
@@ -568,12 +666,12 @@ def _assemble(
                 tuple(f"k{i + 1}" for i in sorted(fixed.per_camera[c])),
                 views,
                 int(rejected_views[c]),
-                result.camera_covariance[
-                    c * N_CAMERA_PARAMS : c * N_CAMERA_PARAMS + 5, c * N_CAMERA_PARAMS : c * N_CAMERA_PARAMS + 5
-                ].copy(),
+                result.camera_block(c, slice(0, 5)).copy(),
+                float(state.camera_timing[c, 0]),
+                float(state.camera_timing[c, 1]),
             )
         )
-    points = triangulate_placements(state.models, state.poses, uv)
+    points = triangulate_placements(state.models, state.poses, synchronised_pixels(state, problem, uv))
     lengths = np.linalg.norm(points[:, 2] - points[:, 0], axis=-1)
     lengths = lengths[np.isfinite(lengths)]
     order = [reference] + [c for c in range(len(cameras)) if c != reference]
@@ -591,4 +689,32 @@ def _assemble(
         iterations=result.iterations,
         lens_trials=lens_trials,
         warnings=tuple(warnings),
+        timing=_timing_summary(rig, clocks, fixed),
     )
+
+
+def _timing_summary(rig: RigSpec, clocks: ClockModel, fixed: _Fixed) -> TimingSummary | None:
+    """How the result treated the cameras' timing (None without timing input)."""
+    line = clocks.line
+    if line is None:
+        return None
+    return TimingSummary(
+        line.unit,
+        "estimated" if fixed.timing[:, 0].any() else "fixed",
+        {spec.name: "estimated" if fixed.timing[c, 1] else "fixed" for c, spec in enumerate(rig.cameras)},
+        line.period,
+        clocks.notes,
+    )
+
+
+def synchronised_pixels(state: BundleState, problem: BundleProblem, uv: FloatArray) -> FloatArray:
+    """(P, C, 3, 2) the observations moved to their placement's time (the modelled motion removed).
+
+    Triangulating these gives the wand as one instant saw it; without timing they are ``uv``.
+    """
+    if problem.timing is None:
+        return uv
+    shift = residuals(state, problem) - residuals(state, replace(problem, timing=None))
+    out = np.array(uv, dtype=np.float64)
+    out[problem.placement, problem.camera, problem.point] -= shift
+    return out

@@ -33,6 +33,9 @@ class CameraCalibration:
         n_views: placements it contributed to the bundle adjustment.
         rejected_views: its views (of used placements) rejected as outliers.
         radial_covariance: (5, 5) covariance of k1..k5 (mm^2; zero rows for fixed coefficients).
+        time_offset: exposure = stamp - time_offset, relative to the reference camera, in the
+            result's time unit (:class:`TimingSummary`); 0 when held fixed.
+        readout: rolling-shutter readout time of the whole image in the time unit (0: global shutter).
     """
 
     name: str
@@ -47,6 +50,8 @@ class CameraCalibration:
     n_views: int
     rejected_views: int
     radial_covariance: FloatArray
+    time_offset: float = 0.0
+    readout: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -56,6 +61,25 @@ class LensTrial:
     projections: tuple[str, ...]
     wand_rms_mm: float
     failure: str | None = None
+
+
+@dataclass(frozen=True)
+class TimingSummary:
+    """How the calibration treated when each camera saw the wand.
+
+    Attributes:
+        unit: "s" (the observations carried stamps) or "frames" (frame ids only).
+        time_offsets: "estimated" or "fixed" (held at zero: synchronised cameras).
+        rolling_shutter: per camera name "estimated" or "fixed" (at zero or the rig description's readout_ms).
+        frame_period: the recording's frame period in the unit (1 for frames).
+        notes: why something was not estimated, in plain words.
+    """
+
+    unit: str
+    time_offsets: str
+    rolling_shutter: dict[str, str]
+    frame_period: float
+    notes: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -98,7 +122,9 @@ class CalibrationResult:
         iterations: bundle adjustment iterations.
         lens_trials: Step 1 candidates tried and their Step 3 wand-length RMS.
         warnings: plain-language remarks on weakly determined parameters.
-        clock_offsets: per camera timing diagnostics (empty when frames are not a time series).
+        clock_offsets: per camera timing diagnostics (empty when frames are not a time series or the
+            offsets were estimated).
+        timing: how the cameras' timing was treated (None: not modelled, as for simultaneous views).
     """
 
     reference_camera: str
@@ -115,6 +141,7 @@ class CalibrationResult:
     lens_trials: tuple[LensTrial, ...]
     warnings: tuple[str, ...]
     clock_offsets: tuple[ClockOffset, ...] = ()
+    timing: TimingSummary | None = None
 
     def camera(self, name: str) -> CameraCalibration:
         for camera in self.cameras:

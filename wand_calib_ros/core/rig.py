@@ -51,6 +51,8 @@ class CameraSpec:
         nominal_focal_mm: nominal focal length, mm.
         max_view_angle_deg: theta_max, half the field of view, degrees.
         lens: optional hint: "fisheye", "conventional" or a projection name.
+        readout_ms: rolling-shutter readout time of the whole image, ms, held fixed (0: a global
+            shutter); None: estimated when the data say so.
     """
 
     name: str
@@ -59,6 +61,7 @@ class CameraSpec:
     nominal_focal_mm: float
     max_view_angle_deg: float
     lens: str | None = None
+    readout_ms: float | None = None
 
     @property
     def m(self) -> FloatArray:
@@ -99,14 +102,19 @@ class WandObservations:
     """Image points of the wand, dense over frames and cameras.
 
     Attributes:
-        frames: (F,) frame ids as in the observations file.
+        frames: (F,) frame ids as in the observations file. Without stamps, consecutive ids are
+            consecutive frames of one recording at a constant rate and a frame's views are
+            simultaneous; with stamps, a frame is a grouping of views close in time.
         camera_names: (C,) names; the order of axis 1 of ``uv``.
         uv: (F, C, 3, 2) pixels of A, B, C; NaN where a camera did not see a point.
+        stamps: (F, C) capture stamp of each camera's image, seconds (NaN where the camera has no
+            view in that frame), or None when the observations carry no stamps.
     """
 
     frames: NDArray[np.int64]
     camera_names: tuple[str, ...]
     uv: FloatArray
+    stamps: FloatArray | None = None
 
     def __post_init__(self) -> None:
         frames = np.asarray(self.frames, dtype=np.int64)
@@ -119,6 +127,12 @@ class WandObservations:
         uv.setflags(write=False)
         object.__setattr__(self, "frames", frames)
         object.__setattr__(self, "uv", uv)
+        if self.stamps is not None:
+            stamps = np.array(self.stamps, dtype=np.float64)
+            if stamps.shape != uv.shape[:2]:
+                raise ValueError(f"stamps must have shape (F, C) = {uv.shape[:2]}, got {stamps.shape}")
+            stamps.setflags(write=False)
+            object.__setattr__(self, "stamps", stamps)
 
     @property
     def complete(self) -> NDArray[np.bool_]:
@@ -131,14 +145,20 @@ class WandObservations:
         except ValueError:
             raise InsufficientDataError(f"no observations for camera '{name}'") from None
 
-    def select_frames(self, mask: NDArray[np.bool_]) -> WandObservations:
-        """A copy restricted to the frames where ``mask`` (F,) is True."""
-        return WandObservations(self.frames[mask], self.camera_names, self.uv[mask])
+    def select_frames(self, mask: NDArray[np.bool_] | NDArray[np.int64]) -> WandObservations:
+        """A copy restricted to the frames where ``mask`` (F,) is True (or to an index of frames)."""
+        stamps = None if self.stamps is None else self.stamps[mask]
+        return WandObservations(self.frames[mask], self.camera_names, self.uv[mask], stamps)
 
     def select_cameras(self, names: tuple[str, ...]) -> WandObservations:
         """A copy with only the named cameras, in that order."""
         index = [self.camera_index(n) for n in names]
-        return WandObservations(self.frames, names, self.uv[:, index])
+        stamps = None if self.stamps is None else self.stamps[:, index]
+        return WandObservations(self.frames, names, self.uv[:, index], stamps)
+
+    def with_uv(self, uv: FloatArray) -> WandObservations:
+        """The same frames, cameras and stamps with other pixels (F, C, 3, 2)."""
+        return WandObservations(self.frames, self.camera_names, uv, self.stamps)
 
 
 def spread_subset(n: int, size: int) -> NDArray[np.int64]:

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.refine import triangulate_placements
+from wand_calib_ros.core.placements import triangulate_placements
 from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.core.rig import WandObservations, WandSpec
 
@@ -26,7 +26,7 @@ CONSISTENCY_TOLERANCE = 0.03
 
 def label_across_cameras(
     observations: WandObservations,
-    ambiguous: list[tuple[int, str, FloatArray]],
+    ambiguous: list[tuple[int, str, FloatArray, float]],
     result: CalibrationResult,
     wand: WandSpec,
 ) -> tuple[WandObservations, list[str]]:
@@ -34,7 +34,7 @@ def label_across_cameras(
 
     Args:
         observations: labelled views (frame ids as in ``ambiguous``).
-        ambiguous: (frame id, camera, (3, 2) points in either order).
+        ambiguous: (frame id, camera, (3, 2) points in either order, the image's stamp in s).
         result: a calibration of the same cameras.
         wand: the wand lengths.
 
@@ -46,8 +46,9 @@ def label_across_cameras(
     poses = tuple(result.camera(n).pose for n in names)
     row_of = {int(f): i for i, f in enumerate(observations.frames)}
     uv = observations.uv.copy()
+    stamps = None if observations.stamps is None else observations.stamps.copy()
     settled: list[str] = []
-    for frame, camera, points in ambiguous:
+    for frame, camera, points, stamp in ambiguous:
         row = row_of.get(frame)
         if row is None:
             continue
@@ -69,5 +70,7 @@ def label_across_cameras(
         best = int(np.argmin(errors))
         if errors[best] <= CONSISTENCY_MARGIN * errors[1 - best] and errors[best] <= CONSISTENCY_TOLERANCE * wand.L:
             uv[row, c] = points if best == 0 else points[::-1]
+            if stamps is not None:
+                stamps[row, c] = stamp
             settled.append(camera)
-    return WandObservations(observations.frames, names, uv), settled
+    return WandObservations(observations.frames, names, uv, stamps), settled

@@ -4,8 +4,8 @@ Each camera's images go through a :class:`CameraStream` (blobs, wand, labels).
 An ambiguous A/C labelling is settled by continuity with a neighbouring
 detection in time (before or after it), otherwise the view is rejected as
 "ambiguous" rather than risk swapped labels. For recordings, images of
-different cameras whose header stamps lie within a tolerance form one frame;
-live, the collector's synchroniser does that.
+different cameras are grouped into frames by nearest stamps, with the same
+synchroniser the live collector uses.
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from wand_calib_ros.collection.sync import frames_to_observations, group_by_stamps
 from wand_calib_ros.core.camera_model import CameraModel
 from wand_calib_ros.core.errors import CoreError
 from wand_calib_ros.core.intrinsics_init import initial_model, lens_candidates
@@ -45,14 +46,14 @@ class Detections(NamedTuple):
     Attributes:
         observations: labelled wand points per frame (time slot) and camera.
         stats: per camera counts.
-        ambiguous: (frame id, camera, (3, 2) points in either order) of views whose A/C
-            labels neither the image nor time settled; other cameras can (see
+        ambiguous: (frame id, camera, (3, 2) points in either order, stamp in s) of views whose
+            A/C labels neither the image nor time settled; other cameras can (see
             :func:`wand_calib_ros.detection.consistency.label_across_cameras`).
     """
 
     observations: WandObservations
     stats: dict[str, CameraStats]
-    ambiguous: list[tuple[int, str, NDArray[np.float64]]]
+    ambiguous: list[tuple[int, str, NDArray[np.float64], float]]
 
 
 @dataclass
@@ -171,16 +172,20 @@ def detect_recording(
     frames: Iterable[ImageFrame],
     rig: RigSpec,
     *,
-    tolerance_ns: int = 5_000_000,
+    tolerance_ns: int = 0,
     blob_options: BlobOptions = BlobOptions(),
     inspect: Callable[[ImageFrame, Blobs | None, WandDetection | None, str | None], None] | None = None,
 ) -> Detections:
     """Wand observations of a recording, with per-camera counts (detected, rejected by reason).
 
+    Images are grouped into frames by nearest stamps (:func:`wand_calib_ros.collection.sync.group_by_stamps`,
+    hardware-triggered or free-running cameras alike); frame ids count every frame of the recording
+    and each view keeps its image's stamp.
+
     Args:
         frames: decoded images of the rig's cameras, roughly in time order.
         rig: the rig description (image sizes, wand lengths).
-        tolerance_ns: images closer in time than this belong to the same frame.
+        tolerance_ns: images further apart than this never form a frame (0: half the frame period).
         blob_options: blob extraction settings.
         inspect: called for every image with its blobs, detection and rejection reason
             (progress reports, debug overlays).
@@ -188,22 +193,23 @@ def detect_recording(
     wand_options = WandOptions(ratio=rig.wand.L1 / rig.wand.L2)
     streams = {c.name: CameraStream(c, wand_options, blob_options, max_hold_ns=None) for c in rig.cameras}
     outcomes: list[tuple[str, Labelled]] = []
-    stamps: list[int] = []
     for frame in sorted(frames, key=lambda f: f.stamp_ns):
-        stamps.append(frame.stamp_ns)
         stream = streams[frame.camera]
         blobs, detection, reason = stream.detect(frame.image, frame.encoding)
         if inspect is not None:
             inspect(frame, blobs, detection, reason)
         outcomes += [(frame.camera, out) for out in stream.label(frame.stamp_ns, detection, reason)]
     outcomes += [(name, out) for name, stream in streams.items() for out in stream.flush()]
-    slots = _slots(np.array(stamps, dtype=np.int64), tolerance_ns)
-    detections = [(out.stamp_ns, camera, out.points) for camera, out in outcomes if out.points is not None]
-    observations = _group(detections, slots, rig.camera_names)
+    grouped = group_by_stamps(rig.camera_names, [(c, out.stamp_ns, out.points) for c, out in outcomes], tolerance_ns)
+    observations = frames_to_observations(grouped, rig.camera_names)
+    frame_of = {
+        (c, int(f.stamps_ns[c])): k for k, f in enumerate(grouped) for c in np.flatnonzero(f.reported)
+    }  # fmt: skip
+    index = {name: i for i, name in enumerate(rig.camera_names)}
     ambiguous = [
-        (int(np.searchsorted(slots, out.stamp_ns, side="right")) - 1, camera, out.unsettled)
+        (frame_of[(index[camera], out.stamp_ns)], camera, out.unsettled, out.stamp_ns / 1e9)
         for camera, out in outcomes
-        if out.unsettled is not None
+        if out.unsettled is not None and (index[camera], out.stamp_ns) in frame_of
     ]
     stats = {name: stream.stats for name, stream in streams.items()}
     return Detections(observations, stats, ambiguous)
@@ -284,25 +290,3 @@ def track_labels(sequence: list[tuple[int, WandDetection]]) -> list[NDArray[np.f
     labeller = StreamLabeller(max_hold_ns=None)
     released = [labels for stamp, detection in sequence for _, labels in labeller.push(stamp, detection)]
     return released + [labels for _, labels in labeller.flush()]
-
-
-def _slots(stamps: NDArray[np.int64], tolerance_ns: int) -> NDArray[np.int64]:
-    """First stamp of each time slot: an image opens a new slot when it lies more than
-    ``tolerance_ns`` after the current slot's first stamp."""
-    starts: list[int] = []
-    for stamp in np.sort(stamps):
-        if not starts or stamp - starts[-1] > tolerance_ns:
-            starts.append(int(stamp))
-    return np.array(starts, dtype=np.int64)
-
-
-def _group(
-    detections: list[tuple[int, str, NDArray[np.float64]]], slots: NDArray[np.int64], names: tuple[str, ...]
-) -> WandObservations:
-    """Observations whose frame ids number the recording's time slots (frames without a wand left out)."""
-    uv = np.full((slots.size, len(names), 3, 2), np.nan)
-    index = {name: i for i, name in enumerate(names)}
-    for stamp, camera, points in detections:
-        uv[int(np.searchsorted(slots, stamp, side="right")) - 1, index[camera]] = points
-    seen = np.any(np.isfinite(uv), axis=(1, 2, 3))
-    return WandObservations(np.flatnonzero(seen), names, uv[seen])

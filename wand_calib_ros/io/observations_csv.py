@@ -1,9 +1,13 @@
 """The observations CSV: one row per wand point seen by one camera.
 
-Header ``frame,camera,point,u,v`` (extra columns are ignored): ``frame`` an
-integer id shared by the cameras' simultaneous images, ``camera`` a name from
-the rig description, ``point`` A, B or C, ``u, v`` pixels in the OpenCV
-convention ((0, 0) is the centre of the top-left pixel).
+Header ``frame,camera,point,u,v[,stamp]`` (extra columns are ignored): ``frame`` an
+integer id, ``camera`` a name from the rig description, ``point`` A, B or C,
+``u, v`` pixels in the OpenCV convention ((0, 0) is the centre of the top-left
+pixel), ``stamp`` (optional) the capture stamp of that camera's image in seconds
+(the image's header stamp). Without stamps, rows sharing ``frame`` are
+simultaneous and consecutive ids are consecutive frames of one recording at a
+constant rate; with stamps, rows sharing ``frame`` are a grouping of images close
+in time, and each image is placed at its own stamp.
 """
 
 from __future__ import annotations
@@ -15,11 +19,16 @@ from pathlib import Path
 from typing import TextIO
 
 import numpy as np
+from numpy.typing import NDArray
 
 from wand_calib_ros.core.rig import POINT_LABELS, WandObservations
 from wand_calib_ros.io.errors import FormatError
 
 COLUMNS = ("frame", "camera", "point", "u", "v")
+#: The optional column of per-image capture stamps (seconds).
+STAMP = "stamp"
+#: Stamps above this (seconds: year 5138) are surely in another unit (nanoseconds).
+MAX_STAMP_S = 1e11
 
 
 def read_observations(path: str | Path, camera_names: Iterable[str] | None = None) -> WandObservations:
@@ -55,12 +64,14 @@ def _parse(handle: TextIO, path: Path, known: list[str] | None) -> WandObservati
             path, f"missing column(s) {', '.join(missing)}; expected header frame,camera,point,u,v", row=1
         )
     index = [header.index(c) for c in COLUMNS]
-    width = max(index) + 1
+    stamp_index = header.index(STAMP) if STAMP in header else None
+    width = max(index + ([stamp_index] if stamp_index is not None else [])) + 1
     label_index = {label: i for i, label in enumerate(POINT_LABELS)}
     frames: dict[int, int] = {}
     cameras: dict[str, int] = {name: i for i, name in enumerate(known)} if known is not None else {}
     entries: list[tuple[int, int, int, float, float]] = []
     seen: set[tuple[int, int, int]] = set()
+    view_stamps: dict[tuple[int, int], tuple[float, int]] = {}  # (frame, camera) -> (stamp, first row)
     for row_number, row in enumerate(reader, start=2):
         if not row or all(not cell.strip() for cell in row):
             continue
@@ -92,6 +103,16 @@ def _parse(handle: TextIO, path: Path, known: list[str] | None) -> WandObservati
             raise FormatError(path, f"camera '{camera}' frame {frame} point {point} appears twice", row=row_number)
         seen.add(key)
         entries.append((*key, u, v))
+        if stamp_index is not None:
+            stamp = _stamp(path, row_number, camera, frame, row[stamp_index].strip())
+            first = view_stamps.setdefault(key[:2], (stamp, row_number))
+            if first[0] != stamp:
+                raise FormatError(
+                    path,
+                    f"camera '{camera}' frame {frame}: stamp {stamp!r} differs from {first[0]!r} in row {first[1]}; "
+                    "the points of one image share its stamp",
+                    row=row_number,
+                )
     if not entries:
         raise FormatError(path, "no observations after the header")
     frame_ids = np.array(sorted(frames, key=frames.__getitem__), dtype=np.int64)
@@ -101,17 +122,85 @@ def _parse(handle: TextIO, path: Path, known: list[str] | None) -> WandObservati
     uv[f, c, p] = table[:, 3:]
     order = np.argsort(frame_ids, kind="stable")
     names = tuple(sorted(cameras, key=cameras.__getitem__))
-    return WandObservations(frame_ids[order], names, uv[order])
+    stamps = None
+    if stamp_index is not None:
+        stamps = np.full((len(frames), len(cameras)), np.nan)
+        for (frame_row, camera_index), (stamp, _) in view_stamps.items():
+            stamps[frame_row, camera_index] = stamp
+        stamps = stamps[order]
+        _check_stamp_order(path, frame_ids[order], names, stamps, view_stamps, order)
+    return WandObservations(frame_ids[order], names, uv[order], stamps)
+
+
+def _stamp(path: Path, row_number: int, camera: str, frame: int, text: str) -> float:
+    try:
+        stamp = float(text)
+    except ValueError:
+        raise FormatError(
+            path, f"camera '{camera}' frame {frame}: stamp must be a number of seconds, got {text!r}", row=row_number
+        ) from None
+    if not math.isfinite(stamp):
+        raise FormatError(path, f"camera '{camera}' frame {frame}: stamp must be finite, got {text}", row=row_number)
+    if abs(stamp) > MAX_STAMP_S:
+        raise FormatError(
+            path,
+            f"camera '{camera}' frame {frame}: stamp {text} is not in seconds (nanoseconds?); write seconds, "
+            "e.g. 1700000000.033",
+            row=row_number,
+        )
+    return stamp
+
+
+def _check_stamp_order(
+    path: Path,
+    frame_ids: NDArray[np.int64],
+    names: tuple[str, ...],
+    stamps: NDArray[np.float64],
+    view_stamps: dict[tuple[int, int], tuple[float, int]],
+    order: NDArray[np.int64],
+) -> None:
+    """Each camera's stamps must increase with the frame id (one image per frame, in time order)."""
+    for c, name in enumerate(names):
+        rows = np.flatnonzero(np.isfinite(stamps[:, c]))
+        steps = np.diff(stamps[rows, c])
+        bad = np.flatnonzero(steps <= 0)
+        if bad.size:
+            first, second = rows[bad[0]], rows[bad[0] + 1]
+            what = "repeats" if steps[bad[0]] == 0 else "goes backwards"
+            raise FormatError(
+                path,
+                f"camera '{name}': its stamp {what} from frame {frame_ids[first]} ({stamps[first, c]!r} s) to frame "
+                f"{frame_ids[second]} ({stamps[second, c]!r} s); each image is one frame, frames in time order",
+                row=view_stamps[(int(order[second]), c)][1],
+            )
+
+
+def observation_rows(
+    frame: int, camera_names: tuple[str, ...], uv: NDArray[np.float64], stamps: NDArray[np.float64] | None
+) -> list[list[object]]:
+    """The CSV rows of one frame: (C, 3, 2) pixels (NaN: not seen) and (C,) stamps in s (or None)."""
+    rows: list[list[object]] = []
+    for c, name in enumerate(camera_names):
+        for p, label in enumerate(POINT_LABELS):
+            u, v = uv[c, p]
+            if np.isfinite(u) and np.isfinite(v):
+                row: list[object] = [frame, name, label, f"{u:.6f}", f"{v:.6f}"]
+                if stamps is not None:
+                    row.append(f"{stamps[c]:.9f}")
+                rows.append(row)
+    return rows
+
+
+def header(with_stamps: bool) -> tuple[str, ...]:
+    """The CSV header, with the stamp column or without."""
+    return (*COLUMNS, STAMP) if with_stamps else COLUMNS
 
 
 def write_observations(observations: WandObservations, path: str | Path) -> None:
-    """Write every finite point of ``observations`` as CSV rows (frame, camera, A/B/C order)."""
+    """Write every finite point of ``observations`` as CSV rows (frame, camera, A/B/C order; stamps if any)."""
     with Path(path).open("w", newline="") as handle:
-        writer = csv.writer(handle)
-        writer.writerow(COLUMNS)
-        seen = np.all(np.isfinite(observations.uv), axis=-1)
-        for f, c, p in zip(*np.nonzero(seen), strict=True):
-            u, v = observations.uv[f, c, p]
-            writer.writerow(
-                [int(observations.frames[f]), observations.camera_names[c], POINT_LABELS[p], f"{u:.6f}", f"{v:.6f}"]
-            )
+        writer = csv.writer(handle, lineterminator="\n")
+        writer.writerow(header(observations.stamps is not None))
+        for f, frame in enumerate(observations.frames):
+            stamps = None if observations.stamps is None else observations.stamps[f]
+            writer.writerows(observation_rows(int(frame), observations.camera_names, observations.uv[f], stamps))

@@ -13,8 +13,11 @@ The result contract::
         rms_reprojection_px: ...
         image_size: [w, h]
         opencv_equidistant: {camera_matrix: 3x3, distortion: [D1..D4]}
-        std: {k1: ..., u0: ..., rx: ..., tx: ...}
+        std: {k1: ..., u0: ..., rx: ..., tx: ..., time_offset_s: ...}
+        time_offset_s: ...               # exposure = stamp - time_offset_s (time_offset_frames without stamps)
+        rolling_shutter_readout_s: ...   # row v is exposed readout * v / H later (0: global shutter)
         ...
+    timing: {unit: s, time_offsets: estimated, rolling_shutter: {cam0: fixed}, frame_period_s: ...}
     metrics: {...}
     warnings: [...]
 """
@@ -67,9 +70,16 @@ def camera_entry(model: CameraModel, pose: Pose) -> dict[str, Any]:
     }
 
 
+def timing_keys(unit: str) -> dict[str, str]:
+    """Result keys of the core's timing parameters for observations in ``unit`` ("s" or "frames")."""
+    return {"time_offset": f"time_offset_{unit}", "readout": f"rolling_shutter_readout_{unit}"}
+
+
 def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
     """The result YAML document."""
     cameras: dict[str, Any] = {}
+    timing = result.timing
+    keys = timing_keys("frames" if timing is None else timing.unit)
     for camera in result.cameras:
         entry = camera_entry(camera.model, camera.pose)
         entry.update(
@@ -79,7 +89,9 @@ def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
                 "n_observations": int(camera.n_observations),
                 "n_views": int(camera.n_views),
                 "rejected_views": int(camera.rejected_views),
-                "std": {k: float(v) for k, v in camera.parameter_std.items()},
+                "std": {keys.get(k, k): float(v) for k, v in camera.parameter_std.items()},
+                keys["time_offset"]: float(camera.time_offset),
+                keys["readout"]: float(camera.readout),
                 "radial_covariance": _floats(camera.radial_covariance),
                 "max_observed_theta_deg": float(camera.max_observed_theta_deg),
                 "initial_projection": camera.initial_projection,
@@ -103,6 +115,7 @@ def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
             "placements_rejected": int(result.placements_rejected),
             "iterations": int(result.iterations),
         },
+        "timing": _timing_dict(result),
         "lens_trials": [
             {"projections": list(t.projections), "wand_rms_mm": float(t.wand_rms_mm)}
             | ({"failure": t.failure} if t.failure else {})
@@ -122,6 +135,25 @@ def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
     }
 
 
+def _timing_dict(result: CalibrationResult) -> dict[str, Any]:
+    """How the cameras' timing was treated (unit, estimated or fixed, the recording's frame period)."""
+    timing = result.timing
+    if timing is None:
+        return {
+            "unit": "frames",
+            "time_offsets": "fixed",
+            "rolling_shutter": {c.name: "fixed" for c in result.cameras},
+            "note": "views of a frame taken as simultaneous",
+        }
+    return {
+        "unit": timing.unit,
+        "time_offsets": timing.time_offsets,
+        "rolling_shutter": dict(timing.rolling_shutter),
+        f"frame_period_{timing.unit}": float(timing.frame_period),
+        "notes": list(timing.notes),
+    }
+
+
 def write_yaml(document: dict[str, Any], path: str | Path) -> None:
     """Write a YAML document (block style, keys in insertion order)."""
     Path(path).write_text(yaml.safe_dump(document, sort_keys=False, default_flow_style=None, width=120))
@@ -134,14 +166,27 @@ def write_result(result: CalibrationResult, path: str | Path) -> None:
 
 @dataclass(frozen=True, eq=False)
 class CameraGeometry:
-    """Intrinsics and pose of one camera as read from a result (or truth) file."""
+    """Intrinsics, pose and timing of one camera as read from a result (or truth) file.
+
+    Attributes:
+        model: intrinsics.
+        pose: X_cam = R X_ref + T, mm.
+        time_offset: exposure = stamp - time_offset, in the file's time unit (0 when absent).
+        readout: rolling-shutter readout time in the file's time unit (0 when absent).
+    """
 
     model: CameraModel
     pose: Pose
+    time_offset: float = 0.0
+    readout: float = 0.0
 
 
 def read_result(path: str | Path) -> tuple[str, dict[str, CameraGeometry]]:
-    """Read the geometry of a result YAML: (reference camera, per-camera model and pose)."""
+    """Read the geometry of a result YAML: (reference camera, per-camera model, pose and timing).
+
+    The timing is read in the file's unit: ``time_offset_s`` / ``rolling_shutter_readout_s``, or their
+    ``_frames`` forms.
+    """
     path = Path(path)
     try:
         data = yaml.safe_load(path.read_text())
@@ -149,6 +194,8 @@ def read_result(path: str | Path) -> tuple[str, dict[str, CameraGeometry]]:
             name: CameraGeometry(
                 CameraModel(entry["k"], entry["m"], entry["principal_point"], tuple(entry["image_size"])),
                 Pose(entry["rotation"], entry["translation"]),
+                float(entry.get("time_offset_s", entry.get("time_offset_frames", 0.0))),
+                float(entry.get("rolling_shutter_readout_s", entry.get("rolling_shutter_readout_frames", 0.0))),
             )
             for name, entry in data["cameras"].items()
         }

@@ -4,7 +4,8 @@
 wand: {L1: 400.0, L2: 200.0}        # mm, |AB| = L1, |BC| = L2, A-B-C collinear
 cameras:
   - {name: cam0, image_size: [640, 480], pixel_size_um: [5.6, 5.6],
-     nominal_focal_mm: 1.8, max_view_angle_deg: 92.5, lens: fisheye}   # lens optional
+     nominal_focal_mm: 1.8, max_view_angle_deg: 92.5, lens: fisheye,   # lens optional
+     readout_ms: 0.0}                                                  # optional: fixed rolling-shutter readout
 ```
 The ROS nodes read three optional keys per camera with :func:`load_camera_endpoints`:
 ``image_topic`` (default ``/<name>/image_raw``), ``points_topic`` (default ``wand_points`` next to
@@ -83,6 +84,14 @@ def parse_rig(data: Any, path: str | Path = "<rig>") -> RigSpec:
         lens = item.get("lens")
         if lens is not None and lens not in (*LENS_CLASSES, *PROJECTIONS):
             raise FormatError(path, f"{label} lens must be one of {[*LENS_CLASSES, *PROJECTIONS]}, got {lens!r}")
+        readout = item.get("readout_ms")
+        if readout is not None:
+            readout = _number(path, f"{label} readout_ms", readout, positive=False)
+            if readout < 0 or readout > 1000:
+                raise FormatError(
+                    path, f"{label} readout_ms is the rolling-shutter readout time of one image, 0 to 1000 ms; "
+                    f"got {item['readout_ms']!r}"
+                )  # fmt: skip
         cameras.append(
             CameraSpec(
                 name=str(item["name"]),
@@ -91,6 +100,7 @@ def parse_rig(data: Any, path: str | Path = "<rig>") -> RigSpec:
                 nominal_focal_mm=_number(path, f"{label} nominal_focal_mm", item["nominal_focal_mm"]),
                 max_view_angle_deg=angle,
                 lens=lens,
+                readout_ms=readout,
             )
         )
     names = [c.name for c in cameras]
@@ -125,6 +135,8 @@ def rig_to_dict(rig: RigSpec) -> dict[str, Any]:
         }
         if spec.lens is not None:
             item["lens"] = spec.lens
+        if spec.readout_ms is not None:
+            item["readout_ms"] = float(spec.readout_ms)
         cameras.append(item)
     return {"wand": {"L1": float(rig.wand.L1), "L2": float(rig.wand.L2)}, "cameras": cameras}
 

@@ -63,5 +63,5 @@ def corrupt(
         else:
             angle = rng.uniform(0, 2 * np.pi)
             uv[f, c, point] += gross_px * np.array([np.cos(angle), np.sin(angle)])
-    corrupted = WandObservations(observations.frames, observations.camera_names, uv)
+    corrupted = observations.with_uv(uv)
     return Corruption(corrupted, kind >= 0, kind)

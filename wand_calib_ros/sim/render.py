@@ -1,20 +1,24 @@
 """Rendering of LED wand images: Gaussian spots on a dark, noisy background.
 
-A scenario's wand is waved continuously (smooth motion through the volume at a
-given frame rate) and each camera's image shows its three LEDs as Gaussian
-spots of a few pixels at their exact projections, with sensor noise and,
-optionally, spurious reflections and occluded LEDs. These images are the test
-and demo data of the detector, the bag tools and the ROS nodes.
+A scenario's wand is waved continuously (smooth motion through the volume) and
+each camera's images, at its own clock's instants (:mod:`wand_calib_ros.sim.clocks`:
+hardware-triggered or free-running, global or rolling shutter), show its three LEDs
+as Gaussian spots of a few pixels at their exact projections, with sensor noise and,
+optionally, spurious reflections and occluded LEDs. These images are the test and
+demo data of the detector, the bag tools and the ROS nodes.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
 from wand_calib_ros.core.camera_model import project
+from wand_calib_ros.core.rig import WandObservations
+from wand_calib_ros.sim.clocks import CameraTake, film, observe, stamp_ns, synchronised_clocks
+from wand_calib_ros.sim.motion import WandMotion, waved_wand
 from wand_calib_ros.sim.scenarios import Scenario, sample_placements, visibility
 
 FloatArray = NDArray[np.float64]
@@ -31,6 +35,9 @@ class RenderOptions:
         read_noise: Gaussian noise, grey levels.
         reflection_rate: probability per image of one extra, LED-like spot somewhere.
         occlusion_rate: probability per LED and image that it is hidden.
+        centre_scatter_px: standard deviation (px) of each spot's centre about the LED's true
+            projection: real centroids scatter by a few tenths of a pixel (spot shape, diffusers,
+            sensor non-uniformity) where these ideal spots are found to 0.01 px.
     """
 
     spot_sigma_px: float = 1.3
@@ -39,49 +46,12 @@ class RenderOptions:
     read_noise: float = 2.0
     reflection_rate: float = 0.0
     occlusion_rate: float = 0.0
-
-
-@dataclass(frozen=True, eq=False)
-class WandMotion:
-    """A continuous wand trajectory sampled at the frame times.
-
-    Attributes:
-        times: (F,) seconds.
-        wand_a: (F, 3) point A, reference frame, mm.
-        direction: (F, 3) unit A -> C.
-        facing: (F, 3) direction the LEDs shine into.
-    """
-
-    times: FloatArray
-    wand_a: FloatArray
-    direction: FloatArray
-    facing: FloatArray
-
-
-def wave_wand(scenario: Scenario, n_frames: int, fps: float, rng: np.random.Generator) -> WandMotion:
-    """A smooth wand motion through the scenario's volume (sums of slow sinusoids, random phases)."""
-    times = np.arange(n_frames) / fps
-    low, high = scenario.volume
-    middle, half = (low + high) / 2, (high - low) / 2
-    frequencies = rng.uniform(0.05, 0.25, size=(3, 3))  # Hz, three components per axis
-    phases = rng.uniform(0, 2 * np.pi, size=(3, 3))
-    wave = np.sin(2 * np.pi * frequencies[None] * times[:, None, None] + phases[None]).mean(axis=2)
-    centre = middle + half * np.clip(wave * 1.6, -1, 1)
-    spin = rng.uniform(0.1, 0.4, size=3)
-    tilt = rng.uniform(0, 2 * np.pi, size=3)
-    direction = np.stack([np.sin(2 * np.pi * spin[i] * times + tilt[i]) for i in range(3)], axis=1)
-    direction += 0.3 * rng.normal(size=3)
-    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
-    facing = np.cross(direction, [0.0, 1.0, 0.0])
-    facing = np.where(np.linalg.norm(facing, axis=1, keepdims=True) > 1e-6, facing, [1.0, 0.0, 0.0])
-    facing /= np.linalg.norm(facing, axis=1, keepdims=True)
-    wand_a = centre - 0.5 * scenario.wand.L * direction
-    return WandMotion(times, wand_a, direction, facing)
+    centre_scatter_px: float = 0.0
 
 
 def true_pixels(scenario: Scenario, motion: WandMotion) -> FloatArray:
     """(F, C, 3, 2) exact projections of A, B, C (NaN where a camera cannot see the LED)."""
-    points = motion.wand_a[:, None, :] + scenario.wand.offsets[None, :, None] * motion.direction[:, None, :]
+    points = motion.points(scenario.wand)
     seen = visibility(scenario, motion.wand_a, motion.direction, motion.facing)
     uv = np.full((points.shape[0], len(scenario.cameras), 3, 2), np.nan)
     for c, camera in enumerate(scenario.cameras):
@@ -118,12 +88,14 @@ def render_frame(
         uv: (3, 2) exact pixels of A, B, C (NaN where not visible).
 
     Returns:
-        The image and the (3, 2) pixels actually drawn (NaN where occluded or not visible).
+        The image and the (3, 2) true pixels of the LEDs drawn (NaN where occluded or not visible).
     """
     drawn = uv.copy()
     hidden = rng.random(3) < options.occlusion_rate
     drawn[hidden] = np.nan
-    spots = drawn
+    spots = (
+        drawn + rng.normal(scale=options.centre_scatter_px, size=drawn.shape) if options.centre_scatter_px else drawn
+    )
     if rng.random() < options.reflection_rate:
         width, height = image_size
         spots = np.vstack([drawn, rng.uniform([0, 0], [width - 1, height - 1])])
@@ -135,14 +107,13 @@ class Recording:
     """Rendered images of a waved wand with the pixels drawn.
 
     Attributes:
-        frames: (camera, stamp_ns, mono8 image) in time order.
-        drawn: (F, C, 3, 2) pixels of A, B, C actually drawn (NaN: hidden or out of view).
-        stamps_ns: (F,) frame times.
+        frames: (camera, stamp_ns, mono8 image) in stamp order (cameras in rig order on a tie).
+        drawn: the pixels of A, B, C actually drawn (NaN: hidden or out of view), grouped into
+            frames by nearest stamps, each view with its image's stamp.
     """
 
     frames: list[tuple[str, int, NDArray[np.uint8]]]
-    drawn: FloatArray
-    stamps_ns: NDArray[np.int64]
+    drawn: WandObservations
 
 
 def independent_placements(scenario: Scenario, n_frames: int, fps: float, rng: np.random.Generator) -> WandMotion:
@@ -150,6 +121,24 @@ def independent_placements(scenario: Scenario, n_frames: int, fps: float, rng: n
     down and picked up again, with no continuity to track."""
     wand_a, direction, facing = sample_placements(scenario, n_frames, rng)
     return WandMotion(np.arange(n_frames, dtype=np.float64), wand_a, direction, facing)
+
+
+def render_take(
+    scenario: Scenario, takes: tuple[CameraTake, ...], options: RenderOptions, rng: np.random.Generator
+) -> Recording:
+    """Every camera's images of what it filmed (each image at its own stamp)."""
+    names = scenario.rig.camera_names
+    frames: list[tuple[int, int, str, NDArray[np.uint8]]] = []
+    drawn_takes = []
+    for c, (camera, take) in enumerate(zip(scenario.cameras, takes, strict=True)):
+        drawn = np.full_like(take.uv, np.nan)
+        for k, stamp in enumerate(stamp_ns(take.stamps)):
+            image, drawn[k] = render_frame(camera.spec.image_size, take.uv[k], options, rng)
+            frames.append((int(stamp), c, camera.spec.name, image))
+        drawn_takes.append(replace(take, uv=drawn))
+    frames.sort(key=lambda f: (f[0], f[1]))
+    observations = observe(names, tuple(drawn_takes), 0.0, rng)
+    return Recording([(name, stamp, image) for stamp, _, name, image in frames], observations)
 
 
 def render_recording(
@@ -163,13 +152,13 @@ def render_recording(
 ) -> Recording:
     """Images of every camera (hardware-synchronised) of a wand waved through the scenario's volume,
     or of independent placements when ``independent``."""
-    motion = (independent_placements if independent else wave_wand)(scenario, n_frames, fps, rng)
-    uv = true_pixels(scenario, motion)
-    stamps = np.round(motion.times * 1e9).astype(np.int64) + 1_700_000_000 * 10**9
-    frames = []
-    drawn = np.full_like(uv, np.nan)
-    for f in range(n_frames):
-        for c, camera in enumerate(scenario.cameras):
-            image, drawn[f, c] = render_frame(camera.spec.image_size, uv[f, c], options, rng)
-            frames.append((camera.spec.name, int(stamps[f]), image))
-    return Recording(frames, drawn, stamps)
+    if independent:
+        motion = independent_placements(scenario, n_frames, fps, rng)
+        uv = true_pixels(scenario, motion)
+        times = np.repeat(motion.times[:, None], 3, axis=1)
+        takes = tuple(CameraTake(motion.times, motion.times, uv[:, c], times) for c in range(len(scenario.cameras)))
+    else:
+        trajectory = waved_wand(scenario.volume, scenario.wand, rng)
+        clocks = synchronised_clocks(len(scenario.cameras), fps=fps)
+        takes = film(scenario, trajectory, clocks, (n_frames - 0.5) / fps, rng)
+    return render_take(scenario, takes, options, rng)

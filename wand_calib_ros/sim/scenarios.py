@@ -179,6 +179,21 @@ def mixed_pair_scenario(*, n_placements: int = 300) -> Scenario:
     return Scenario("mixed", WandSpec(400.0, 200.0), cameras, volume, n_placements)
 
 
+#: The real pair's conventional camera mirrored to the other side of the fisheye (x -> -x).
+_MIRRORED_PAIR_POSE = Pose.from_rotvec(np.array([0.0729, -0.6276, -0.2053]), np.array([1373.47, -180.03, 504.96]))
+
+
+def mixed_three_camera_scenario(*, n_placements: int = 300) -> Scenario:
+    """The mixed pair with a second 4.2 mm camera mirrored to the fisheye's other side (a 3-camera mixed rig)."""
+    cameras = (
+        _fisheye_camera("cam0", Pose.identity(), (336.0, 241.0)),
+        _conventional_camera("cam1", _REAL_PAIR_POSE, (322.0, 251.0)),
+        _conventional_camera("cam2", _MIRRORED_PAIR_POSE, (331.0, 244.0)),
+    )
+    volume = np.array([[-1500.0, -1000.0, 800.0], [1500.0, 1000.0, 3000.0]])
+    return Scenario("mixed3", WandSpec(400.0, 200.0), cameras, volume, n_placements, min_views=2)
+
+
 def paper_three_camera_scenario(**kwargs: float | tuple[float, float]) -> Scenario:
     """The paper's three-fisheye simulation (camera 2 at Euler (57.3, 57.3, 57.3) deg, T = [-1200, -200, 700] mm)."""
     scenario = paper_fisheye_scenario(n_cameras=3, **kwargs)  # type: ignore[arg-type]
@@ -253,6 +268,7 @@ SCENARIOS: dict[str, Callable[..., Scenario]] = {
     "paper3": paper_three_camera_scenario,
     "conventional": conventional_pair_scenario,
     "mixed": mixed_pair_scenario,
+    "mixed3": mixed_three_camera_scenario,
     "ring6": ring_scenario,
     "mocap16": mocap_scenario,
 }

@@ -11,7 +11,7 @@ from wand_calib_ros.io.result_yaml import CameraGeometry, read_result
 
 
 def compare_with_truth(
-    reference: str, cameras: dict[str, CameraGeometry], wand: WandSpec, truth_path: Path
+    reference: str, cameras: dict[str, CameraGeometry], wand: WandSpec, truth_path: Path, unit: str = "frames"
 ) -> list[str]:
     """Lines of per camera errors against ``truth_path`` (and D_RMS when ``heldout.csv`` lies next to it).
 
@@ -20,6 +20,8 @@ def compare_with_truth(
         cameras: its per camera model and pose (X_cam = R X_ref + T, mm).
         wand: the wand lengths.
         truth_path: a ``truth.yaml`` written by ``wand-calib simulate`` or ``render``.
+        unit: the calibration's time unit; in seconds, time offsets (relative to ``reference``) and
+            readout times are compared with the truth's too.
     """
     _, truth = read_result(truth_path)
     true_poses = rereference({name: g.pose for name, g in truth.items()}, reference)
@@ -29,6 +31,12 @@ def compare_with_truth(
             continue
         e = camera_errors(camera.model, camera.pose, truth[name].model, true_poses[name])
         extrinsic = f", E_r {e.rotation_deg:.4f} deg, E_t {e.translation:.5f}" if name != reference else ""
+        if unit == "s" and reference in truth:
+            offset = camera.time_offset - (truth[name].time_offset - truth[reference].time_offset)
+            extrinsic += (
+                f", time offset error {1000 * offset:+.3f} ms, readout error "
+                f"{1000 * (camera.readout - truth[name].readout):+.3f} ms"
+            )
         lines.append(
             f"  {name}: focal error {e.focal_mm * 1000:.2f} um ({e.focal_px:.3f} px), "
             f"principal point error {e.principal_point_px:.3f} px{extrinsic}"

@@ -1,0 +1,90 @@
+"""The wand's placements with the cameras known: linear triangulation and a fit of each placement.
+
+Both work on dense (P, C, 3, 2) pixels (NaN where a camera did not see a point) and
+return the wand in the reference frame (mm).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wand_calib_ros.core.bundle_adjustment import (
+    N_CAMERA_PARAMS,
+    BundleProblem,
+    BundleResult,
+    BundleState,
+    PlacementTiming,
+    bundle_adjust,
+)
+from wand_calib_ros.core.camera_model import CameraModel, unproject
+from wand_calib_ros.core.geometry import Pose, triangulate, wand_directions
+from wand_calib_ros.core.rig import WandSpec
+
+FloatArray = NDArray[np.float64]
+
+
+def triangulate_placements(models: tuple[CameraModel, ...], poses: tuple[Pose, ...], uv: FloatArray) -> FloatArray:
+    """Linear n-view triangulation of every wand point.
+
+    Args:
+        models, poses: per camera intrinsics and pose (reference frame).
+        uv: (P, C, 3, 2) pixels of A, B, C, NaN where not seen.
+
+    Returns:
+        (P, 3, 3) A, B, C in the reference frame (NaN where fewer than two views).
+    """
+    n_placements, n_cameras = uv.shape[:2]
+    bearings = np.stack([unproject(models[c], uv[:, c]) for c in range(n_cameras)], axis=2)  # (P, 3, C, 3)
+    rotations = np.stack([p.rotation for p in poses])
+    translations = np.stack([p.translation for p in poses])
+    return triangulate(bearings.reshape(-1, n_cameras, 3), rotations, translations).reshape(n_placements, 3, 3)
+
+
+def fit_placements(
+    wand: WandSpec,
+    cameras: BundleState,
+    uv: FloatArray,
+    timing: PlacementTiming | None = None,
+    *,
+    loss_scale: float | None = None,
+    max_iterations: int = 10,
+    tolerance: float = 1e-5,
+) -> tuple[NDArray[np.int64], BundleResult]:
+    """Each placement's wand (A and direction) fitted to its views with the cameras held fixed.
+
+    Placements are triangulated first; those seen completely by two cameras with a usable
+    triangulation are fitted (independent 5-parameter problems).
+
+    Args:
+        wand: the wand.
+        cameras: the cameras' models, poses and timing (its placements are ignored).
+        uv: (P, C, 3, 2) pixels.
+        timing: when each camera saw each placement and how the wand moved (None: simultaneous).
+        loss_scale: Huber threshold (px) of the fit, or None for least squares.
+        max_iterations, tolerance: of the Levenberg-Marquardt.
+
+    Returns:
+        The indices of the fitted placements and the fit (its state holds only them).
+    """
+    models, poses = cameras.models, cameras.poses
+    points = triangulate_placements(models, poses, uv)
+    usable = np.all(np.isfinite(points), axis=(1, 2)) & (np.linalg.norm(points[:, 2] - points[:, 0], axis=1) > 0)
+    usable &= np.all(np.isfinite(uv), axis=(2, 3)).sum(axis=1) >= 2
+    index = np.flatnonzero(usable)
+    start = BundleState(
+        models, poses, points[index, 0], wand_directions(points[index, 0], points[index, 2]), cameras.timing
+    )
+    problem = BundleProblem.from_dense(wand, uv[index], None if timing is None else timing.subset(index))
+    if index.size == 0:
+        return index, BundleResult(start, np.zeros((0, 2)), 0, True, np.zeros((len(models), N_CAMERA_PARAMS)),
+                                   np.zeros((0, 0)), 0.0, (0, 0))  # fmt: skip
+    fitted = bundle_adjust(
+        start,
+        problem,
+        np.zeros((len(models), N_CAMERA_PARAMS), dtype=bool),
+        loss_scale=loss_scale,
+        max_iterations=max_iterations,
+        tolerance=tolerance,
+    )
+    return index, fitted
