@@ -41,6 +41,7 @@ def test_collect_calibrate_and_publish(ros: Ros, tmp_path: Path) -> None:
         Parameter("min_placements", value=50),
         Parameter("min_theta_fraction", value=0.5),
         Parameter("min_image_fraction", value=0.3),
+        Parameter("min_depth_ratio", value=1.1),  # 5 s of waving reach about 1.2
     ]
     collector = ros.add(
         CollectorNode(context=ros.context, parameter_overrides=[*overrides, Parameter("image_qos", value="reliable")])
@@ -101,6 +102,11 @@ def test_collect_calibrate_and_publish(ros: Ros, tmp_path: Path) -> None:
     # Feedback: per camera diagnostics with counts, a heat map shaped like the image.
     names = {status.name for status in diagnostics[-1].status}
     assert {"wand_calib: cam0", "wand_calib: cam1", "wand_calib: rig"} <= names
+    cam1 = next(s for s in diagnostics[-1].status if s.name == "wand_calib: cam1")
+    values = {kv.key: kv.value for kv in cam1.values}
+    assert abs(float(values["frame_rate_hz"]) - 30.0) < 0.1 and float(values["phase_ms"]) == 0.0  # triggered
+    stored = read_observations(tmp_path / "out" / "observations.csv", scenario.rig.camera_names)
+    assert stored.stamps is not None and np.all(np.isfinite(stored.stamps[np.isfinite(stored.uv[..., 0, 0])]))
     assert heat_maps[-1].encoding == "bgr8" and heat_maps[-1].width == 320
 
 
@@ -125,8 +131,8 @@ def test_calibrate_answers_clearly_when_busy_short_of_data_or_reset(ros: Ros, tm
     assert not first.result().success and "nothing collected yet" in first.result().message
 
     data = simulate(scenario, 0.5, np.random.default_rng(0), n=30)
-    for uv in data.observations.uv:
-        collector.buffer.offer(uv)
+    for k, uv in enumerate(data.observations.uv):
+        collector.buffer.offer(uv, np.full(len(scenario.cameras), 1.7e9 + k / 30.0))
     short = client.call(Trigger.Request(), timeout_sec=30)
     assert not short.success
     assert "coverage insufficient" in short.message and "cam0: 30 of 100 placements" in short.message

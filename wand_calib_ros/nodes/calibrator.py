@@ -37,7 +37,9 @@ from std_srvs.srv import Trigger
 
 from wand_calib_ros.collection.buffer import BUFFER_FILE, has_rows
 from wand_calib_ros.collection.job import run_calibration, summary
+from wand_calib_ros.core.pipeline import CalibrationOptions
 from wand_calib_ros.core.result import CalibrationResult
+from wand_calib_ros.core.timing import TIMING_MODES
 from wand_calib_ros.errors import WandCalibError
 from wand_calib_ros.io.observations_csv import read_observations
 from wand_calib_ros.io.rig_yaml import load_camera_endpoints, load_rig
@@ -52,6 +54,18 @@ PARAMS = (
     Param("write_report", True, "write output_dir/report/index.html after each calibration"),
     Param("commit_to_drivers", False, "send the results to each camera driver's set_camera_info service"),
     Param("driver_timeout_s", 5.0, "how long to wait for a driver's set_camera_info (s)", 0.1, 600.0),
+    Param(
+        "time_offsets",
+        "auto",
+        "per camera time offsets: auto (estimated for free-running cameras, else when significant), estimate, fixed",
+        choices=TIMING_MODES,
+    ),
+    Param(
+        "rolling_shutter",
+        "auto",
+        "per camera rolling-shutter readout times: auto (estimated when significant), estimate, fixed",
+        choices=TIMING_MODES,
+    ),
 )
 
 #: Results stay available to late subscribers.
@@ -64,11 +78,19 @@ class CalibratorNode(Node):
     #: A solve occupies one thread; another answers "in progress", a third takes driver answers.
     EXECUTOR_THREADS = 3
 
-    def __init__(self, *, before_calibrate: Callable[[], None] | None = None, **kwargs: Any) -> None:
+    def __init__(
+        self,
+        *,
+        before_calibrate: Callable[[], None] | None = None,
+        after_calibrate: Callable[[CalibrationResult], None] | None = None,
+        **kwargs: Any,
+    ) -> None:
         """
         Args:
             before_calibrate: called at the start of each /calibrate (the in-process collector
                 stores what it still holds).
+            after_calibrate: called with each successful result (the in-process collector shows
+                its time offsets on /diagnostics).
             **kwargs: passed to :class:`rclpy.node.Node` (context, parameter_overrides, ...).
         """
         super().__init__("wand_calib_calibrator", **kwargs)
@@ -81,7 +103,11 @@ class CalibratorNode(Node):
         self.write_report = bool(values["write_report"])
         self.commit = bool(values["commit_to_drivers"])
         self.driver_timeout = float(values["driver_timeout_s"])
+        self.options = CalibrationOptions(
+            time_offsets=values["time_offsets"], rolling_shutter=values["rolling_shutter"]
+        )
         self.before_calibrate = before_calibrate
+        self.after_calibrate = after_calibrate
         self._running = threading.Lock()
         # Reentrant: a second /calibrate during a solve gets its "in progress" answer at once,
         # and driver answers arrive while the solve's thread waits for them.
@@ -127,7 +153,12 @@ class CalibratorNode(Node):
         try:
             observations = read_observations(path, self.rig.camera_names)
             result, files = run_calibration(
-                self.rig, observations, self.output_dir, thresholds=self.thresholds, report=self.write_report
+                self.rig,
+                observations,
+                self.output_dir,
+                thresholds=self.thresholds,
+                report=self.write_report,
+                options=self.options,
             )
         except WandCalibError as error:
             return False, f"calibration failed: {error}"
@@ -135,6 +166,8 @@ class CalibratorNode(Node):
         for name in self.rig.camera_names:
             self.info_publishers[name].publish(messages.camera_info_message(result, name, stamp))
             self.extrinsics_publishers[name].publish(messages.extrinsics_message(result, name, stamp))
+        if self.after_calibrate is not None:
+            self.after_calibrate(result)
         answer = summary(result, files)
         if self.commit:
             failures = self._commit(result, stamp)

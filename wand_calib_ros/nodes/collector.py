@@ -33,7 +33,8 @@ from std_srvs.srv import Trigger
 
 from wand_calib_ros.collection.buffer import BUFFER_FILE, ObservationBuffer
 from wand_calib_ros.collection.coverage import CoverageTracker
-from wand_calib_ros.collection.sync import FrameSynchroniser
+from wand_calib_ros.collection.sync import FrameSynchroniser, SyncedFrame
+from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.detection.recording import CameraStream, Labelled
 from wand_calib_ros.detection.wand import WandOptions
 from wand_calib_ros.io.images import image_array
@@ -61,7 +62,13 @@ PARAMS = (
         choices=("images", "points"),
     ),
     IMAGE_QOS,
-    Param("sync_tolerance_ms", 5.0, "stamps closer than this form one frame (ms)", 0.0, 1000.0),
+    Param(
+        "sync_tolerance_ms",
+        0.0,
+        "images further apart than this never form a frame (ms; 0: half the frame period, learned per stream)",
+        0.0,
+        1000.0,
+    ),
     Param("buffer_capacity", 20000, "frames stored before only coverage-adding frames are kept", 100, 10**7),
     Param("min_motion_px", 2.0, "a frame whose wand moved less than this (px) in every camera is skipped", 0.0, 1000.0),
     LABEL_HOLD,
@@ -93,8 +100,11 @@ class CollectorNode(Node):
             self.coverage.add(uv)
         hold_ns = int(values["label_hold_ms"] * 1e6)
         self.sync = FrameSynchroniser(
-            self.rig.camera_names, slop_ns=int(values["sync_tolerance_ms"] * 1e6), max_delay_ns=hold_ns + 500_000_000
+            self.rig.camera_names,
+            tolerance_ns=int(values["sync_tolerance_ms"] * 1e6),
+            max_delay_ns=hold_ns + 500_000_000,
         )
+        self.timing: CalibrationResult | None = None  # the last /calibrate's result (its time offsets)
         wand = WandOptions(ratio=self.rig.wand.L1 / self.rig.wand.L2)
         self.streams = {c.name: CameraStream(c, wand, max_hold_ns=hold_ns) for c in self.rig.cameras}
         self.received = dict.fromkeys(self.rig.camera_names, 0)
@@ -153,28 +163,35 @@ class CollectorNode(Node):
     def _offer(self, camera: str, outcomes: list[Labelled]) -> None:
         """Synchronise released outcomes and store completed frames (caller holds the lock)."""
         for outcome in outcomes:
-            for frame in self.sync.add(camera, outcome.stamp_ns, outcome.points):
-                if self.buffer.offer(frame.uv):
-                    self.coverage.add(frame.uv)
+            self._store(self.sync.add(camera, outcome.stamp_ns, outcome.points))
+
+    def _store(self, frames: list[SyncedFrame]) -> None:
+        for frame in frames:
+            if self.buffer.offer(frame.uv, messages.frame_stamps(frame)):
+                self.coverage.add(frame.uv)
 
     def flush(self) -> None:
         """Store everything still held (ambiguous views, pending frames): before /calibrate, at exit."""
         with self.lock:
             for name, stream in self.streams.items():
                 self._offer(name, stream.flush())
-            for frame in self.sync.flush_all():
-                if self.buffer.offer(frame.uv):
-                    self.coverage.add(frame.uv)
+            self._store(self.sync.flush_all())
 
     close = flush
 
-    def _counts(self) -> dict[str, dict[str, int]]:
-        counts = {}
+    def after_calibrate(self, result: CalibrationResult) -> None:
+        """Keep a calibration's result: /diagnostics then shows its time offsets."""
+        with self.lock:
+            self.timing = result
+
+    def _counts(self) -> dict[str, dict[str, int | str]]:
+        counts: dict[str, dict[str, int | str]] = {}
         for name, stream in self.streams.items():
             counts[name] = {"received": self.received[name], "wand_labelled": stream.stats.detected}
             counts[name] |= {f"rejected_{reason}": n for reason, n in sorted(stream.stats.rejected.items())}
             if self.malformed[name]:
                 counts[name]["malformed_points"] = self.malformed[name]
+            counts[name] |= messages.timing_values(self.sync, name, self.timing)
         return counts
 
     def _publish_feedback(self) -> None:
@@ -186,9 +203,10 @@ class CollectorNode(Node):
                 "frames_stored": len(self.buffer.frames),
                 "frames_synchronised": sync.frames,
                 "frames_all_cameras": sync.complete,
-                "late_messages": sync.late,
-                "out_of_order_messages": sync.out_of_order,
-                "duplicate_messages": sync.duplicates,
+                "frames_anchored_by": "-" if self.sync.anchor is None else self.rig.camera_names[self.sync.anchor],
+                "late_messages": sum(sync.late.values()),
+                "out_of_order_messages": sum(sync.out_of_order.values()),
+                "duplicate_messages": sum(sync.duplicates.values()),
                 "skipped_still": stored.still,
                 "skipped_buffer_full": stored.full,
                 "without_wand": stored.empty,
@@ -224,7 +242,10 @@ def build(context: Context) -> list[Node]:
     collector = CollectorNode(context=context)
     if not collector.with_calibrator:
         return [collector]
-    return [collector, CalibratorNode(context=context, before_calibrate=collector.flush)]
+    calibrator = CalibratorNode(
+        context=context, before_calibrate=collector.flush, after_calibrate=collector.after_calibrate
+    )
+    return [collector, calibrator]
 
 
 def main(argv: Sequence[str] | None = None) -> int:

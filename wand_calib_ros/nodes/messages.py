@@ -19,6 +19,7 @@ from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
 from wand_calib_ros.collection.coverage import CoverageStatus
+from wand_calib_ros.collection.sync import FrameSynchroniser, SyncedFrame
 from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.io.result_yaml import camera_info_dict
 
@@ -103,8 +104,37 @@ def extrinsics_message(result: CalibrationResult, name: str, stamp: Time) -> Tra
     return message
 
 
+def frame_stamps(frame: SyncedFrame) -> NDArray[np.float64]:
+    """(C,) each view's stamp in seconds (NaN where a camera has no image in the frame)."""
+    return np.where(frame.reported, frame.stamps_ns / 1e9, np.nan)
+
+
+def timing_values(sync: FrameSynchroniser, camera: str, result: CalibrationResult | None) -> dict[str, str]:
+    """Diagnostics values of a camera's timing: its learned rate, its phase against the frames' anchor
+    camera, what the synchroniser could not use, and the last calibration's time offset."""
+    values: dict[str, str] = {}
+    period, phase = sync.period_ns(camera), sync.phase_ns(camera)
+    if period is not None:
+        values["frame_rate_hz"] = f"{1e9 / period:.2f}"
+    if phase is not None:
+        values["phase_ms"] = f"{phase / 1e6:+.2f}"
+    for key, counter in (("late", sync.stats.late), ("out_of_order", sync.stats.out_of_order)):
+        if counter.get(camera):
+            values[f"{key}_images"] = str(counter[camera])
+    if sync.stats.duplicates.get(camera):
+        values["duplicate_stamps"] = str(sync.stats.duplicates[camera])
+    if result is not None and result.timing is not None:
+        calibrated = result.camera(camera)
+        scale, unit = (1000.0, "ms") if result.timing.unit == "s" else (1.0, "frames")
+        for key, label, value in (("time_offset", "time_offset", calibrated.time_offset),
+                                  ("readout", "readout", calibrated.readout)):  # fmt: skip
+            std = calibrated.parameter_std.get(key)
+            values[f"{label}_{unit}"] = f"{scale * value:+.3f}" + ("" if std is None else f" +- {scale * std:.3f}")
+    return values
+
+
 def diagnostics_message(
-    status: CoverageStatus, counts: dict[str, dict[str, int]], rig_values: dict[str, int], stamp: Time
+    status: CoverageStatus, counts: dict[str, dict[str, int | str]], rig_values: dict[str, int | str], stamp: Time
 ) -> DiagnosticArray:
     """/diagnostics: one OK/WARN entry per camera (what is missing) and one for the rig.
 
