@@ -258,3 +258,32 @@ def test_detect_writes_debug_overlays(tmp_path: Path) -> None:
     pictures = sorted(debug.glob("*.png"))
     assert len(pictures) == 4  # 10 images per camera, every 5th
     assert pictures[0].read_bytes()[:4] == b"\x89PNG"
+
+
+def test_a_free_running_take_is_simulated_and_its_timing_calibrated(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    sim = tmp_path / "take"
+    arguments = ["simulate", "paper3", "--take", "10", "--free-running", "--readout-ms", "20", "--noise", "0.25"]
+    assert main(["-q", *arguments, "--seed", "4", "--out", str(sim)]) == 0
+    assert read_observations(sim / "observations.csv").stamps is not None
+    truth = yaml.safe_load((sim / "truth.yaml").read_text())["cameras"]
+    assert all(entry["rolling_shutter_readout_s"] == 0.02 for entry in truth.values())
+    capsys.readouterr()
+    assert _calibrate(sim, tmp_path, "--truth", str(sim / "truth.yaml")) == 0
+    out = capsys.readouterr().out
+    assert "time offset" in out and "readout" in out
+    errors = [float(part.split()[-2]) for part in out.split(",") if "time offset error" in part]
+    assert len(errors) == 3 and max(abs(e) for e in errors) < 1.0  # ms
+    result = yaml.safe_load((tmp_path / "result.yaml").read_text())
+    assert result["timing"]["time_offsets"] == "estimated"
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exit_code:  # argparse: a usage line and exit 2
+        _calibrate(sim, tmp_path, "--time-offsets", "bogus")
+    assert exit_code.value.code == 2 and "--time-offsets: invalid choice" in capsys.readouterr().err
+
+
+def test_estimating_offsets_of_independent_placements_is_one_clear_line(
+    simulated: Path, tmp_path: Path, capsys
+) -> None:  # type: ignore[no-untyped-def]
+    assert _calibrate(simulated, tmp_path, "--time-offsets", "estimate") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "time offsets cannot be estimated" in err[0]

@@ -18,12 +18,13 @@ import numpy as np
 
 from wand_calib_ros.core.pairwise import PairOptions
 from wand_calib_ros.core.pipeline import CalibrationOptions, calibrate
-from wand_calib_ros.core.result import CalibrationResult
-from wand_calib_ros.core.rig import WandObservations
+from wand_calib_ros.core.result import CalibrationResult, CameraCalibration
+from wand_calib_ros.core.timing import TIMING_MODES
 from wand_calib_ros.errors import WandCalibError
 from wand_calib_ros.io.observations_csv import read_observations, write_observations
 from wand_calib_ros.io.result_yaml import CameraGeometry, camera_entry, write_camera_infos, write_result, write_yaml
 from wand_calib_ros.io.rig_yaml import load_rig, save_rig
+from wand_calib_ros.sim.clocks import TakeOptions, film, observe, take_trajectory, truth_timing
 from wand_calib_ros.sim.outliers import corrupt
 from wand_calib_ros.sim.scenarios import SCENARIOS, image_placements, sample_placements, simulate
 from wand_calib_ros.sim.sweeps import paper_sweeps
@@ -48,13 +49,29 @@ def _parser() -> argparse.ArgumentParser:
     cal.add_argument("--observations", required=True, type=Path, help="observations CSV (frame,camera,point,u,v)")
     cal.add_argument("--output", required=True, type=Path, help="result YAML to write")
     cal.add_argument("--camera-info-dir", type=Path, help="also write ROS camera_info YAML files here")
-    cal.add_argument("--reference", help="reference camera name (default: the first in cameras.yaml)")
+    cal.add_argument(
+        "--reference", help="reference camera name (default: the one sharing the most placements with the others)"
+    )
     cal.add_argument("--seed", type=int, default=0, help="seed of the RANSAC sampler (default 0)")
     cal.add_argument("--truth", type=Path, help="truth YAML (from 'simulate') to compare the result with")
     cal.add_argument(
         "--max-placements",
         type=int,
         help="use at most this many placements, spread over the recording (a time budget for large rigs)",
+    )
+    cal.add_argument(
+        "--time-offsets",
+        choices=TIMING_MODES,
+        default="auto",
+        help="per camera time offsets (exposure = stamp - offset): auto (estimated for free-running cameras, "
+        "else when significant), estimate, or fixed at zero (default auto)",
+    )
+    cal.add_argument(
+        "--rolling-shutter",
+        choices=TIMING_MODES,
+        default="auto",
+        help="per camera rolling-shutter readout times: auto (estimated when significant), estimate, or fixed "
+        "(zero, or readout_ms of cameras.yaml) (default auto)",
     )
 
     ren = commands.add_parser("render", help="render a scenario's waved wand into a rosbag2 of images")
@@ -63,7 +80,6 @@ def _parser() -> argparse.ArgumentParser:
         "--out", required=True, type=Path, help="directory: bag/ (or bag.bag), cameras.yaml, truth.yaml, drawn.csv"
     )
     ren.add_argument("--frames", type=int, default=300, help="frames per camera (default 300)")
-    ren.add_argument("--fps", type=float, default=30.0, help="frame rate (default 30)")
     ren.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     ren.add_argument("--reflections", type=float, default=0.0, help="probability of a spurious spot per image")
     ren.add_argument("--occlusions", type=float, default=0.0, help="probability that an LED is hidden")
@@ -74,13 +90,21 @@ def _parser() -> argparse.ArgumentParser:
         help="bag format (default mcap; ros1: bag.bag)",
     )
     ren.add_argument("--independent", action="store_true", help="independent placements instead of a waved wand")
+    _take_arguments(
+        ren, "with any of them, a take of --frames / fps seconds at --speed through the cameras' shared view"
+    )
 
     det = commands.add_parser("detect", help="detect the wand in a rosbag2 of camera images")
     det.add_argument("bag", type=Path, help="rosbag2 directory (mcap or sqlite3)")
     det.add_argument("--cameras", required=True, type=Path, help="rig description (cameras.yaml)")
     det.add_argument("--output", required=True, type=Path, help="observations CSV to write")
     det.add_argument("--topic", default="/{camera}/image_raw", help="topic pattern (default /{camera}/image_raw)")
-    det.add_argument("--sync-tolerance-ms", type=float, default=5.0, help="images this close in time form a frame")
+    det.add_argument(
+        "--sync-tolerance-ms",
+        type=float,
+        default=0.0,
+        help="images further apart never form a frame (default 0: half the frame period)",
+    )
     det.add_argument("--debug-dir", type=Path, help="write overlay images (blobs, chosen A/B/C) here")
     det.add_argument("--debug-every", type=int, default=30, help="overlay every N-th image per camera (default 30)")
 
@@ -116,7 +140,55 @@ def _parser() -> argparse.ArgumentParser:
         metavar=("U0", "V0"),
         help="paper scenario: true principal point in px (default 310 250)",
     )
+    sim.add_argument(
+        "--take",
+        type=float,
+        metavar="SECONDS",
+        help="a continuous wave of this length instead of independent placements",
+    )
+    _take_arguments(sim, "for --take")
     return parser
+
+
+def _take_arguments(parser: argparse.ArgumentParser, when: str) -> None:
+    """The cameras' clocks of a simulated take (``simulate --take``, ``render``)."""
+    group = parser.add_argument_group(f"cameras' clocks ({when})")
+    group.add_argument(
+        "--fps", type=float, nargs="+", default=[30.0], help="frame rate, or one per camera (default 30)"
+    )
+    group.add_argument(
+        "--free-running", action="store_true", help="each camera at its own phase and stamp latency (else triggered)"
+    )
+    group.add_argument(
+        "--max-latency-ms", type=float, default=8.0, help="free-running latencies in +- this (default 8)"
+    )
+    group.add_argument(
+        "--max-phase-frames", type=float, default=0.5, help="free-running phases in +- this of a frame (default 0.5)"
+    )
+    group.add_argument("--jitter-ms", type=float, default=0.2, help="free-running stamp jitter (default 0.2 ms)")
+    group.add_argument("--readout-ms", type=float, default=0.0, help="rolling-shutter readout time (default 0: global)")
+    group.add_argument("--speed", type=float, default=1000.0, help="median speed of the LEDs, mm/s (default 1000)")
+
+
+def _take_options(args: argparse.Namespace, duration_s: float) -> TakeOptions:
+    values = (args.max_latency_ms, args.max_phase_frames, args.jitter_ms, args.readout_ms)
+    if not all(v >= 0 for v in values) or not all(f > 0 for f in args.fps) or not args.speed > 0:
+        raise WandCalibError("--fps and --speed must be positive; latencies, phases, jitter and readout >= 0")
+    return TakeOptions(
+        duration_s=duration_s,
+        fps=tuple(args.fps) if len(args.fps) > 1 else args.fps[0],
+        free_running=args.free_running,
+        max_phase_frames=args.max_phase_frames,
+        max_latency_s=args.max_latency_ms / 1000.0,
+        jitter_s=args.jitter_ms / 1000.0,
+        readout_s=args.readout_ms / 1000.0,
+        speed_mm_s=args.speed,
+    )
+
+
+def _timed_take(args: argparse.Namespace) -> bool:
+    """Whether render's arguments ask for a take with clocks (else the classic triggered recording)."""
+    return bool(args.free_running or args.readout_ms or len(args.fps) > 1 or args.speed != 1000.0)
 
 
 def _print_summary(result: CalibrationResult, output: Path) -> None:
@@ -128,6 +200,7 @@ def _print_summary(result: CalibrationResult, output: Path) -> None:
             f"  {camera.name}: fx {fx:.2f} fy {fy:.2f} px, principal point ({u0:.2f}, {v0:.2f}) px, "
             f"RMS {camera.rms_reprojection_px:.3f} px over {camera.n_observations} points"
             + (f"; {', '.join(camera.fixed_coefficients)} fixed at 0" if camera.fixed_coefficients else "")
+            + _timing_summary(result, camera)
         )
     print(
         f"  wand |AC| {result.wand_length_mean_mm:.2f} +- {result.wand_length_std_mm:.2f} mm "
@@ -139,6 +212,23 @@ def _print_summary(result: CalibrationResult, output: Path) -> None:
         print(f"  warning: {warning}")
 
 
+def _timing_summary(result: CalibrationResult, camera: CameraCalibration) -> str:
+    """Per camera time offset and readout time, where estimated."""
+    timing = result.timing
+    if timing is None:
+        return ""
+    scale, unit, digits = (1000.0, "ms", 3) if timing.unit == "s" else (1.0, "frames", 4)
+    parts = [
+        f"{label} {scale * value:+.{digits}f} +- {scale * camera.parameter_std[key]:.{digits}f} {unit}"
+        for key, label, value in (
+            ("time_offset", "time offset", camera.time_offset),
+            ("readout", "readout", camera.readout),
+        )
+        if key in camera.parameter_std
+    ]
+    return "; " + ", ".join(parts) if parts else ""
+
+
 def _calibrate(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     rig = load_rig(args.cameras)
@@ -147,7 +237,11 @@ def _calibrate(args: argparse.Namespace) -> int:
     if args.max_placements is not None and args.max_placements < 2:
         raise WandCalibError("--max-placements must be at least 2")
     options = CalibrationOptions(
-        reference_camera=args.reference, pair=PairOptions(seed=args.seed), max_placements=args.max_placements
+        reference_camera=args.reference,
+        pair=PairOptions(seed=args.seed),
+        max_placements=args.max_placements,
+        time_offsets=args.time_offsets,
+        rolling_shutter=args.rolling_shutter,
     )
     result = calibrate(rig, observations, options)
     args.output.parent.mkdir(parents=True, exist_ok=True)
@@ -158,8 +252,9 @@ def _calibrate(args: argparse.Namespace) -> int:
     log.info("done in %.2f s", time.perf_counter() - started)
     _print_summary(result, args.output)
     if args.truth:
-        cameras = {c.name: CameraGeometry(c.model, c.pose) for c in result.cameras}
-        print("\n".join(compare_with_truth(result.reference_camera, cameras, result.wand, args.truth)))
+        cameras = {c.name: CameraGeometry(c.model, c.pose, c.time_offset, c.readout) for c in result.cameras}
+        unit = "frames" if result.timing is None else result.timing.unit
+        print("\n".join(compare_with_truth(result.reference_camera, cameras, result.wand, args.truth, unit)))
     return 0
 
 
@@ -183,8 +278,19 @@ def _simulate(args: argparse.Namespace) -> int:
         raise WandCalibError("--outliers must be a fraction in [0, 1)")
     scenario = factory(**kwargs)
     rng = np.random.default_rng(args.seed)
-    data = simulate(scenario, args.noise, rng)
-    observations = data.observations
+    timing: dict[str, dict[str, float]] = {}
+    if args.take is not None:
+        if not args.take > 0:
+            raise WandCalibError("--take must be a positive number of seconds")
+        take = _take_options(args, args.take)
+        clocks = take.clocks(len(scenario.cameras), rng)
+        trajectory = take_trajectory(scenario, take, rng)
+        observations = observe(
+            scenario.rig.camera_names, film(scenario, trajectory, clocks, take.duration_s, rng), args.noise, rng
+        )
+        timing = truth_timing(scenario.rig.camera_names, clocks)
+    else:
+        observations = simulate(scenario, args.noise, rng).observations
     if args.outliers > 0:
         sizes = tuple(c.spec.image_size for c in scenario.cameras)
         observations = corrupt(observations, args.outliers, sizes, rng).observations
@@ -202,11 +308,11 @@ def _simulate(args: argparse.Namespace) -> int:
         "seed": args.seed,
         "noise_px": float(args.noise),
         "outlier_fraction": float(args.outliers),
-        "cameras": {c.spec.name: camera_entry(c.model, c.pose) for c in scenario.cameras},
+        "cameras": {c.spec.name: camera_entry(c.model, c.pose) | timing.get(c.spec.name, {}) for c in scenario.cameras},
     }
     write_yaml(truth, out / "truth.yaml")
     print(
-        f"simulated '{scenario.name}': {len(scenario.cameras)} cameras, {scenario.n_placements} placements, "
+        f"simulated '{scenario.name}': {len(scenario.cameras)} cameras, {observations.uv.shape[0]} frames, "
         f"noise {args.noise} px -> {out}/cameras.yaml, observations.csv, heldout.csv, truth.yaml"
     )
     return 0
@@ -214,30 +320,42 @@ def _simulate(args: argparse.Namespace) -> int:
 
 def _render(args: argparse.Namespace) -> int:
     from wand_calib_ros.io.bags import write_image_bag
-    from wand_calib_ros.sim.render import RenderOptions, render_recording
+    from wand_calib_ros.sim.render import RenderOptions, render_recording, render_take
 
-    if args.frames < 1 or not (args.fps > 0):
-        raise WandCalibError("--frames and --fps must be positive")
+    if args.frames < 1:
+        raise WandCalibError("--frames must be positive")
     scenario = SCENARIOS[args.scenario]()
     rng = np.random.default_rng(args.seed)
     options = RenderOptions(reflection_rate=args.reflections, occlusion_rate=args.occlusions)
-    recording = render_recording(scenario, args.frames, args.fps, options, rng, independent=args.independent)
+    names = scenario.rig.camera_names
+    timing: dict[str, dict[str, float]] = {}
+    if _timed_take(args):
+        if args.independent:
+            raise WandCalibError("--independent placements have no clocks: leave out the take options")
+        take = _take_options(args, args.frames / min(args.fps))
+        clocks = take.clocks(len(names), rng)
+        takes = film(scenario, take_trajectory(scenario, take, rng), clocks, take.duration_s, rng)
+        recording = render_take(scenario, takes, options, rng)
+        timing = truth_timing(names, clocks)
+    else:
+        fps = _take_options(args, 1.0).fps
+        assert isinstance(fps, float)
+        recording = render_recording(scenario, args.frames, fps, options, rng, independent=args.independent)
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
     bag = out / ("bag.bag" if args.storage == "ros1" else "bag")
     if bag.exists():
         raise WandCalibError(f"{bag} exists already; choose another --out")
-    write_image_bag(bag, recording.frames, scenario.rig.camera_names, storage=args.storage)
+    write_image_bag(bag, recording.frames, names, storage=args.storage)
     save_rig(scenario.rig, out / "cameras.yaml")
-    names = tuple(c.spec.name for c in scenario.cameras)
-    write_observations(WandObservations(np.arange(args.frames), names, recording.drawn), out / "drawn.csv")
+    write_observations(recording.drawn, out / "drawn.csv")
     truth = {
         "reference_camera": names[0],
         "scenario": scenario.name,
-        "cameras": {c.spec.name: camera_entry(c.model, c.pose) for c in scenario.cameras},
+        "cameras": {c.spec.name: camera_entry(c.model, c.pose) | timing.get(c.spec.name, {}) for c in scenario.cameras},
     }
     write_yaml(truth, out / "truth.yaml")
-    print(f"rendered {args.frames} frames x {len(names)} cameras -> {bag} ({args.storage})")
+    print(f"rendered {len(recording.frames)} images of {len(names)} cameras -> {bag} ({args.storage})")
     return 0
 
 

@@ -3,11 +3,14 @@
 The residuals are those of the result's cameras: every placement is
 triangulated and its wand parameters are fitted with the cameras held fixed,
 so the report can be made for any result file, also one from another run.
+With the result's time offsets and readout times, each view is carried to its
+camera's instant along the wand's motion (as the calibration did); the timing
+figure compares those residuals with the ones of simultaneous views.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -15,12 +18,20 @@ import numpy as np
 import yaml
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.bundle_adjustment import N_CAMERA_PARAMS, BundleProblem, BundleState, bundle_adjust
+from wand_calib_ros.core.bundle_adjustment import (
+    N_CAMERA_PARAMS,
+    BundleProblem,
+    BundleResult,
+    BundleState,
+    PlacementTiming,
+    bundle_adjust,
+)
 from wand_calib_ros.core.camera_model import CameraModel
 from wand_calib_ros.core.errors import CoreError
 from wand_calib_ros.core.geometry import Pose, wand_directions
-from wand_calib_ros.core.refine import triangulate_placements
+from wand_calib_ros.core.placements import triangulate_placements
 from wand_calib_ros.core.rig import RigSpec, WandObservations
+from wand_calib_ros.core.timing import Timeline, align_views, smooth_motion, timeline
 from wand_calib_ros.core.vision_graph import VisionGraph, build_vision_graph, covisibility
 from wand_calib_ros.io.errors import FormatError
 from wand_calib_ros.io.result_yaml import read_result
@@ -44,6 +55,21 @@ class CameraResiduals:
 
 
 @dataclass(frozen=True, eq=False)
+class TimingResiduals:
+    """One camera's residuals against its image velocity, without and with the result's timing.
+
+    Attributes:
+        speed: (N,) image speed of each observed point, px per frame.
+        along_static: (N,) residual component along the image velocity, views taken as simultaneous, px.
+        along_timed: (N,) the same with the result's time offset and readout time, px.
+    """
+
+    speed: FloatArray
+    along_static: FloatArray
+    along_timed: FloatArray
+
+
+@dataclass(frozen=True, eq=False)
 class ReportData:
     """Everything the report draws.
 
@@ -58,6 +84,8 @@ class ReportData:
         ac_lengths: (P,) |AC| of the linearly triangulated placements, mm.
         shared: (C, C) placements seen completely by both cameras.
         graph: the vision graph from the reference (None if the cameras are not connected).
+        timing: per camera residuals against image velocity (None when the result has no timing or
+            the frames show no continuous motion).
     """
 
     rig: RigSpec
@@ -71,6 +99,7 @@ class ReportData:
     ac_lengths: FloatArray
     shared: NDArray[np.int64]
     graph: VisionGraph | None
+    timing: tuple[TimingResiduals, ...] | None = None
 
 
 def prepare(rig: RigSpec, observations: WandObservations, result_path: Path) -> ReportData:
@@ -89,19 +118,25 @@ def prepare(rig: RigSpec, observations: WandObservations, result_path: Path) -> 
     poses = tuple(geometry[n].pose for n in names)
     obs = observations.select_cameras(names)
     complete = obs.complete
-    uv = obs.uv[complete.sum(axis=1) >= 2]
-    points = triangulate_placements(models, poses, uv)
+    rows = np.flatnonzero(complete.sum(axis=1) >= 2)
+    uv = obs.uv[rows]
+    line = timeline(obs).subset(rows)
+    points = triangulate_placements(models, poses, align_views(uv, line))
     lengths = np.linalg.norm(points[:, 2] - points[:, 0], axis=-1)
     ok = np.all(np.isfinite(points), axis=(1, 2)) & (lengths > 0)
-    uv, points, lengths = uv[ok], points[ok], lengths[ok]
-    state = BundleState(models, poses, points[:, 0], wand_directions(points[:, 0], points[:, 2]))
-    problem = BundleProblem.from_dense(rig.wand, uv)
-    try:
-        fitted = bundle_adjust(state, problem, np.zeros((len(names), N_CAMERA_PARAMS), dtype=bool), max_iterations=20)
-        wand_points, res = fitted.state.points(rig.wand), fitted.residuals
-    except CoreError:
-        wand_points = state.points(rig.wand)
-        res = np.full((problem.n_observations, 2), np.nan)
+    camera_timing = np.array([[geometry[n].time_offset, geometry[n].readout] for n in names])
+    timing = None
+    if np.any(camera_timing) or not line.simultaneous:
+        motion = smooth_motion(line.placement_times, points, line.period)
+        if motion.continuous:
+            ok &= motion.known
+            heights = np.array([spec.image_size[1] for spec in rig.cameras], dtype=np.float64)
+            timing = PlacementTiming(line.view_times, heights, motion.velocity, motion.acceleration, motion.jerk)
+    uv, points, lengths, line = uv[ok], points[ok], lengths[ok], line.subset(ok)
+    state = BundleState(models, poses, points[:, 0], wand_directions(points[:, 0], points[:, 2]), camera_timing)
+    problem = BundleProblem.from_dense(rig.wand, uv, None if timing is None else timing.subset(ok))
+    timed = _fit(state, problem)
+    wand_points, res = timed.state.points(rig.wand), timed.residuals
     world = wand_points[problem.placement, problem.point]
     cameras = []
     for c, pose in enumerate(poses):
@@ -109,11 +144,41 @@ def prepare(rig: RigSpec, observations: WandObservations, result_path: Path) -> 
         in_cam = pose.apply(world[mine])
         theta = np.arctan2(np.hypot(in_cam[:, 0], in_cam[:, 1]), in_cam[:, 2])
         cameras.append(CameraResiduals(problem.uv[mine], res[mine], theta))
+    against = None
+    if problem.timing is not None:
+        static = _fit(replace(state, timing=None), replace(problem, timing=None)).residuals
+        against = tuple(_against_velocity(uv, line, problem, c, static, res) for c in range(len(names)))
     shared = covisibility(complete)
     try:
         graph: VisionGraph | None = build_vision_graph(names, complete, reference=reference)
     except CoreError:
         graph = None
     return ReportData(
-        rig, names, models, poses, reference, document, tuple(cameras), wand_points, lengths, shared, graph
+        rig, names, models, poses, reference, document, tuple(cameras), wand_points, lengths, shared, graph, against
     )
+
+
+def _fit(state: BundleState, problem: BundleProblem) -> BundleResult:
+    """The placements fitted with the cameras (and their timing) held fixed; NaN residuals if that fails."""
+    try:
+        return bundle_adjust(
+            state, problem, np.zeros((len(state.models), N_CAMERA_PARAMS), dtype=bool), max_iterations=20
+        )
+    except CoreError:
+        nan = np.full((problem.n_observations, 2), np.nan)
+        return BundleResult(state, nan, 0, False, np.zeros((0, 0)), np.zeros((0, 0)), float("nan"), (0, 0))
+
+
+def _against_velocity(
+    uv: FloatArray, line: Timeline, problem: BundleProblem, camera: int, static: FloatArray, timed: FloatArray
+) -> TimingResiduals:
+    """One camera's residuals along its image velocity (from its own image track), px per frame."""
+    seen = np.all(np.isfinite(uv[:, camera]), axis=(1, 2))
+    velocity = np.full((uv.shape[0], 3, 2), np.nan)
+    track = smooth_motion(line.placement_times[seen] + line.view_times[seen, camera], uv[seen, camera], line.period)
+    velocity[seen] = np.where(track.known[:, None, None], track.velocity * line.period, np.nan)
+    mine = problem.camera == camera
+    v = velocity[problem.placement[mine], problem.point[mine]]
+    speed = np.linalg.norm(v, axis=1)
+    direction = v / np.where(speed > 0, speed, np.nan)[:, None]
+    return TimingResiduals(speed, np.sum(static[mine] * direction, axis=1), np.sum(timed[mine] * direction, axis=1))

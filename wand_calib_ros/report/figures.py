@@ -196,6 +196,28 @@ def vision_graph(data: ReportData) -> Figure:
     return figure
 
 
+def timing(data: ReportData) -> Figure:
+    """Per camera residual along the image velocity against the image speed: views taken as
+    simultaneous (grey) and carried to their camera's instant with the result's timing (colour)."""
+    assert data.timing is not None
+    figure, axes = _grid(len(data.names))
+    for axis, name, camera in zip(axes, data.names, data.timing, strict=False):
+        ok = np.isfinite(camera.speed) & np.isfinite(camera.along_static) & np.isfinite(camera.along_timed)
+        step = max(1, int(ok.sum()) // 3000)
+        speed = camera.speed[ok][::step]
+        axis.scatter(speed, camera.along_static[ok][::step], s=3, color="0.6", label="simultaneous")
+        axis.scatter(speed, camera.along_timed[ok][::step], s=3, color="tab:blue", label="with its timing")
+        spread = np.percentile(np.abs(camera.along_static[ok]), 99) if ok.any() else 1.0
+        axis.set_ylim(-1.2 * spread, 1.2 * spread)
+        axis.axhline(0.0, color="k", linewidth=0.5)
+        axis.set_title(f"{name}: residual along motion")
+        axis.set_xlabel("image speed (px per frame)")
+        axis.set_ylabel("residual along the motion (px)")
+        axis.legend(loc="upper left", fontsize=7, markerscale=3)
+    figure.tight_layout()
+    return figure
+
+
 FIGURES = {
     "residual_histograms": residual_histograms,
     "residual_vectors": residual_vectors,
@@ -204,4 +226,5 @@ FIGURES = {
     "wand_lengths": wand_lengths,
     "rig_3d": rig_3d,
     "vision_graph": vision_graph,
+    "timing": timing,
 }
