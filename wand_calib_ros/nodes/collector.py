@@ -27,7 +27,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PolygonStamped
 from rclpy.context import Context
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Image
 from std_srvs.srv import Trigger
 
@@ -49,6 +49,7 @@ from wand_calib_ros.nodes.params import (
     coverage_thresholds,
     declare,
     existing_file,
+    image_qos,
 )
 from wand_calib_ros.nodes.runner import run
 
@@ -115,7 +116,7 @@ class CollectorNode(Node):
         # messages in order, as the A/C labeller needs; /calibrate runs in the calibrator's executor.
         for name, endpoint in self.endpoints.items():
             if values["input"] == "images":
-                qos = qos_profile_sensor_data if values["image_qos"] == "sensor_data" else QoSProfile(depth=100)
+                qos = image_qos(values["image_qos"])
                 self.create_subscription(Image, endpoint.image_topic, lambda m, n=name: self._on_image(n, m), qos)
             else:
                 self.create_subscription(

@@ -20,7 +20,6 @@ from typing import Any
 from geometry_msgs.msg import PolygonStamped
 from rclpy.context import Context
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from sensor_msgs.msg import Image
 from std_msgs.msg import Header
 
@@ -30,7 +29,16 @@ from wand_calib_ros.io.images import image_array
 from wand_calib_ros.io.rig_yaml import load_camera_endpoints, load_rig
 from wand_calib_ros.nodes import messages
 from wand_calib_ros.nodes.collector import POINTS_QOS
-from wand_calib_ros.nodes.params import IMAGE_QOS, LABEL_HOLD, RIG, Param, SettingsError, declare, existing_file
+from wand_calib_ros.nodes.params import (
+    IMAGE_QOS,
+    LABEL_HOLD,
+    RIG,
+    Param,
+    SettingsError,
+    declare,
+    existing_file,
+    image_qos,
+)
 from wand_calib_ros.nodes.runner import run
 
 PARAMS = (
@@ -58,7 +66,7 @@ class DetectorNode(Node):
             spec, WandOptions(ratio=rig.wand.L1 / rig.wand.L2), max_hold_ns=int(values["label_hold_ms"] * 1e6)
         )
         self.frame_id = name
-        qos = qos_profile_sensor_data if values["image_qos"] == "sensor_data" else QoSProfile(depth=100)
+        qos = image_qos(values["image_qos"])
         self.publisher = self.create_publisher(PolygonStamped, endpoint.points_topic, POINTS_QOS)
         self.create_subscription(Image, endpoint.image_topic, self._on_image, qos)
         self.get_logger().info(f"{name}: {endpoint.image_topic} -> {endpoint.points_topic}")

@@ -16,6 +16,7 @@ from typing import Any
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 
 from wand_calib_ros.collection.coverage import CoverageThresholds
 from wand_calib_ros.errors import WandCalibError
@@ -119,8 +120,25 @@ COVERAGE = (
 
 #: How a node subscribes to images.
 IMAGE_QOS = Param(
-    "image_qos", "sensor_data", "image subscription QoS (reliable for bag replay)", choices=("sensor_data", "reliable")
+    "image_qos",
+    "sensor_data",
+    "image subscription QoS (reliable: every image is queued until processed, for bag replay)",
+    choices=("sensor_data", "reliable"),
 )
+
+
+def image_qos(choice: str) -> QoSProfile:
+    """The QoS an ``image_qos`` choice names.
+
+    ``reliable`` keeps all: a subscriber that falls behind a burst (a bag replayed faster
+    than detection runs) queues the images instead of overwriting the oldest, as a
+    keep-last history does once it is full.
+    """
+    if choice == "sensor_data":
+        return qos_profile_sensor_data
+    return QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE)
+
+
 #: How long the labeller may hold an A/C-ambiguous view back.
 LABEL_HOLD = Param(
     "label_hold_ms", 1000.0, "how long an A/C-ambiguous view may wait for a later one to settle it (ms)", 0.0, 60000.0

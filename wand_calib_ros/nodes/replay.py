@@ -14,14 +14,13 @@ from pathlib import Path
 from typing import Any
 
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from sensor_msgs.msg import Image
 
 from wand_calib_ros.errors import WandCalibError
 from wand_calib_ros.io.bags import read_image_frames
 from wand_calib_ros.io.rig_yaml import load_camera_endpoints
 from wand_calib_ros.nodes import messages
-from wand_calib_ros.nodes.params import Param, declare, existing_file
+from wand_calib_ros.nodes.params import Param, declare, existing_file, image_qos
 from wand_calib_ros.nodes.runner import run
 
 REPLAY_PARAMS = (
@@ -45,7 +44,7 @@ class ReplayNode(Node):
             raise WandCalibError(f"parameter bag: no such bag {self.bag}")
         endpoints = load_camera_endpoints(existing_file(values, "cameras_file"))
         self.topics = {name: endpoint.image_topic for name, endpoint in endpoints.items()}
-        qos = qos_profile_sensor_data if values["qos"] == "sensor_data" else QoSProfile(depth=100)
+        qos = image_qos(values["qos"])
         self.publishers_ = {name: self.create_publisher(Image, topic, qos) for name, topic in self.topics.items()}
         self.rate = float(values["rate"])
         self.wait_s = float(values["wait_for_subscribers_s"])
