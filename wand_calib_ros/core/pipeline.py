@@ -86,7 +86,8 @@ def calibrate(
         ", ".join(f"{names[a]}-{names[b]}" for a, b in graph.edges),
     )
     line = timing.line.subset(usable)
-    init = initialise_rig(rig, align_views(uv, line), graph, options.pair)  # free-running views nearly simultaneous
+    aligned = align_views(uv, line)  # free-running views moved to their placement's time, for the starts
+    init = initialise_rig(rig, aligned, graph, options.pair)
     result = refine_calibration(
         rig,
         uv,
@@ -96,6 +97,7 @@ def calibrate(
         initial_projections=init.projections,
         lens_trials=init.trials,
         timing=replace(timing, line=line),
+        start_uv=aligned,
     )
     warnings = [*result.warnings, *rate_warnings(obs, timing.line), *offset_warnings(result)]
     if result.timing is not None and result.timing.time_offsets == "estimated":

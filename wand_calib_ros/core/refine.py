@@ -73,10 +73,10 @@ HUBER_SIGMAS = 2.0
 VIEW_GATE_SIGMAS = 5.0
 #: The highest free radial coefficient is fixed to zero while |k| / std(k) is below this (Wald test).
 SIGNIFICANCE = 2.0
-#: Rounds of refitting the wand's motion and re-adjusting, at most, until the timing parameters move by
-#: less than MOTION_SETTLED of their standard deviations.
+#: The final adjustment refits the wand's motion and adjusts again, at most MOTION_ROUNDS times in all,
+#: while an adjustment moves a timing parameter by more than MOTION_SETTLED standard deviations.
 MOTION_ROUNDS = 3
-MOTION_SETTLED = 0.1
+MOTION_SETTLED = 1.0
 #: Uncertainty of r(theta) at the widest observed angle (px) above which a camera gets a warning.
 WEAK_CURVE_PX = 0.5
 #: A camera whose observations stop below this fraction of the angle its image reaches gets a warning.
@@ -148,6 +148,7 @@ def refine_calibration(
     lens_trials: tuple[LensTrial, ...] = (),
     min_placements: int = 10,
     timing: TimingInput | None = None,
+    start_uv: FloatArray | None = None,
 ) -> CalibrationResult:
     """Gate, bundle-adjust and report (paper Step 4 / Section III-B Step 2).
 
@@ -161,14 +162,15 @@ def refine_calibration(
         lens_trials: Step 1-3 candidate scores to carry into the result.
         min_placements: fewest placements the bundle adjustment accepts.
         timing: when the cameras saw the placements (None: synchronised cameras, frames in no time order).
+        start_uv: (P, C, 3, 2) the views moved to their placements' times (free-running cameras, see
+            :func:`wand_calib_ros.core.timing.align_views`) for the gate and the starting placements;
+            None: ``uv``. The adjustments model the timing on the observed pixels.
     """
     wand = rig.wand
     n_cameras = len(rig.cameras)
     full = default_free_mask(n_cameras, reference)
     models = tuple(m.with_intrinsic_vector(np.r_[m.k[:2], 0.0, 0.0, 0.0, m.principal_point]) for m in models)
-    # The gate and the starting placements use views moved to their placement's time along each camera's
-    # image track (free-running cameras); the adjustments model the timing on the observed pixels.
-    points = triangulate_placements(models, poses, uv if timing is None else align_views(uv, timing.line))
+    points = triangulate_placements(models, poses, uv if start_uv is None else start_uv)
     clocks = start_clocks(rig, timing, points, reference)
     errors = ac_length_errors(points, wand)
     threshold = gate_threshold(errors, wand)
@@ -191,14 +193,15 @@ def refine_calibration(
     _require(int(still.sum()), min_placements, "keep two clean views after outlier rejection")
     used, uv_used = keep[still], clean[still]
     state = _subset(robust.state, still)
-    clocks = refresh_motion(clocks, wand, robust.state, uv, HUBER_SIGMAS * sigma)
+    if clocks.modelled:  # the motion from where the robust cameras put every placement
+        placed = _fitted_points(wand, robust.state, uv, clocks, keep, HUBER_SIGMAS * sigma)
+        clocks = refresh_motion(clocks, placed, choose=True)
 
     # 2. Least squares on the clean data, dropping the distortion terms (and the timing) the data do not support.
     result, fixed = _adjust_with_model_selection(rig, uv_used, state, reference, clocks, used)
     free = _free_mask(n_cameras, reference, fixed)
 
     # 3. Placements set aside so far come back with their clean views if they fit the solution.
-    clocks = refresh_motion(clocks, wand, result.state, uv, HUBER_SIGMAS * max(result.sigma, MIN_SIGMA_PX))
     aside = np.setdiff1d(np.flatnonzero(clocks.placeable(len(uv))), used)
     admitted, admitted_uv, admitted_state = _readmit(rig, uv[aside], result, clocks.placements(aside))
     if admitted.any():
@@ -213,8 +216,7 @@ def refine_calibration(
             np.concatenate([result.state.wand_direction, admitted_state.wand_direction]),
             result.state.timing,
         )
-        result = bundle_adjust(state, BundleProblem.from_dense(wand, uv_used, clocks.placements(used)), free)
-        result, clocks = _settle_motion(rig, uv, uv_used, used, result, clocks, free)
+        result, clocks = _final_adjustment(rig, uv, uv_used, used, state, clocks, free)
     check_geometry(result.state.points(wand))
     check_camera_views(rig, uv, uv_used)
     check_uncertainty(rig, result)
@@ -300,34 +302,51 @@ def _robust_pass(
     return robust, sigma, clocks, keep
 
 
-def _settle_motion(
+def _final_adjustment(
     rig: RigSpec,
     uv: FloatArray,
     uv_used: FloatArray,
     used: NDArray[np.int64],
-    result: BundleResult,
+    state: BundleState,
     clocks: ClockModel,
     free: NDArray[np.bool_],
 ) -> tuple[BundleResult, ClockModel]:
-    """Refit the wand's motion to the adjusted placements and re-adjust until the timing settles.
-
-    The motion is held fixed during an adjustment; moving cameras and offsets move the placements
-    it is fitted to. A few rounds bring the timing parameters to within MOTION_SETTLED of their
-    standard deviations (usually one).
-    """
-    if not clocks.modelled:
-        return result, clocks
-    for _ in range(MOTION_ROUNDS):
-        before = result.state.camera_timing.copy()
-        clocks = refresh_motion(clocks, rig.wand, result.state, uv, HUBER_SIGMAS * max(result.sigma, MIN_SIGMA_PX))
-        result = bundle_adjust(result.state, BundleProblem.from_dense(rig.wand, uv_used, clocks.placements(used)), free)
+    """The final adjustment of the placements ``used`` from ``state``; with timing, the wand's motion is
+    refitted first to where the adjustments put them, and again while an adjustment moves a timing
+    parameter by more than MOTION_SETTLED of its standard deviation (at most MOTION_ROUNDS rounds)."""
+    for _ in range(MOTION_ROUNDS if clocks.modelled else 1):
+        if clocks.modelled:
+            points = np.full((len(uv), 3, 3), np.nan)
+            rest = np.setdiff1d(np.arange(len(uv)), used)
+            aligned = align_views(uv, clocks.line, state.camera_timing, clocks.heights)  # type: ignore[arg-type]
+            points[rest] = triangulate_placements(state.models, state.poses, aligned[rest])
+            points[used] = state.points(rig.wand)
+            clocks = refresh_motion(clocks, points)
+        result = bundle_adjust(state, BundleProblem.from_dense(rig.wand, uv_used, clocks.placements(used)), free)
+        if not clocks.modelled:
+            break
         std = result.camera_std[:, N_GEOMETRIC:]
-        change = np.abs(result.state.camera_timing - before)
-        log.info("motion refitted: timing moved by %.3g (at most %.2f sigma)", change.max(),
-                 float(np.max(change[std > 0] / std[std > 0], initial=0.0)))  # fmt: skip
-        if np.all(change[std > 0] <= MOTION_SETTLED * std[std > 0]):
+        moved = np.abs(result.state.camera_timing - state.camera_timing)[std > 0] / std[std > 0]
+        log.info("final adjustment: timing moved by %.2f sigma at most", float(np.max(moved, initial=0.0)))
+        state = result.state
+        if np.all(moved <= MOTION_SETTLED):
             break
     return result, clocks
+
+
+def _fitted_points(
+    wand: WandSpec, cameras: BundleState, uv: FloatArray, clocks: ClockModel, adjusted: NDArray[np.int64], scale: float
+) -> FloatArray:
+    """(P, 3, 3) every placement where the cameras put it: ``adjusted`` from ``cameras``' state (an
+    adjustment of those), the others fitted (Huber ``scale`` px) with the cameras and timing held fixed."""
+    points = np.full((uv.shape[0], 3, 3), np.nan)
+    points[adjusted] = cameras.points(wand)
+    others = np.setdiff1d(np.arange(uv.shape[0]), adjusted)
+    index, fitted = fit_placements(
+        wand, cameras, uv[others], clocks.placements(others), loss_scale=scale, max_iterations=5
+    )  # neighbours of the adjusted ones: a few Gauss-Newton steps from the triangulation are plenty
+    points[others[index]] = fitted.state.points(wand)
+    return points
 
 
 def _gate(rig: RigSpec, uv: FloatArray, errors: FloatArray, threshold: float) -> NDArray[np.bool_]:

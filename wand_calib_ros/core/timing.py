@@ -30,13 +30,11 @@ from wand_calib_ros.core.bundle_adjustment import (
     READOUT,
     TIME_OFFSET,
     BundleResult,
-    BundleState,
     PlacementTiming,
 )
 from wand_calib_ros.core.errors import TimingError
-from wand_calib_ros.core.placements import fit_placements
 from wand_calib_ros.core.result import CalibrationResult
-from wand_calib_ros.core.rig import RigSpec, WandObservations, WandSpec
+from wand_calib_ros.core.rig import RigSpec, WandObservations
 
 FloatArray = NDArray[np.float64]
 log = logging.getLogger(__name__)
@@ -229,8 +227,8 @@ def fit_motion(
     factorial = np.cumprod(np.r_[1.0, np.arange(1, degree + 1)])
     design = dt[..., None] ** np.arange(degree + 1) / factorial  # (P, W, D): position, velocity, acceleration, ...
     window = np.nan_to_num(values[index])  # (P, W, K)
-    normal = np.einsum("pwi,pwj->pij", design * weight[..., None], design)
-    rhs = np.einsum("pwi,pwk->pik", design * weight[..., None], window)
+    weighted = (design * weight[..., None]).transpose(0, 2, 1)  # (P, D, W)
+    normal, rhs = weighted @ design, weighted @ window  # batched BLAS
     count = use.sum(axis=1)
     sides = np.minimum((use & (dt < 0)).sum(axis=1), (use & (dt > 0)).sum(axis=1))
     known = finite & (count >= degree + 2) & ((sides >= 2) | one_sided)
@@ -265,19 +263,23 @@ def fit_motion(
     )
 
 
-def smooth_motion(times: FloatArray, points: FloatArray, period: float) -> Motion:
+def smooth_motion(
+    times: FloatArray, points: FloatArray, period: float, window: tuple[int, int] | None = None
+) -> Motion:
     """:func:`fit_motion` with the window (of MOTION_WINDOWS) that predicts each placement best from its
-    neighbours (RMS of the leave-one-out residuals over the placements every window determines).
+    neighbours (RMS of the leave-one-out residuals over the placements every window determines), or
+    with a window chosen before; the ends of stretches get one-sided quadratic fits.
 
     How far apart in time a window may reach depends on how fast the wand moved and how noisy its
     points are: the recording itself decides.
     """
-    fits = [fit_motion(times, points, period, neighbours=n, degree=d) for n, d in MOTION_WINDOWS]
-    common = np.all([fit.known for fit in fits], axis=0)
-    if not common.any():
-        return fits[MOTION_WINDOWS.index((MOTION_NEIGHBOURS, MOTION_DEGREE))]
-    scores = [float(np.mean(fit.residual[common] ** 2)) for fit in fits]
-    best = fits[int(np.argmin(scores))]
+    if window is None:
+        fits = [fit_motion(times, points, period, neighbours=n, degree=d) for n, d in MOTION_WINDOWS]
+        common = np.all([fit.known for fit in fits], axis=0)
+        scores = [float(np.mean(fit.residual[common] ** 2)) if common.any() else 0.0 for fit in fits]
+        best = fits[int(np.argmin(scores))] if common.any() else fits[MOTION_WINDOWS.index((5, 3))]
+    else:
+        best = fit_motion(times, points, period, neighbours=window[0], degree=window[1])
     # Where a stretch of placements ends (the wand leaves a camera's view: often at the widest angles),
     # a quadratic from one side.
     ends = fit_motion(times, points, period, neighbours=END_WINDOW[0], degree=END_WINDOW[1], one_sided=True)
@@ -292,21 +294,28 @@ def smooth_motion(times: FloatArray, points: FloatArray, period: float) -> Motio
     return replace(best, **merged, known=best.known | fill)
 
 
-def align_views(uv: FloatArray, line: Timeline) -> FloatArray:
+def align_views(
+    uv: FloatArray, line: Timeline, camera_timing: FloatArray | None = None, heights: FloatArray | None = None
+) -> FloatArray:
     """(P, C, 3, 2) each complete view moved along its camera's own image track to its placement's time.
 
-    Before any calibration, each camera's pixels of consecutive frames give its image velocity; a
-    view stamped ``tau`` after its placement's time is moved back by that motion (to third order).
-    The cameras' unknown time offsets stay; the stamps' phases are gone, so the initialisation
-    (essential matrices, wand lengths) and the wand-length gate see nearly simultaneous views.
+    Each camera's pixels of consecutive frames give its image velocity; a point seen ``tau`` after its
+    placement's time is moved back by that motion (to third order). Before any calibration ``tau`` is
+    the stamps' difference (the offsets are unknown then): the initialisation (essential matrices,
+    wand lengths) and the wand-length gate see nearly simultaneous views. With the cameras' timing
+    (C, 2) (offsets, readout times; rows of H = ``heights`` px) ``tau`` is each point's own instant:
+    the views triangulate to where the wand was at the placement's time.
     """
-    if line.unit != "s" or line.simultaneous:
+    if line.simultaneous and (camera_timing is None or not np.any(camera_timing)):
         return uv
     out = np.array(uv, dtype=np.float64)
     for c in range(uv.shape[1]):
         seen = np.flatnonzero(np.all(np.isfinite(uv[:, c]), axis=(1, 2)))
-        tau = line.view_times[seen, c][:, None, None]
-        track = smooth_motion(line.placement_times[seen] + tau[:, 0, 0], uv[seen, c], line.period)
+        tau = np.repeat(line.view_times[seen, c][:, None], 3, axis=1)  # (N, 3)
+        track = fit_motion(line.placement_times[seen] + tau[:, 0], uv[seen, c], line.period)  # the views' own times
+        if camera_timing is not None and heights is not None:
+            tau = tau - camera_timing[c, 0] + camera_timing[c, 1] * uv[seen, c, :, 1] / heights[c]
+        tau = tau[..., None]
         moved = uv[seen, c] - tau * (track.velocity - tau / 2 * (track.acceleration - tau / 3 * track.jerk))
         out[seen, c] = np.where(track.known[:, None, None], moved, uv[seen, c])
     return out
@@ -470,24 +479,19 @@ def start_clocks(rig: RigSpec, timing: TimingInput | None, points: FloatArray, r
     )  # fmt: skip
 
 
-def refresh_motion(
-    clocks: ClockModel, wand: WandSpec, cameras: BundleState, uv: FloatArray, loss_scale: float
-) -> ClockModel:
-    """The motion refitted to every placement fitted with the current cameras and timing.
+def refresh_motion(clocks: ClockModel, points: FloatArray, *, choose: bool = False) -> ClockModel:
+    """The motion refitted to the placements where an adjustment put them.
 
     Args:
         clocks: the timing model (unchanged when it models nothing).
-        wand: the wand.
-        cameras: models, poses and timing of the cameras.
-        uv: (P, C, 3, 2) every placement of the timeline.
-        loss_scale: Huber threshold (px) of the placements' fits.
+        points: (P, 3, 3) every placement of the timeline: the adjusted ones where an adjustment
+            placed them, the others where the starting triangulation did (NaN: unknown).
+        choose: choose the motion's window again (else keep the one chosen before).
     """
-    if clocks.line is None or not clocks.modelled:
+    if clocks.line is None or clocks.motion is None:
         return clocks
-    index, fitted = fit_placements(wand, cameras, uv, clocks.placements(), loss_scale=loss_scale)
-    points = np.full((uv.shape[0], 3, 3), np.nan)
-    points[index] = fitted.state.points(wand)
-    return clocks.with_motion(smooth_motion(clocks.line.placement_times, points, clocks.line.period))
+    window = None if choose else clocks.motion.window
+    return clocks.with_motion(smooth_motion(clocks.line.placement_times, points, clocks.line.period, window))
 
 
 def reduce_timing(clocks: ClockModel, result: BundleResult, free: NDArray[np.bool_]) -> NDArray[np.bool_]:
