@@ -318,8 +318,10 @@ def _final_adjustment(
         if clocks.modelled:
             points = np.full((len(uv), 3, 3), np.nan)
             rest = np.setdiff1d(np.arange(len(uv)), used)
-            aligned = align_views(uv, clocks.line, state.camera_timing, clocks.heights)  # type: ignore[arg-type]
-            points[rest] = triangulate_placements(state.models, state.poses, aligned[rest])
+            rest = rest[(np.all(np.isfinite(uv[rest]), axis=(2, 3)).sum(axis=1) >= 2)]  # the others it can place
+            if rest.size:
+                aligned = align_views(uv, clocks.line, state.camera_timing, clocks.heights)  # type: ignore[arg-type]
+                points[rest] = triangulate_placements(state.models, state.poses, aligned[rest])
             points[used] = state.points(rig.wand)
             clocks = refresh_motion(clocks, points)
         result = bundle_adjust(state, BundleProblem.from_dense(rig.wand, uv_used, clocks.placements(used)), free)

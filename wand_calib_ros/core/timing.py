@@ -47,6 +47,8 @@ MOTION_DEGREE = 3
 #: The (neighbours, degree) windows :func:`smooth_motion` chooses from: narrow ones follow a fast wave,
 #: wide ones average the noise of a slow one.
 MOTION_WINDOWS = ((3, 3), (4, 3), (5, 3), (4, 4), (5, 4), (6, 4), (8, 4))
+#: A window is chosen on this many stretches of that many consecutive placements (when longer).
+WINDOW_CHOICE_BLOCKS = (20, 100)
 #: The window of the one-sided fits at the ends of stretches.
 END_WINDOW = (4, 2)
 #: A recording is a continuous motion when the local fits leave less than this fraction of the points'
@@ -274,12 +276,8 @@ def smooth_motion(
     points are: the recording itself decides.
     """
     if window is None:
-        fits = [fit_motion(times, points, period, neighbours=n, degree=d) for n, d in MOTION_WINDOWS]
-        common = np.all([fit.known for fit in fits], axis=0)
-        scores = [float(np.mean(fit.residual[common] ** 2)) if common.any() else 0.0 for fit in fits]
-        best = fits[int(np.argmin(scores))] if common.any() else fits[MOTION_WINDOWS.index((5, 3))]
-    else:
-        best = fit_motion(times, points, period, neighbours=window[0], degree=window[1])
+        window = choose_window(times, points, period)
+    best = fit_motion(times, points, period, neighbours=window[0], degree=window[1])
     # Where a stretch of placements ends (the wand leaves a camera's view: often at the widest angles),
     # a quadratic from one side.
     ends = fit_motion(times, points, period, neighbours=END_WINDOW[0], degree=END_WINDOW[1], one_sided=True)
@@ -292,6 +290,26 @@ def smooth_motion(
         for name in ("velocity", "acceleration", "jerk")
     }
     return replace(best, **merged, known=best.known | fill)
+
+
+def choose_window(times: FloatArray, points: FloatArray, period: float) -> tuple[int, int]:
+    """The (neighbours, degree) of MOTION_WINDOWS whose fits predict the placements best from their
+    neighbours (mean square leave-one-out residual over the placements every window determines).
+
+    A long recording is scored on WINDOW_CHOICE_BLOCKS stretches of consecutive placements spread over
+    it: the choice needs a representative sample of the motion, not every placement.
+    """
+    order = np.argsort(times, kind="stable")
+    n_blocks = WINDOW_CHOICE_BLOCKS[0]
+    if order.size > n_blocks * WINDOW_CHOICE_BLOCKS[1] * 2:
+        starts = np.linspace(0, order.size - WINDOW_CHOICE_BLOCKS[1], n_blocks).astype(np.int64)
+        order = order[(starts[:, None] + np.arange(WINDOW_CHOICE_BLOCKS[1])).ravel()]
+    fits = [fit_motion(times[order], points[order], period, neighbours=n, degree=d) for n, d in MOTION_WINDOWS]
+    common = np.all([fit.known for fit in fits], axis=0)
+    if not common.any():
+        return (MOTION_NEIGHBOURS, MOTION_DEGREE)
+    scores = [float(np.mean(fit.residual[common] ** 2)) for fit in fits]
+    return MOTION_WINDOWS[int(np.argmin(scores))]
 
 
 def align_views(
