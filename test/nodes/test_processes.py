@@ -119,6 +119,9 @@ def test_kill_9_mid_replay_then_restart_loses_nothing(rendered: tuple[Path, np.n
         first.wait(timeout=10)
         before = buffer.read_text()
         kept = _frames_in(buffer)
+        torn = f"{int(before.splitlines()[-1].split(',')[0]) + 1},cam1,C,348.375807,19"
+        with buffer.open("a") as handle:  # as if the kill had come in the middle of writing the next frame
+            handle.write(torn)
         second = start("wand_calib_ros.nodes.collector", params, domain_id=domain_id, log=tmp_path / "second.log")
         assert player.wait(timeout=120) == 0
         time.sleep(1.0)
@@ -134,7 +137,10 @@ def test_kill_9_mid_replay_then_restart_loses_nothing(rendered: tuple[Path, np.n
     assert code == 0
     after = buffer.read_text()
     assert after.startswith(before)  # every row written before the kill is still there, in order
-    assert f"({kept} frames resumed)" in (tmp_path / "second.log").read_text()
+    log = (tmp_path / "second.log").read_text()
+    assert f"({kept} frames resumed)" in log and "the last write was torn" in log
+    assert [p.read_text() for p in buffer.parent.glob("observations.*.torn.csv")] == [before + torn]  # kept aside
+    assert torn not in after  # the torn row and its truncated values are gone
     assert _frames_in(buffer) > kept + 30  # and the restarted collector went on adding
 
 

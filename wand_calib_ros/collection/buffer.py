@@ -1,8 +1,11 @@
 """A bounded, persisted buffer of synchronised wand observations.
 
 Every accepted frame is appended to an observations CSV (the core's format, each
-view with its image's stamp) and flushed at once, so a crash loses at most the frame
-being written and a restart resumes from the file. A frame in which no camera's wand moved by more than
+view with its image's stamp) and flushed at once, and the file is synced to disk at
+least every SYNC_INTERVAL_S: a killed process loses at most the frame being
+written, a machine losing power at most the last second. A restart resumes from the
+file, cutting a torn last write back to the last complete frame (the file as found
+is kept aside, see :mod:`wand_calib_ros.collection.recovery`). A frame in which no camera's wand moved by more than
 ``min_motion_px`` since the last accepted frame is a near-duplicate (the wand
 held still) and is skipped; once ``capacity`` frames are stored, a frame is only
 accepted when it shows a camera the wand in an image cell with few
@@ -12,7 +15,7 @@ observations, so the buffer stays bounded without losing coverage.
 from __future__ import annotations
 
 import csv
-import shutil
+import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,6 +23,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from wand_calib_ros.collection.recovery import TornTail, backup_path, cut_torn_tail
 from wand_calib_ros.core.rig import RigSpec, WandObservations
 from wand_calib_ros.io.errors import FormatError
 from wand_calib_ros.io.observations_csv import header, observation_rows, read_observations
@@ -31,6 +35,8 @@ BUFFER_FILE = "observations.csv"
 
 #: Cells per image side for the coverage test of a full buffer.
 GRID = 8
+#: The longest time (s) an appended frame stays in the operating system's cache only.
+SYNC_INTERVAL_S = 1.0
 
 
 @dataclass
@@ -56,20 +62,31 @@ class ObservationBuffer:
     stamps: list[FloatArray] = field(default_factory=list)
     stats: BufferStats = field(default_factory=BufferStats)
     with_stamps: bool = True
+    repaired: TornTail | None = None  #: a torn tail cut on opening
     _cells: NDArray[np.int64] | None = None
+    _synced: float = 0.0  # time.monotonic() of the last fsync
 
     @staticmethod
     def open(
         path: Path, rig: RigSpec, *, capacity: int = 20_000, min_motion_px: float = 2.0, with_stamps: bool = True
     ) -> ObservationBuffer:
-        """A buffer persisted at ``path``; resumes from the file when it exists (a corrupt file is an error).
+        """A buffer persisted at ``path``; resumes from the file when it exists (a torn last write is
+        cut, see :attr:`repaired`; any other corruption is an error).
 
         Args:
             with_stamps: a new file stores each view's stamp (a resumed file keeps what it has: one
                 written without stamps, by an older version, is continued without them).
+
+        Raises:
+            FormatError: the file exists but is not a buffer this rig can continue.
         """
         buffer = ObservationBuffer(Path(path), rig, capacity, min_motion_px, with_stamps=with_stamps)
         buffer._cells = np.zeros((len(rig.cameras), GRID, GRID), dtype=np.int64)
+        if buffer.path.exists():
+            try:
+                buffer.repaired = cut_torn_tail(buffer.path)
+            except OSError as error:
+                raise FormatError(buffer.path, f"cannot repair the buffer: {error.strerror}") from None
         if buffer.path.exists() and has_rows(buffer.path):
             try:
                 existing = read_observations(buffer.path, rig.camera_names)
@@ -123,19 +140,24 @@ class ObservationBuffer:
         return WandObservations(np.array(self.frames, dtype=np.int64), self.rig.camera_names, uv, stamps)
 
     def reset(self) -> Path | None:
-        """Move the file to a timestamped backup and start empty; returns the backup path."""
+        """Move the file to a new timestamped backup (one never replaces another) and start empty.
+
+        Returns:
+            The backup, or None when nothing was stored (the file is only restarted).
+        """
         backup = None
-        if self.path.exists():
-            backup = self.path.with_name(f"{self.path.stem}.{time.strftime('%Y%m%d-%H%M%S')}.bak{self.path.suffix}")
-            shutil.move(self.path, backup)
+        if self.path.exists() and has_rows(self.path):
+            backup = backup_path(self.path, "bak")
+            os.replace(self.path, backup)
         self.frames, self.uv, self.stamps, self.stats = [], [], [], BufferStats()
         self._cells = np.zeros((len(self.rig.cameras), GRID, GRID), dtype=np.int64)
         self._start_file()
         return backup
 
     def _start_file(self) -> None:
-        with self.path.open("w", newline="") as handle:
+        with self.path.open("w", newline="", encoding="utf-8") as handle:
             csv.writer(handle, lineterminator="\n").writerow(header(self.with_stamps))
+            self._sync(handle.fileno())
 
     def _cell_index(self, c: int, points: FloatArray) -> NDArray[np.int64]:
         width, height = self.rig.cameras[c].image_size
@@ -160,13 +182,25 @@ class ObservationBuffer:
             np.add.at(self._cells[c], (cells[:, 1], cells[:, 0]), 1)
 
     def _append_rows(self, frame: int, uv: FloatArray, stamps: FloatArray) -> None:
-        with self.path.open("a", newline="") as handle:
+        with self.path.open("a", newline="", encoding="utf-8") as handle:
             rows = observation_rows(frame, self.rig.camera_names, uv, stamps if self.with_stamps else None)
             csv.writer(handle, lineterminator="\n").writerows(rows)
             handle.flush()
+            if time.monotonic() - self._synced >= SYNC_INTERVAL_S:
+                self._sync(handle.fileno())
+
+    def sync(self) -> None:
+        """Write everything appended so far through to the disk (at exit)."""
+        if self.path.exists():
+            with self.path.open("rb") as handle:
+                self._sync(handle.fileno())
+
+    def _sync(self, descriptor: int) -> None:
+        os.fsync(descriptor)
+        self._synced = time.monotonic()
 
 
 def has_rows(path: Path) -> bool:
     """Whether the file holds more than a header (a collector that saw no wand leaves just the header)."""
-    with path.open() as handle:
+    with path.open("rb") as handle:
         return sum(1 for line, _ in zip(handle, range(2), strict=False) if line.strip()) > 1

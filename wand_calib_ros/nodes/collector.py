@@ -96,6 +96,8 @@ class CollectorNode(Node):
             capacity=values["buffer_capacity"],
             min_motion_px=values["min_motion_px"],
         )
+        if self.buffer.repaired is not None:
+            self.get_logger().warning(self.buffer.repaired.describe(self.buffer.path))
         self.coverage = CoverageTracker(self.rig, coverage_thresholds(values))
         for uv in self.buffer.uv:
             self.coverage.add(uv)
@@ -178,7 +180,11 @@ class CollectorNode(Node):
                 self._offer(name, stream.flush())
             self._store(self.sync.flush_all())
 
-    close = flush
+    def close(self) -> None:
+        """At exit: store what is held and write the buffer through to the disk."""
+        self.flush()
+        with self.lock:
+            self.buffer.sync()
 
     def after_calibrate(self, result: CalibrationResult) -> None:
         """Keep a calibration's result: /diagnostics then shows its time offsets."""
@@ -228,10 +234,11 @@ class CollectorNode(Node):
             self._logged = (status.ready, now)
 
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        with self.lock:
+        with self.lock:  # serialised with the frames being stored and with other resets
             backup = self.buffer.reset()
             self.coverage = CoverageTracker(self.rig, self.coverage.thresholds)
-        response.success, response.message = True, f"buffer cleared; backup {backup}"
+        kept = "it was empty" if backup is None else f"backup {backup}"
+        response.success, response.message = True, f"buffer cleared; {kept}"
         self.get_logger().info(response.message)
         return response
 
