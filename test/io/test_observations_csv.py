@@ -105,3 +105,26 @@ def test_bad_stamps_name_file_row_and_camera(tmp_path: Path, text: str, message:
     with pytest.raises(FormatError, match=message) as error:
         read_observations(path, ("cam0", "cam1"))
     assert str(path) in str(error.value)
+
+
+def test_a_byte_order_mark_before_the_header_is_accepted(tmp_path: Path) -> None:
+    path = tmp_path / "o.csv"
+    path.write_bytes(b"\xef\xbb\xbfframe,camera,point,u,v\n0,cam0,A,1.5,2.5\n")
+    back = read_observations(path)
+    assert back.camera_names == ("cam0",) and back.uv[0, 0, 0].tolist() == [1.5, 2.5]
+
+
+@pytest.mark.parametrize(
+    ("content", "message"),
+    [
+        (b"\x89PNG\r\n\x1a\n" + bytes(range(256)), "not UTF-8 text"),
+        (b"frame,camera,point,u,v\n0,cam0,A,1,2\n0,cam0,B,\x00,4\n", "row 3: u, v must be numbers"),
+    ],
+    ids=["binary", "NUL byte"],
+)
+def test_files_that_are_not_text_are_format_errors(tmp_path: Path, content: bytes, message: str) -> None:
+    path = tmp_path / "o.csv"
+    path.write_bytes(content)
+    with pytest.raises(FormatError, match=message) as error:
+        read_observations(path)
+    assert str(error.value).startswith(str(path)) and "\n" not in str(error.value)

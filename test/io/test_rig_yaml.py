@@ -74,3 +74,10 @@ def test_bad_rig_descriptions_name_the_problem(tmp_path: Path, text: str, messag
 def test_missing_file_is_a_format_error(tmp_path: Path) -> None:
     with pytest.raises(FormatError, match="cannot read"):
         load_rig(tmp_path / "nope.yaml")
+
+
+def test_a_binary_file_is_a_format_error(tmp_path: Path) -> None:
+    path = tmp_path / "cameras.yaml"
+    path.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(range(256)))
+    with pytest.raises(FormatError, match=r"cameras.yaml: not UTF-8 text \(it holds the byte 0x89\)"):
+        load_rig(path)

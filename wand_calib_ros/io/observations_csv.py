@@ -45,11 +45,18 @@ def read_observations(path: str | Path, camera_names: Iterable[str] | None = Non
     path = Path(path)
     known = list(camera_names) if camera_names is not None else None
     try:
-        handle = path.open(newline="")
+        handle = path.open(newline="", encoding="utf-8-sig")  # a byte-order mark some editors write is fine
     except OSError as error:
         raise FormatError(path, f"cannot read: {error.strerror}") from None
     with handle:
-        return _parse(handle, path, known)
+        try:
+            return _parse(handle, path, known)
+        except UnicodeDecodeError as error:
+            raise FormatError(
+                path, f"not UTF-8 text (it holds the byte 0x{error.object[error.start]:02x}): not an observations CSV?"
+            ) from None
+        except csv.Error as error:
+            raise FormatError(path, f"not a CSV: {error}") from None
 
 
 def _parse(handle: TextIO, path: Path, known: list[str] | None) -> WandObservations:

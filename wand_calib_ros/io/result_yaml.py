@@ -36,6 +36,7 @@ from wand_calib_ros.core.errors import ModelError
 from wand_calib_ros.core.geometry import Pose
 from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.io.errors import FormatError
+from wand_calib_ros.io.text import read_yaml
 
 CONVENTIONS = {
     "frames": "X_cam = R X_ref + T, mm; reference = reference_camera",
@@ -188,8 +189,8 @@ def read_result(path: str | Path) -> tuple[str, dict[str, CameraGeometry]]:
     ``_frames`` forms.
     """
     path = Path(path)
+    data = read_yaml(path)
     try:
-        data = yaml.safe_load(path.read_text())
         cameras = {
             name: CameraGeometry(
                 CameraModel(entry["k"], entry["m"], entry["principal_point"], tuple(entry["image_size"])),
@@ -200,9 +201,7 @@ def read_result(path: str | Path) -> tuple[str, dict[str, CameraGeometry]]:
             for name, entry in data["cameras"].items()
         }
         return str(data["reference_camera"]), cameras
-    except OSError as error:
-        raise FormatError(path, f"cannot read: {error.strerror}") from None
-    except (yaml.YAMLError, KeyError, TypeError, ValueError, AttributeError, ModelError) as error:
+    except (KeyError, TypeError, ValueError, AttributeError, ModelError) as error:
         raise FormatError(path, f"not a wand_calib_ros result file ({type(error).__name__}: {error})") from None
 
 

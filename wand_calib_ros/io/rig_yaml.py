@@ -26,6 +26,7 @@ from wand_calib_ros.core.errors import ModelError
 from wand_calib_ros.core.intrinsics_init import PROJECTIONS
 from wand_calib_ros.core.rig import LENS_CLASSES, CameraSpec, RigSpec, WandSpec
 from wand_calib_ros.io.errors import FormatError
+from wand_calib_ros.io.text import read_yaml
 
 _REQUIRED = ("name", "image_size", "pixel_size_um", "nominal_focal_mm", "max_view_angle_deg")
 
@@ -113,13 +114,7 @@ def parse_rig(data: Any, path: str | Path = "<rig>") -> RigSpec:
 def load_rig(path: str | Path) -> RigSpec:
     """Read and validate ``cameras.yaml``."""
     path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text())
-    except OSError as error:
-        raise FormatError(path, f"cannot read: {error.strerror}") from None
-    except yaml.YAMLError as error:
-        raise FormatError(path, f"not valid YAML: {error}") from None
-    return parse_rig(data, path)
+    return parse_rig(read_yaml(path), path)
 
 
 def rig_to_dict(rig: RigSpec) -> dict[str, Any]:
@@ -171,7 +166,7 @@ def load_camera_endpoints(path: str | Path) -> dict[str, CameraEndpoints]:
     """Per camera ROS topics and services of ``cameras.yaml`` (defaults where not given)."""
     path = Path(path)
     rig = load_rig(path)
-    items = {str(item["name"]): item for item in yaml.safe_load(path.read_text())["cameras"]}
+    items = {str(item["name"]): item for item in read_yaml(path)["cameras"]}
     endpoints = {}
     for name in rig.camera_names:
         item = items[name]

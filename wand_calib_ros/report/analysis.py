@@ -15,7 +15,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 from numpy.typing import NDArray
 
 from wand_calib_ros.core.bundle_adjustment import (
@@ -35,6 +34,7 @@ from wand_calib_ros.core.timing import Timeline, align_views, smooth_motion, tim
 from wand_calib_ros.core.vision_graph import VisionGraph, build_vision_graph, covisibility
 from wand_calib_ros.io.errors import FormatError
 from wand_calib_ros.io.result_yaml import read_result
+from wand_calib_ros.io.text import read_yaml
 
 FloatArray = NDArray[np.float64]
 
@@ -109,7 +109,7 @@ def prepare(rig: RigSpec, observations: WandObservations, result_path: Path) -> 
         FormatError: the result does not describe the rig's cameras.
     """
     reference, geometry = read_result(result_path)
-    document = yaml.safe_load(Path(result_path).read_text())
+    document = read_yaml(result_path)
     names = rig.camera_names
     missing = [n for n in names if n not in geometry]
     if missing:
