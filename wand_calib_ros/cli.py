@@ -22,7 +22,14 @@ from wand_calib_ros.core.result import CalibrationResult, CameraCalibration
 from wand_calib_ros.core.timing import TIMING_MODES
 from wand_calib_ros.errors import WandCalibError
 from wand_calib_ros.io.observations_csv import read_observations, write_observations
-from wand_calib_ros.io.result_yaml import CameraGeometry, camera_entry, write_camera_infos, write_result, write_yaml
+from wand_calib_ros.io.outputs import check_writable
+from wand_calib_ros.io.result_yaml import (
+    CameraGeometry,
+    calibration_paths,
+    camera_entry,
+    write_calibration,
+    write_yaml,
+)
 from wand_calib_ros.io.rig_yaml import load_rig, save_rig
 from wand_calib_ros.sim.clocks import TakeOptions, film, observe, take_trajectory, truth_timing
 from wand_calib_ros.sim.outliers import corrupt
@@ -243,12 +250,11 @@ def _calibrate(args: argparse.Namespace) -> int:
         time_offsets=args.time_offsets,
         rolling_shutter=args.rolling_shutter,
     )
+    check_writable(calibration_paths(rig.camera_names, args.output, args.camera_info_dir))  # before the solve
     result = calibrate(rig, observations, options)
-    args.output.parent.mkdir(parents=True, exist_ok=True)
-    write_result(result, args.output)
+    paths = write_calibration(result, args.output, args.camera_info_dir)
     if args.camera_info_dir:
-        paths = write_camera_infos(result, args.camera_info_dir)
-        log.info("wrote camera_info files %s", ", ".join(str(p) for p in paths))
+        log.info("wrote camera_info files %s", ", ".join(str(p) for p in paths[1:]))
     log.info("done in %.2f s", time.perf_counter() - started)
     _print_summary(result, args.output)
     if args.truth:
@@ -359,13 +365,33 @@ def _render(args: argparse.Namespace) -> int:
     return 0
 
 
+def _image_topics(pattern: str, names: tuple[str, ...]) -> dict[str, str]:
+    """Each camera's image topic from ``--topic`` (``{camera}`` is the camera's name)."""
+    try:
+        topics = {name: pattern.format(camera=name) for name in names}
+    except (KeyError, IndexError) as error:
+        raise WandCalibError(
+            f"--topic {pattern!r}: {{{error.args[0]}}} is not a field; the only one is {{camera}} "
+            "(e.g. /{camera}/image_raw)"
+        ) from None
+    except ValueError as error:
+        raise WandCalibError(f"--topic {pattern!r}: {error} (the field is {{camera}}; {{{{ is a brace)") from None
+    if len(set(topics.values())) < len(topics):
+        raise WandCalibError(
+            f"--topic {pattern!r} gives every camera the same topic {topics[names[0]]}: put {{camera}} in it, "
+            "or one camera's images would be written as another's"
+        )
+    return topics
+
+
 def _detect(args: argparse.Namespace) -> int:
     from wand_calib_ros.detection.recording import detect_recording
     from wand_calib_ros.io.bags import count_images, read_image_frames
 
     cv2.setNumThreads(1)  # per-image work is small: OpenCV's thread pool only adds overhead here
     rig = load_rig(args.cameras)
-    topics = {name: args.topic.format(camera=name) for name in rig.camera_names}
+    topics = _image_topics(args.topic, rig.camera_names)
+    check_writable([args.output])  # before reading the bag
     started = time.perf_counter()
     seen: dict[str, int] = {}
     if args.debug_dir is not None:

@@ -12,7 +12,7 @@ from rigs import scenario_data, timed_take
 from wand_calib_ros.core.camera_model import to_opencv_fisheye
 from wand_calib_ros.core.pipeline import calibrate
 from wand_calib_ros.io.errors import FormatError
-from wand_calib_ros.io.result_yaml import read_result, write_camera_infos, write_result
+from wand_calib_ros.io.result_yaml import read_result, write_calibration, write_result
 from wand_calib_ros.sim.clocks import TakeOptions
 
 
@@ -40,7 +40,7 @@ def test_result_round_trip_keeps_the_geometry(tmp_path: Path, result) -> None:  
 
 
 def test_camera_info_files_follow_camera_calibration(tmp_path: Path, result) -> None:  # type: ignore[no-untyped-def]
-    paths = write_camera_infos(result, tmp_path / "info")
+    paths = write_calibration(result, tmp_path / "result.yaml", tmp_path / "info")[1:]
     assert [p.name for p in paths] == ["cam0.yaml", "cam1.yaml"]
     info = yaml.safe_load(paths[1].read_text())
     model = result.camera("cam1").model

@@ -27,6 +27,7 @@ from wand_calib_ros.collection.recovery import TornTail, backup_path, cut_torn_t
 from wand_calib_ros.core.rig import RigSpec, WandObservations
 from wand_calib_ros.io.errors import FormatError
 from wand_calib_ros.io.observations_csv import header, observation_rows, read_observations
+from wand_calib_ros.io.outputs import check_writable
 
 FloatArray = NDArray[np.float64]
 
@@ -97,7 +98,7 @@ class ObservationBuffer:
             for frame, uv, stamp in zip(existing.frames, existing.uv, stamps, strict=True):
                 buffer._remember(int(frame), uv, stamp)
         else:
-            buffer.path.parent.mkdir(parents=True, exist_ok=True)
+            check_writable([buffer.path])
             buffer._start_file()
         return buffer
 

@@ -17,7 +17,8 @@ from wand_calib_ros.collection.errors import CoverageError
 from wand_calib_ros.core.pipeline import CalibrationOptions, calibrate
 from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.core.rig import RigSpec, WandObservations
-from wand_calib_ros.io.result_yaml import write_camera_infos, write_result
+from wand_calib_ros.io.outputs import check_writable
+from wand_calib_ros.io.result_yaml import calibration_paths, write_calibration
 
 log = logging.getLogger(__name__)
 
@@ -72,11 +73,10 @@ def run_calibration(
         status = coverage_of(rig, observations, thresholds)
         if not status.ready:
             raise CoverageError(status.messages())
-    result = calibrate(rig, observations, options)
-    output_dir.mkdir(parents=True, exist_ok=True)
     result_path = output_dir / "result.yaml"
-    write_result(result, result_path)
-    infos = tuple(write_camera_infos(result, output_dir / "camera_info"))
+    check_writable(calibration_paths(rig.camera_names, result_path, output_dir / "camera_info"))
+    result = calibrate(rig, observations, options)
+    infos = tuple(write_calibration(result, result_path, output_dir / "camera_info")[1:])
     report_path = None
     if report:
         from wand_calib_ros.report.html import write_report  # matplotlib only when a report is asked for

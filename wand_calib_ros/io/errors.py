@@ -15,3 +15,11 @@ class FormatError(WandCalibError):
         super().__init__(f"{where}: {message}")
         self.path = Path(path)
         self.row = row
+
+
+class OutputError(WandCalibError):
+    """An output that cannot be written; the message names the path and why."""
+
+    def __init__(self, path: str | Path, reason: str) -> None:
+        super().__init__(f"cannot write {path}: {reason}")
+        self.path = Path(path)

@@ -84,6 +84,12 @@ def _parse(handle: TextIO, path: Path, known: list[str] | None) -> WandObservati
             continue
         if len(row) < width:
             raise FormatError(path, f"expected at least {width} columns, got {len(row)}", row=row_number)
+        if len(row) > len(header):
+            raise FormatError(
+                path,
+                f"{len(row)} cells where the header has {len(header)} (a decimal comma? write 12.5, not 12,5)",
+                row=row_number,
+            )
         frame_text, camera, point, u_text, v_text = (row[i].strip() for i in index)
         try:
             frame = int(frame_text)

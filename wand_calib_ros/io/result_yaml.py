@@ -24,6 +24,7 @@ The result contract::
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -36,6 +37,7 @@ from wand_calib_ros.core.errors import ModelError
 from wand_calib_ros.core.geometry import Pose
 from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.io.errors import FormatError
+from wand_calib_ros.io.outputs import write_together
 from wand_calib_ros.io.text import read_yaml
 
 CONVENTIONS = {
@@ -155,14 +157,38 @@ def _timing_dict(result: CalibrationResult) -> dict[str, Any]:
     }
 
 
+def yaml_text(document: dict[str, Any]) -> str:
+    """A YAML document as text (block style, keys in insertion order)."""
+    return yaml.safe_dump(document, sort_keys=False, default_flow_style=None, width=120)
+
+
 def write_yaml(document: dict[str, Any], path: str | Path) -> None:
-    """Write a YAML document (block style, keys in insertion order)."""
-    Path(path).write_text(yaml.safe_dump(document, sort_keys=False, default_flow_style=None, width=120))
+    """Write a YAML document (replacing the file only once it is written whole)."""
+    write_together({Path(path): yaml_text(document)})
 
 
 def write_result(result: CalibrationResult, path: str | Path) -> None:
     """Write the result YAML."""
     write_yaml(result_to_dict(result), path)
+
+
+def calibration_paths(
+    camera_names: Iterable[str], result_path: str | Path, camera_info_dir: str | Path | None
+) -> list[Path]:
+    """The files :func:`write_calibration` writes: the result, then ``<camera>.yaml`` per camera."""
+    infos = [] if camera_info_dir is None else [Path(camera_info_dir) / f"{name}.yaml" for name in camera_names]
+    return [Path(result_path), *infos]
+
+
+def write_calibration(
+    result: CalibrationResult, result_path: str | Path, camera_info_dir: str | Path | None = None
+) -> list[Path]:
+    """Write the result YAML and (into ``camera_info_dir``) each camera's camera_info YAML as one set:
+    every file is in place, or (OutputError) none was replaced. Returns the paths written."""
+    paths = calibration_paths([c.name for c in result.cameras], result_path, camera_info_dir)
+    documents = [result_to_dict(result), *(camera_info_dict(c.name, c.model) for c in result.cameras)]
+    write_together({path: yaml_text(document) for path, document in zip(paths, documents, strict=False)})
+    return paths
 
 
 @dataclass(frozen=True, eq=False)
@@ -220,15 +246,3 @@ def camera_info_dict(name: str, model: CameraModel) -> dict[str, Any]:
         "rectification_matrix": {"rows": 3, "cols": 3, "data": _floats(np.eye(3).ravel())},
         "projection_matrix": {"rows": 3, "cols": 4, "data": _floats(projection.ravel())},
     }
-
-
-def write_camera_infos(result: CalibrationResult, directory: str | Path) -> list[Path]:
-    """Write ``<camera>.yaml`` camera_info files into ``directory``; returns their paths."""
-    directory = Path(directory)
-    directory.mkdir(parents=True, exist_ok=True)
-    paths = []
-    for camera in result.cameras:
-        path = directory / f"{camera.name}.yaml"
-        write_yaml(camera_info_dict(camera.name, camera.model), path)
-        paths.append(path)
-    return paths

@@ -1,0 +1,318 @@
+"""The bad-input catalogue of the command line: every case ends with exit code 2 and one line.
+
+Each case spoils one input of a good simulated run (or gives one bad option) and asserts the exit
+code, that stderr is a single ``wand-calib: error:`` line naming what is wrong (file, row, camera,
+option), that no input file changed and that no output was written. Buffer cases (torn writes,
+resets) are in ``test/collection/test_recovery.py``; node parameter cases in ``test/nodes``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+from wand_calib_ros.cli import main
+
+Spoil = Callable[[Path], list[str]]  # given a folder holding a good run's files, the argv of a bad run
+
+PNG = b"\x89PNG\r\n\x1a\n" + bytes(range(256))
+
+
+@pytest.fixture(scope="module")
+def good(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("good")
+    assert main(["-q", "simulate", "paper", "--seed", "3", "--noise", "0.5", "--out", str(folder)]) == 0
+    result = ["-q", "calibrate", "--cameras", str(folder / "cameras.yaml"), "--observations"]
+    assert main([*result, str(folder / "observations.csv"), "--output", str(folder / "result.yaml")]) == 0
+    return folder
+
+
+def _calibrate(
+    folder: Path, *extra: str, cameras: str = "cameras.yaml", observations: str = "observations.csv"
+) -> list[str]:
+    return [
+        "calibrate",
+        "--cameras",
+        str(folder / cameras),
+        "--observations",
+        str(folder / observations),
+        "--output",
+        str(folder / "out" / "result.yaml"),
+        *extra,
+    ]
+
+
+def _rewrite(folder: Path, name: str, edit: Callable[[str], str]) -> Path:
+    """A spoilt copy of ``name`` as ``bad-<name>``."""
+    path = folder / f"bad-{name}"
+    path.write_text(edit((folder / name).read_text()))
+    return path
+
+
+def _observations(edit: Callable[[str], str], *extra: str) -> Spoil:
+    def spoil(folder: Path) -> list[str]:
+        _rewrite(folder, "observations.csv", edit)
+        return _calibrate(folder, *extra, observations="bad-observations.csv")
+
+    return spoil
+
+
+def _cameras(edit: Callable[[str], str]) -> Spoil:
+    def spoil(folder: Path) -> list[str]:
+        _rewrite(folder, "cameras.yaml", edit)
+        return _calibrate(folder, cameras="bad-cameras.yaml")
+
+    return spoil
+
+
+def _bytes(name: str, content: bytes) -> Spoil:
+    def spoil(folder: Path) -> list[str]:
+        (folder / f"bad-{name}").write_bytes(content)
+        if name == "cameras.yaml":
+            return _calibrate(folder, cameras="bad-cameras.yaml")
+        return _calibrate(folder, observations="bad-observations.csv")
+
+    return spoil
+
+
+def _row(n: int, edit: Callable[[list[str]], list[str]]) -> Callable[[str], str]:
+    """Edit the cells of line ``n`` (1 = header) of a CSV text."""
+
+    def change(text: str) -> str:
+        lines = text.splitlines()
+        lines[n - 1] = ",".join(edit(lines[n - 1].split(",")))
+        return "\n".join(lines) + "\n"
+
+    return change
+
+
+def _cell(n: int, column: int, value: str) -> Callable[[str], str]:
+    return _row(n, lambda cells: [*cells[:column], value, *cells[column + 1 :]])
+
+
+def _with_stamps(edit: Callable[[list[str], int], str] | None = None) -> Callable[[str], str]:
+    """Add a stamp column (30 fps, both cameras at the frame's time); ``edit(cells, line)`` may change one."""
+
+    def change(text: str) -> str:
+        lines = text.splitlines()
+        out = [lines[0] + ",stamp"]
+        for k, line in enumerate(lines[1:], start=2):
+            cells = line.split(",")
+            stamp = f"{1.7e9 + int(cells[0]) / 30.0:.6f}"
+            out.append(line + "," + (edit(cells, k) if edit is not None else stamp))
+        return "\n".join(out) + "\n"
+
+    return change
+
+
+def _stamp_at(line: int, value: str) -> Callable[[str], str]:
+    return _with_stamps(lambda cells, k: value if k == line else f"{1.7e9 + int(cells[0]) / 30.0:.6f}")
+
+
+def _yaml_replace(old: str, new: str, count: int = 1) -> Callable[[str], str]:
+    def change(text: str) -> str:
+        assert old in text, old
+        return text.replace(old, new, count)
+
+    return change
+
+
+def _argv(*argv: str) -> Spoil:
+    return lambda folder: [a.format(folder=folder) for a in argv]
+
+
+def _output_in_a_file(folder: Path) -> list[str]:
+    (folder / "plain").write_text("a file\n")
+    argv = _calibrate(folder)
+    argv[argv.index("--output") + 1] = str(folder / "plain" / "result.yaml")
+    return argv
+
+
+def _output_is_a_folder(folder: Path) -> list[str]:
+    argv = _calibrate(folder)
+    argv[argv.index("--output") + 1] = str(folder)
+    return argv
+
+
+def _camera_info_in_a_file(folder: Path) -> list[str]:
+    (folder / "plain").write_text("a file\n")
+    return _calibrate(folder, "--camera-info-dir", str(folder / "plain"))
+
+
+def _report(result: Callable[[Path], Path]) -> Spoil:
+    def spoil(folder: Path) -> list[str]:
+        return [
+            "report",
+            "--result",
+            str(result(folder)),
+            "--observations",
+            str(folder / "observations.csv"),
+            "--cameras",
+            str(folder / "cameras.yaml"),
+            "--out",
+            str(folder / "out" / "report"),
+        ]
+
+    return spoil
+
+
+def _detect(topic: str) -> Spoil:
+    def spoil(folder: Path) -> list[str]:
+        output = str(folder / "out" / "o.csv")
+        return [
+            "detect",
+            str(folder / "no-bag"),
+            "--cameras",
+            str(folder / "cameras.yaml"),
+            "--topic",
+            topic,
+            "--output",
+            output,
+        ]
+
+    return spoil
+
+
+def _binary_result(folder: Path) -> Path:
+    (folder / "bad-result.yaml").write_bytes(PNG)
+    return folder / "bad-result.yaml"
+
+
+def _other_cameras_result(folder: Path) -> Path:
+    return _rewrite(folder, "result.yaml", lambda text: text.replace("cam1", "camX"))
+
+
+CASES: dict[str, tuple[Spoil, str]] = {
+    # cameras.yaml
+    "cameras missing": (lambda f: _calibrate(f, cameras="none.yaml"), "none.yaml: cannot read: No such file"),
+    "cameras binary": (_bytes("cameras.yaml", PNG), "bad-cameras.yaml: not UTF-8 text"),
+    "cameras not YAML": (_cameras(lambda t: "wand: [1, 2\ncameras: {"), "bad-cameras.yaml: not valid YAML"),
+    "cameras empty": (_cameras(lambda t: ""), "bad-cameras.yaml"),
+    "cameras a list": (_cameras(lambda t: "- 1\n- 2\n"), "bad-cameras.yaml"),
+    "wand length negative": (_cameras(_yaml_replace("L1: 400.0", "L1: -400.0")), "L1"),
+    "wand length text": (_cameras(_yaml_replace("L1: 400.0", "L1: long")), "L1"),
+    "wand missing": (_cameras(_yaml_replace("wand: {L1: 400.0, L2: 200.0}\n", "")), "wand"),
+    "camera without image_size": (_cameras(_yaml_replace("  image_size: [640, 480]\n", "")), "image_size"),
+    "image_size of one number": (_cameras(_yaml_replace("image_size: [640, 480]", "image_size: [640]")), "image_size"),
+    "focal zero": (_cameras(_yaml_replace("nominal_focal_mm: 1.8", "nominal_focal_mm: 0")), "nominal_focal_mm"),
+    "pixel size negative": (
+        _cameras(_yaml_replace("pixel_size_um: [5.6, 5.6]", "pixel_size_um: [-5.6, 5.6]")),
+        "pixel_size_um",
+    ),
+    "duplicate camera name": (_cameras(_yaml_replace("name: cam1", "name: cam0")), "cam0"),
+    "one camera only": (_cameras(lambda t: t[: t.index("- name: cam1")]), "unknown camera 'cam1'; the rig has cam0"),
+    # observations CSV
+    "observations missing": (lambda f: _calibrate(f, observations="none.csv"), "none.csv: cannot read: No such file"),
+    "observations binary": (_bytes("observations.csv", PNG), "bad-observations.csv: not UTF-8 text"),
+    "observations empty": (_bytes("observations.csv", b""), "bad-observations.csv: empty file"),
+    "header only": (_observations(lambda t: t.splitlines()[0] + "\n"), "no observations after the header"),
+    "column missing": (_observations(_row(1, lambda c: c[:4])), "row 1: missing column(s) v"),
+    "row too short": (_observations(_row(5, lambda c: c[:3])), "row 5: expected at least 5 columns"),
+    "frame not an integer": (_observations(_cell(4, 0, "1.5")), "row 4: frame must be an integer"),
+    "point D": (_observations(_cell(3, 2, "D")), "row 3: point must be A, B or C"),
+    "decimal comma": (_observations(_cell(6, 3, "12,5")), "row 6: 6 cells where the header has 5 (a decimal comma?"),
+    "v text": (_observations(_cell(6, 4, "high")), "row 6: u, v must be numbers"),
+    "u NaN": (_observations(_cell(7, 3, "nan")), "row 7: camera 'cam1' frame 0 point C: u, v must be finite"),
+    "v infinite": (_observations(_cell(7, 4, "inf")), "row 7"),
+    "unknown camera": (_observations(_cell(8, 1, "cam7")), "row 8: unknown camera 'cam7'"),
+    "point twice": (_observations(_row(3, lambda c: [c[0], c[1], "A", *c[3:]])), "appears twice"),
+    "NUL byte in a row": (_bytes("observations.csv", b"frame,camera,point,u,v\n0,cam0,A,1,\x00\n"), "row 2"),
+    "stamp not a number": (
+        _observations(_stamp_at(9, "noon")),
+        "row 9: camera 'cam0' frame 1: stamp must be a number of seconds",
+    ),
+    "stamp NaN": (_observations(_stamp_at(9, "nan")), "row 9"),
+    "stamps in nanoseconds": (
+        _observations(_with_stamps(lambda c, k: str(1_700_000_000_000_000_000 + int(c[0]) * 33_333_333))),
+        "nanoseconds",
+    ),
+    "stamps of one image differ": (
+        _observations(_stamp_at(3, "1700000000.5")),
+        "the points of one image share its stamp",
+    ),
+    "stamps going backwards": (
+        _observations(_with_stamps(lambda c, k: f"{1.7e9 - int(c[0]) / 30.0:.6f}")),
+        "cam0",
+    ),
+    "stamps repeating": (_observations(_with_stamps(lambda c, k: "1700000000.0")), "cam0"),
+    # options
+    "max placements 1": (lambda f: _calibrate(f, "--max-placements", "1"), "--max-placements must be at least 2"),
+    "reference camera unknown": (lambda f: _calibrate(f, "--reference", "cam9"), "cam9"),
+    "offsets of independent placements": (lambda f: _calibrate(f, "--time-offsets", "estimate"), "time offsets"),
+    "too few placements": (_observations(lambda t: "\n".join(t.splitlines()[:40]) + "\n"), "placements"),
+    # outputs (checked before the solve)
+    "output is a folder": (_output_is_a_folder, "it is a folder; give a file name"),
+    "output's folder is a file": (_output_in_a_file, "plain is a file, not a folder"),
+    "camera_info folder is a file": (_camera_info_in_a_file, "plain is a file, not a folder"),
+    # simulate
+    "simulate noise negative": (
+        _argv("simulate", "paper", "--noise", "-1", "--out", "{folder}/out"),
+        "--noise must be >= 0",
+    ),
+    "simulate outliers 1.5": (_argv("simulate", "paper", "--outliers", "1.5", "--out", "{folder}/out"), "--outliers"),
+    "simulate no placements": (
+        _argv("simulate", "paper", "--placements", "0", "--out", "{folder}/out"),
+        "--placements",
+    ),
+    "simulate take of 0 s": (_argv("simulate", "paper3", "--take", "0", "--out", "{folder}/out"), "--take"),
+    # report
+    "report result missing": (_report(lambda f: f / "none.yaml"), "none.yaml: cannot read"),
+    "report result binary": (_report(_binary_result), "bad-result.yaml: not UTF-8 text"),
+    "report result of other cameras": (_report(_other_cameras_result), "cam1"),
+    "report result not a result": (_report(lambda f: f / "cameras.yaml"), "not a wand_calib_ros result file"),
+    # detect
+    "detect topic with an unknown field": (_detect("/{cam}/image_raw"), "{cam} is not a field"),
+    "detect topic with a broken brace": (_detect("/{camera/image_raw"), "--topic '/{camera/image_raw'"),
+    "detect topic shared by the cameras": (_detect("/cam0/image_raw"), "gives every camera the same topic"),
+    "detect bag missing": (_detect("/{camera}/image_raw"), "no-bag"),
+}
+
+
+def _digests(folder: Path) -> dict[str, str]:
+    return {
+        str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in sorted(folder.rglob("*"))
+        if p.is_file()
+    }
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_bad_input_is_one_line_and_exit_code_2(
+    good: Path, tmp_path: Path, case: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    folder = tmp_path / "run"
+    shutil.copytree(good, folder)
+    spoil, expected = CASES[case]
+    argv = spoil(folder)
+    before = _digests(folder)
+    capsys.readouterr()
+    code = main(["-q", *argv])
+    err = capsys.readouterr().err
+    errors = [line for line in err.splitlines() if line.startswith("wand-calib: error:")]
+    assert code == 2, err
+    assert len(errors) == 1 and expected in errors[0], err
+    assert "Traceback" not in err
+    assert _digests(folder) == before  # no input changed
+    assert not (folder / "out").exists() or not any(p.is_file() for p in (folder / "out").rglob("*"))
+
+
+def test_the_catalogue_is_broad() -> None:
+    assert len(CASES) >= 50
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root writes anywhere")
+def test_a_read_only_output_folder_is_refused_before_the_solve(good: Path, tmp_path: Path) -> None:
+    folder = tmp_path / "locked"
+    folder.mkdir()
+    folder.chmod(0o500)
+    try:
+        argv = _calibrate(good)
+        argv[argv.index("--output") + 1] = str(folder / "result.yaml")
+        assert main(["-q", *argv]) == 2
+    finally:
+        folder.chmod(0o700)
