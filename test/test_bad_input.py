@@ -240,6 +240,22 @@ CASES: dict[str, tuple[Spoil, str]] = {
         "cam0",
     ),
     "stamps repeating": (_observations(_with_stamps(lambda c, k: "1700000000.0")), "cam0"),
+    "point outside the image": (_observations(_cell(5, 3, "700.5")), "row 5: camera 'cam1' frame 0 point A: (700.5,"),
+    # the rig against the views (plausibility)
+    "wand in metres": (_cameras(_yaml_replace("L1: 400.0, L2: 200.0", "L1: 0.4, L2: 0.2")), "in metres or cm?"),
+    "wand segments declared equal": (
+        _cameras(_yaml_replace("L1: 400.0, L2: 200.0", "L1: 300.0, L2: 300.0")),
+        "L1/L2 = 300/300",
+    ),
+    "wand segments swapped": (_cameras(_yaml_replace("L1: 400.0, L2: 200.0", "L1: 200.0, L2: 400.0")), "swapped"),
+    "focal 1000 mm for a fisheye": (
+        _cameras(_yaml_replace("nominal_focal_mm: 1.8", "nominal_focal_mm: 1000")),
+        "camera 'cam0': nominal_focal_mm 1000 with max_view_angle_deg 92.5",
+    ),
+    "one camera never sees the whole wand": (
+        _observations(lambda t: "".join(line + "\n" for line in t.splitlines() if ",cam1,C," not in line)),
+        "camera(s) cam1 never see the whole wand",
+    ),
     # options
     "max placements 1": (lambda f: _calibrate(f, "--max-placements", "1"), "--max-placements must be at least 2"),
     "reference camera unknown": (lambda f: _calibrate(f, "--reference", "cam9"), "cam9"),
@@ -264,6 +280,10 @@ CASES: dict[str, tuple[Spoil, str]] = {
     "report result missing": (_report(lambda f: f / "none.yaml"), "none.yaml: cannot read"),
     "report result binary": (_report(_binary_result), "bad-result.yaml: not UTF-8 text"),
     "report result of other cameras": (_report(_other_cameras_result), "cam1"),
+    "report result with a negative focal": (
+        _report(lambda f: _rewrite(f, "result.yaml", lambda t: t.replace("k: [", "k: [-", 1))),
+        "bad-result.yaml: not a wand_calib_ros result file: camera 'cam0': k1 and m must be positive",
+    ),
     "report result not a result": (_report(lambda f: f / "cameras.yaml"), "not a wand_calib_ros result file"),
     # detect
     "detect topic with an unknown field": (_detect("/{cam}/image_raw"), "{cam} is not a field"),

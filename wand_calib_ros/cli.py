@@ -239,7 +239,7 @@ def _timing_summary(result: CalibrationResult, camera: CameraCalibration) -> str
 def _calibrate(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     rig = load_rig(args.cameras)
-    observations = read_observations(args.observations, rig.camera_names)
+    observations = read_observations(args.observations, rig.camera_names, image_sizes=rig.image_sizes)
     log.info("read %d frames of %d cameras from %s", observations.uv.shape[0], len(rig.cameras), args.observations)
     if args.max_placements is not None and args.max_placements < 2:
         raise WandCalibError("--max-placements must be at least 2")
@@ -450,7 +450,7 @@ def _report(args: argparse.Namespace) -> int:
     from wand_calib_ros.report.html import write_report  # matplotlib only when a report is asked for
 
     rig = load_rig(args.cameras)
-    observations = read_observations(args.observations, rig.camera_names)
+    observations = read_observations(args.observations, rig.camera_names, image_sizes=rig.image_sizes)
     path = write_report(rig, observations, args.result, args.out)
     print(f"report: {path}")
     return 0

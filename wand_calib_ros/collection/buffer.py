@@ -90,7 +90,7 @@ class ObservationBuffer:
                 raise FormatError(buffer.path, f"cannot repair the buffer: {error.strerror}") from None
         if buffer.path.exists() and has_rows(buffer.path):
             try:
-                existing = read_observations(buffer.path, rig.camera_names)
+                existing = read_observations(buffer.path, rig.camera_names, image_sizes=rig.image_sizes)
             except FormatError as error:
                 raise FormatError(buffer.path, f"cannot resume the buffer ({error}); move the file away") from None
             buffer.with_stamps = existing.stamps is not None

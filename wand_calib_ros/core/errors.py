@@ -27,3 +27,7 @@ class CalibrationFailedError(CoreError):
 
 class TimingError(CoreError):
     """Stamps or time offsets that cannot describe when the cameras saw the wand."""
+
+
+class PlausibilityError(CoreError):
+    """A rig description, its views or a calibration that cannot be physically right."""

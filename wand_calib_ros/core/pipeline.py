@@ -11,6 +11,7 @@ from wand_calib_ros.core.diagnostics import clock_offsets, clock_warnings
 from wand_calib_ros.core.errors import InsufficientDataError
 from wand_calib_ros.core.multi_camera import initialise_rig
 from wand_calib_ros.core.pairwise import PairOptions
+from wand_calib_ros.core.plausibility import check_result, check_rig, check_views
 from wand_calib_ros.core.refine import refine_calibration
 from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.core.rig import RigSpec, WandObservations, spread_subset
@@ -69,8 +70,11 @@ def calibrate(
         if name not in observations.camera_names:
             raise InsufficientDataError(f"camera '{name}' has no observations")
     obs = observations.select_cameras(names)
+    check_rig(rig)
+    check_views(rig, obs)
     timing = timing_input(rig, obs, offsets=options.time_offsets, rolling_shutter=options.rolling_shutter)
     complete = obs.complete
+    _require_whole_views(names, complete)
     usable = np.flatnonzero(complete.sum(axis=1) >= 2)  # a placement seen by one camera only constrains nothing
     if options.max_placements is not None and usable.size > options.max_placements:
         log.info("using %d of %d placements (max_placements)", options.max_placements, usable.size)
@@ -99,8 +103,29 @@ def calibrate(
         timing=replace(timing, line=line),
         start_uv=aligned,
     )
+    check_result(rig, result)
     warnings = [*result.warnings, *rate_warnings(obs, timing.line), *offset_warnings(result)]
     if result.timing is not None and result.timing.time_offsets == "estimated":
         return replace(result, warnings=tuple(warnings))
     offsets = clock_offsets(result, obs)  # not modelled: say when the residuals show them
     return replace(result, clock_offsets=offsets, warnings=(*warnings, *clock_warnings(offsets)))
+
+
+def _require_whole_views(names: tuple[str, ...], complete: np.ndarray) -> None:
+    """Every camera must see the whole wand (all three points) in a frame another camera sees it in too.
+
+    Raises:
+        InsufficientDataError: naming the cameras that never see the whole wand, or that see it
+            only in frames no other camera sees it in.
+    """
+    never = [name for name, seen in zip(names, complete.any(axis=0), strict=True) if not seen]
+    if never:
+        raise InsufficientDataError(f"camera(s) {', '.join(never)} never see the whole wand")
+    shared = complete & (complete.sum(axis=1, keepdims=True) >= 2)
+    alone = [name for name, seen in zip(names, shared.any(axis=0), strict=True) if not seen]
+    if alone:
+        counts = ", ".join(f"{n} in {int(complete[:, names.index(n)].sum())} frames" for n in alone)
+        raise InsufficientDataError(
+            f"camera(s) {', '.join(alone)} see the whole wand ({counts}) but never in a frame another camera "
+            "sees it in too: wave it where they overlap"
+        )

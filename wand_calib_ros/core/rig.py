@@ -90,6 +90,11 @@ class RigSpec:
     def camera_names(self) -> tuple[str, ...]:
         return tuple(c.name for c in self.cameras)
 
+    @property
+    def image_sizes(self) -> dict[str, tuple[int, int]]:
+        """Each camera's (width, height) in px, by name."""
+        return {c.name: c.image_size for c in self.cameras}
+
     def camera(self, name: str) -> CameraSpec:
         for spec in self.cameras:
             if spec.name == name:

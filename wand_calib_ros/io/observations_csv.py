@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import csv
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import TextIO
 
@@ -27,17 +27,26 @@ from wand_calib_ros.io.errors import FormatError
 COLUMNS = ("frame", "camera", "point", "u", "v")
 #: The optional column of per-image capture stamps (seconds).
 STAMP = "stamp"
+#: How far (px) beyond its image's border a point may lie (detection noise at the edge).
+IMAGE_MARGIN_PX = 1.0
 #: Stamps above this (seconds: year 5138) are surely in another unit (nanoseconds).
 MAX_STAMP_S = 1e11
 
 
-def read_observations(path: str | Path, camera_names: Iterable[str] | None = None) -> WandObservations:
+def read_observations(
+    path: str | Path,
+    camera_names: Iterable[str] | None = None,
+    *,
+    image_sizes: Mapping[str, tuple[int, int]] | None = None,
+) -> WandObservations:
     """Read an observations CSV.
 
     Args:
         path: the file.
         camera_names: if given, the rig's cameras: rows naming another camera are
             an error, and the result's cameras follow this order.
+        image_sizes: if given, each camera's (width, height) in px: a point more than
+            IMAGE_MARGIN_PX outside its image is an error.
 
     Raises:
         FormatError: naming the file, the row (1 = header) and the problem.
@@ -50,7 +59,7 @@ def read_observations(path: str | Path, camera_names: Iterable[str] | None = Non
         raise FormatError(path, f"cannot read: {error.strerror}") from None
     with handle:
         try:
-            return _parse(handle, path, known)
+            return _parse(handle, path, known, dict(image_sizes or {}))
         except UnicodeDecodeError as error:
             raise FormatError(
                 path, f"not UTF-8 text (it holds the byte 0x{error.object[error.start]:02x}): not an observations CSV?"
@@ -59,7 +68,7 @@ def read_observations(path: str | Path, camera_names: Iterable[str] | None = Non
             raise FormatError(path, f"not a CSV: {error}") from None
 
 
-def _parse(handle: TextIO, path: Path, known: list[str] | None) -> WandObservations:
+def _parse(handle: TextIO, path: Path, known: list[str] | None, sizes: dict[str, tuple[int, int]]) -> WandObservations:
     reader = csv.reader(handle)
     header = next(reader, None)
     if header is None:
@@ -105,6 +114,17 @@ def _parse(handle: TextIO, path: Path, known: list[str] | None) -> WandObservati
             raise FormatError(
                 path,
                 f"camera '{camera}' frame {frame} point {point}: u, v must be finite, got {u_text}, {v_text}",
+                row=row_number,
+            )
+        size = sizes.get(camera)
+        if size is not None and not (
+            -0.5 - IMAGE_MARGIN_PX <= u <= size[0] - 0.5 + IMAGE_MARGIN_PX
+            and -0.5 - IMAGE_MARGIN_PX <= v <= size[1] - 0.5 + IMAGE_MARGIN_PX
+        ):
+            raise FormatError(
+                path,
+                f"camera '{camera}' frame {frame} point {point}: ({u_text}, {v_text}) lies outside its "
+                f"{size[0]}x{size[1]} image (image_size in the rig description: the right camera? the right size?)",
                 row=row_number,
             )
         if camera not in cameras:

@@ -216,19 +216,22 @@ def read_result(path: str | Path) -> tuple[str, dict[str, CameraGeometry]]:
     """
     path = Path(path)
     data = read_yaml(path)
+    where = "the file"
     try:
-        cameras = {
-            name: CameraGeometry(
+        cameras = {}
+        for name, entry in data["cameras"].items():
+            where = f"camera '{name}'"
+            cameras[str(name)] = CameraGeometry(
                 CameraModel(entry["k"], entry["m"], entry["principal_point"], tuple(entry["image_size"])),
                 Pose(entry["rotation"], entry["translation"]),
                 float(entry.get("time_offset_s", entry.get("time_offset_frames", 0.0))),
                 float(entry.get("rolling_shutter_readout_s", entry.get("rolling_shutter_readout_frames", 0.0))),
             )
-            for name, entry in data["cameras"].items()
-        }
         return str(data["reference_camera"]), cameras
-    except (KeyError, TypeError, ValueError, AttributeError, ModelError) as error:
-        raise FormatError(path, f"not a wand_calib_ros result file ({type(error).__name__}: {error})") from None
+    except KeyError as error:
+        raise FormatError(path, f"not a wand_calib_ros result file: {where} has no {error}") from None
+    except (TypeError, ValueError, AttributeError, ModelError) as error:
+        raise FormatError(path, f"not a wand_calib_ros result file: {where}: {error}") from None
 
 
 def camera_info_dict(name: str, model: CameraModel) -> dict[str, Any]:

@@ -151,7 +151,7 @@ class CalibratorNode(Node):
         if not path.exists() or not has_rows(path):
             return False, f"nothing collected yet in {path}: is the collector running and the wand in view?"
         try:
-            observations = read_observations(path, self.rig.camera_names)
+            observations = read_observations(path, self.rig.camera_names, image_sizes=self.rig.image_sizes)
             result, files = run_calibration(
                 self.rig,
                 observations,
