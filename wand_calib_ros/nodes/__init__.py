@@ -1,1 +1,34 @@
-"""ROS 2 nodes: message and parameter translation around the core (the only modules importing rclpy)."""
+"""ROS 2 nodes: message and parameter translation around the core (the only modules importing rclpy).
+
+Started as an executable (``python -m wand_calib_ros.nodes.<node>`` or a console script), a node
+exits 0 on SIGTERM from its first instant: importing rclpy takes most of a second, and before
+rclpy installs its signal handlers the default one would end the process with 143.
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+import threading
+from pathlib import Path
+from types import FrameType
+
+#: The executables whose start this package guards (console scripts, ``ros2 run`` names).
+EXECUTABLES = frozenset({"collector", "calibrator", "detector", "wand-calib-replay", "wand-calib-trigger", "demo"})
+
+
+def _stop_quietly(signum: int, frame: FrameType | None) -> None:
+    raise SystemExit(0)
+
+
+def _guard_the_start() -> None:
+    starting_node = sys.argv[:1] == ["-m"] or Path(sys.argv[0] if sys.argv else "").name in EXECUTABLES
+    if (
+        starting_node
+        and threading.current_thread() is threading.main_thread()
+        and signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
+    ):
+        signal.signal(signal.SIGTERM, _stop_quietly)
+
+
+_guard_the_start()

@@ -21,7 +21,7 @@ from wand_calib_ros.io.bags import read_image_frames
 from wand_calib_ros.io.rig_yaml import load_camera_endpoints
 from wand_calib_ros.nodes import messages
 from wand_calib_ros.nodes.params import Param, declare, existing_file, image_qos
-from wand_calib_ros.nodes.runner import run
+from wand_calib_ros.nodes.runner import EXIT_SETTINGS, run
 
 REPLAY_PARAMS = (
     Param("bag", "", "rosbag2 directory (mcap or sqlite3) with the cameras' images", required=True),
@@ -49,6 +49,7 @@ class ReplayNode(Node):
         self.rate = float(values["rate"])
         self.wait_s = float(values["wait_for_subscribers_s"])
         self.published = 0
+        self.exit_code = 0  #: the process's exit code once playing ends (EXIT_SETTINGS: the bag is unreadable)
         self._thread = threading.Thread(target=self._play, name="replay", daemon=True)
         self._thread.start()
 
@@ -72,7 +73,8 @@ class ReplayNode(Node):
                 self.published += 1
             self.get_logger().info(f"played {self.published} images from {self.bag}")
         except WandCalibError as error:
-            self.get_logger().error(f"cannot play {self.bag}: {error}")
+            self.get_logger().fatal(f"cannot play {self.bag}: {error}")
+            self.exit_code = EXIT_SETTINGS
         if self.on_done is not None:
             time.sleep(0.5)  # let reliable subscribers take the last messages
             self.on_done()

@@ -18,13 +18,19 @@ dropped none either way).
 Ctrl-C and SIGTERM shut the context down; the nodes' ``close()`` hooks run (the
 collector flushes its buffer), the executor threads are joined and the process
 exits 0. A :class:`WandCalibError` while building the nodes (a bad parameter, an
-unreadable rig file) is one FATAL log line and exit code 2.
+unreadable rig file), a ``--params-file`` that cannot be read, or a node that ends
+with ``exit_code`` set (the replay of an unreadable bag) is one FATAL log line and
+exit code 2; a parameter given that no node of the process declares gets a warning
+naming the declared one it resembles.
 """
 
 from __future__ import annotations
 
 import contextlib
+import difflib
+import itertools
 import os
+import re
 import signal
 import sys
 import threading
@@ -33,6 +39,8 @@ from pathlib import Path
 from typing import Any
 
 import rclpy
+import yaml
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.context import Context
 from rclpy.executors import Executor, ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
@@ -118,6 +126,51 @@ def _shutdown(context: Context) -> None:
         rclpy.try_shutdown(context=context)
 
 
+#: Parameters rclpy itself reads or may be given for any node.
+ROS_PARAMETERS = ("use_sim_time", "start_type_description_service")
+
+
+def undeclared_parameters(nodes: Sequence[Node]) -> list[str]:
+    """One warning per parameter given to these nodes (``-p``, ``--params-file``) that none of them declares
+    (a misspelt name would otherwise be ignored), with the declared names it resembles."""
+    given: set[str] = set()
+    declared: set[str] = set(ROS_PARAMETERS)
+    for node in nodes:
+        given |= set(getattr(node, "_parameter_overrides", {}))  # rclpy keeps the overrides only here
+        declared |= set(node._parameters)
+    unknown = sorted(n for n in given - declared if not n.startswith("qos_overrides."))
+    lines = []
+    for parameter in unknown:
+        near = difflib.get_close_matches(parameter, sorted(declared), n=1, cutoff=0.6)
+        hint = f" (did you mean {near[0]}?)" if near else ""
+        lines.append(
+            f"parameter {parameter} is not a parameter of {', '.join(n.get_name() for n in nodes)}: ignored{hint}"
+        )
+    return lines
+
+
+def params_file_problem(args: Sequence[str]) -> str | None:
+    """What is wrong with the first ``--params-file`` of ``args`` that cannot be read as YAML (None: nothing)."""
+    for flag, value in itertools.pairwise(args):
+        if flag != "--params-file":
+            continue
+        try:
+            yaml.safe_load(Path(value).read_text(encoding="utf-8"))
+        except OSError as error:
+            return f"parameter file {value}: cannot read: {error.strerror}"
+        except (UnicodeDecodeError, yaml.YAMLError) as error:
+            return f"parameter file {value}: not valid YAML: {' '.join(str(error).split())}"
+    return None
+
+
+def _init_error(message: str) -> str:
+    """One line from rcl's initialisation error, naming the parameter file when it is the cause."""
+    found = re.search(r"Couldn't parse params file: '--params-file (.*?)'\. Error: (.*?)(?:, at /|$)", message, re.S)
+    if found:
+        return f"parameter file {found[1]}: {' '.join(found[2].split())}"
+    return "cannot start ROS: " + " ".join(message.split(", at /")[0].split())
+
+
 def run(name: str, build: Callable[[Context], list[Node]], argv: Sequence[str] | None = None) -> int:
     """Run the nodes ``build`` makes until Ctrl-C, SIGTERM or their context shuts down.
 
@@ -131,18 +184,30 @@ def run(name: str, build: Callable[[Context], list[Node]], argv: Sequence[str] |
     """
     use_large_image_transport(os.environ)  # before the first participant reads the profile
     sys.unraisablehook = _quiet_half_built_executors
+    args = list(argv) if argv is not None else sys.argv
+    problem = params_file_problem(args)
+    if problem is not None:  # before rcl, which would add its own error line
+        rclpy.logging.get_logger(name).fatal(problem)
+        return EXIT_SETTINGS
     context = Context()
-    rclpy.init(
-        args=list(argv) if argv is not None else sys.argv,
-        context=context,
-        signal_handler_options=SignalHandlerOptions.ALL,  # SIGINT and SIGTERM shut the context down
-    )
+    try:
+        rclpy.init(
+            args=args,
+            context=context,
+            signal_handler_options=SignalHandlerOptions.ALL,  # SIGINT and SIGTERM shut the context down
+        )
+    except RCLError as error:  # a missing or malformed --params-file, a bad --ros-args
+        rclpy.logging.get_logger(name).fatal(_init_error(str(error)))
+        return EXIT_SETTINGS
     spinner = Spinner(context)
     stopped = threading.Event()
     context.on_shutdown(stopped.set)
     try:
-        for node in build(context):
+        nodes = build(context)
+        for node in nodes:
             spinner.add(node)
+        for line in undeclared_parameters(nodes):
+            rclpy.logging.get_logger(name).warning(line)
         while context.ok() and not stopped.wait(0.2):
             pass
     except WandCalibError as error:
@@ -155,7 +220,7 @@ def run(name: str, build: Callable[[Context], list[Node]], argv: Sequence[str] |
             raise
         code = 0  # SIGTERM while the nodes were being built: a clean stop
     else:
-        code = 0
+        code = max((int(getattr(node, "exit_code", 0)) for node in nodes), default=0)  # a node that failed
     finally:
         for sig in (signal.SIGINT, signal.SIGTERM):  # a second Ctrl-C must not interrupt the clean-up
             signal.signal(sig, signal.SIG_IGN)
