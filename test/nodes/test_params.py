@@ -80,3 +80,34 @@ def test_shipped_params_files_name_only_declared_parameters(name: str) -> None:
         keys = set(section["ros__parameters"])
         allowed = set.union(*declared.values()) if node == "/**" else declared[node]
         assert keys <= allowed, (node, keys - allowed)
+
+
+def test_start_up_parameters_refuse_a_later_set_with_a_reason(ros: Ros, tmp_path: Path) -> None:
+    save_rig(paper_fisheye_scenario().rig, tmp_path / "cameras.yaml")
+    overrides = [
+        Parameter("cameras_file", value=str(tmp_path / "cameras.yaml")),
+        Parameter("output_dir", value=str(tmp_path / "out")),
+    ]
+    collector = ros.add(CollectorNode(context=ros.context, parameter_overrides=overrides))
+    calibrator = ros.add(CalibratorNode(context=ros.context, parameter_overrides=overrides))
+    for node, name, value in ((collector, "input", "bogus"), (calibrator, "commit_to_drivers", True)):
+        result = node.set_parameters([Parameter(name, value=value)])[0]
+        assert not result.successful and "read-only" in result.reason
+    assert collector.get_parameter("input").value == "images"
+    assert calibrator.drivers == {}  # not committing: no set_camera_info clients to list
+    assert not any("set_camera_info" in name for name, _ in ros.helper.get_service_names_and_types())
+
+
+def test_feedback_keeps_flowing_with_sim_time_and_no_clock(ros: Ros, tmp_path: Path) -> None:
+    from conftest import wait_until
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    save_rig(paper_fisheye_scenario().rig, tmp_path / "cameras.yaml")
+    overrides = [
+        Parameter("cameras_file", value=str(tmp_path / "cameras.yaml")),
+        Parameter("output_dir", value=str(tmp_path / "out")),
+        Parameter("use_sim_time", value=True),  # and nobody publishes /clock
+    ]
+    diagnostics = ros.collect(DiagnosticArray, "/diagnostics")
+    ros.add(CollectorNode(context=ros.context, parameter_overrides=overrides))
+    assert wait_until(lambda: len(diagnostics) >= 2, 10)

@@ -158,3 +158,39 @@ def test_a_signal_while_starting_or_running_stops_the_collector_cleanly(tmp_path
     assert wait_until(lambda: moment in log.read_text(), 60, step_s=0.005)
     assert stop(collector, sig, timeout_s=30) == 0
     assert "Traceback" not in log.read_text()
+
+
+def test_stopping_the_calibrator_during_a_calibration_answers_the_caller(tmp_path: Path) -> None:
+    from wand_calib_ros.io.observations_csv import write_observations
+    from wand_calib_ros.sim.scenarios import mocap_scenario, simulate
+
+    scenario = mocap_scenario()  # 6,000 placements of 16 cameras: a solve of several seconds
+    save_rig(scenario.rig, tmp_path / "cameras.yaml")
+    (tmp_path / "out").mkdir()
+    observations = simulate(scenario, 1.0, np.random.default_rng(0), n=6000).observations
+    write_observations(observations, tmp_path / "out" / "observations.csv")
+    domain_id = free_domain_id()
+    params = {
+        "cameras_file": str(tmp_path / "cameras.yaml"),
+        "output_dir": str(tmp_path / "out"),
+        "require_coverage": False,
+        "write_report": False,
+    }
+    log = tmp_path / "calibrator.log"
+    calibrator = start("wand_calib_ros.nodes.calibrator", params, domain_id=domain_id, log=log)
+    caller = subprocess.Popen(
+        [sys.executable, "-m", "wand_calib_ros.nodes.trigger", "/calibrate", "--timeout", "120"],
+        env=child_env(domain_id),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    try:
+        assert wait_until(lambda: "/calibrate: calibrating 6000 frames" in log.read_text(), 60)
+        assert stop(calibrator, signal.SIGINT) == 0
+        answer, _ = caller.communicate(timeout=60)
+    finally:
+        stop(caller)
+        stop(calibrator)
+    assert "/calibrate: failure: the calibrator was stopped" in answer  # answered, not left hanging
+    assert "Traceback" not in log.read_text() and "InvalidHandle" not in log.read_text()

@@ -27,8 +27,10 @@ from wand_calib_ros.io.errors import FormatError
 COLUMNS = ("frame", "camera", "point", "u", "v")
 #: The optional column of per-image capture stamps (seconds).
 STAMP = "stamp"
-#: How far (px) beyond its image's border a point may lie (detection noise at the edge).
-IMAGE_MARGIN_PX = 1.0
+#: How far (px) beyond its image's border a point may lie: real detections never do, but simulated
+#: pixel noise (up to 1 px, about 5 sigma over a large take) pushes points near the border out;
+#: a wrong image_size or a wrong camera is off by tens of pixels or more.
+IMAGE_MARGIN_PX = 10.0
 #: Stamps above this (seconds: year 5138) are surely in another unit (nanoseconds).
 MAX_STAMP_S = 1e11
 

@@ -72,6 +72,10 @@ PARAMS = (
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
 
 
+#: The answer to a /calibrate the node's stop interrupted.
+STOPPED = "the calibrator was stopped (Ctrl-C or SIGTERM) during the calibration; call /calibrate after a restart"
+
+
 class CalibratorNode(Node):
     """``/calibrate`` on the persisted buffer; publishes and writes the result (module docstring)."""
 
@@ -109,6 +113,7 @@ class CalibratorNode(Node):
         self.before_calibrate = before_calibrate
         self.after_calibrate = after_calibrate
         self._running = threading.Lock()
+        self._stopping = threading.Event()
         # Reentrant: a second /calibrate during a solve gets its "in progress" answer at once,
         # and driver answers arrive while the solve's thread waits for them.
         group = ReentrantCallbackGroup()
@@ -121,9 +126,10 @@ class CalibratorNode(Node):
             name: self.create_publisher(TransformStamped, f"wand_calib/{name}/extrinsics", LATCHED)
             for name in self.rig.camera_names
         }
-        self.drivers = {
+        self.drivers = {  # only when committing: idle clients would list services no driver offers
             name: self.create_client(SetCameraInfo, endpoint.set_camera_info, callback_group=group)
             for name, endpoint in self.endpoints.items()
+            if self.commit
         }
         self.get_logger().info(f"/calibrate reads {self.output_dir / BUFFER_FILE}")
 
@@ -131,18 +137,36 @@ class CalibratorNode(Node):
         if not self._running.acquire(blocking=False):
             response.success, response.message = False, "a calibration is already running; try again when it ends"
             return response
-        try:
-            response.success, response.message = self._calibrate()
-        except Exception as error:  # a bug: still answer, so the caller does not wait forever
-            self.get_logger().error(f"/calibrate: unexpected error\n{traceback.format_exc()}")
-            response.success, response.message = False, f"unexpected error (please report): {error!r}"
+        try:  # the solve runs in its own thread so that a stop can still answer the caller
+            outcome: list[tuple[bool, str]] = []
+            worker = threading.Thread(target=self._solve, args=(outcome,), name="calibration", daemon=True)
+            worker.start()
+            while worker.is_alive() and not self._stopping.wait(0.05):
+                pass
+            worker.join(timeout=0.0 if self._stopping.is_set() else None)
+            response.success, response.message = outcome[0] if outcome else (False, STOPPED)
         finally:
             self._running.release()
+        if self._stopping.is_set():  # no log line: the context is gone (the caller gets the answer)
+            return response
         if response.success:  # rclpy ties one severity to each logging call site
             self.get_logger().info(f"/calibrate: {response.message}")
         else:
             self.get_logger().warning(f"/calibrate: {response.message}")
         return response
+
+    def _solve(self, outcome: list[tuple[bool, str]]) -> None:
+        try:
+            outcome.append(self._calibrate())
+        except Exception as error:  # a bug: still answer, so the caller does not wait forever
+            self.get_logger().error(f"/calibrate: unexpected error\n{traceback.format_exc()}")
+            outcome.append((False, f"unexpected error (please report): {error!r}"))
+
+    def close(self) -> None:
+        """At exit (Ctrl-C, SIGTERM): answer a /calibrate in progress before the node goes away."""
+        self._stopping.set()
+        if self._running.acquire(timeout=5.0):
+            self._running.release()
 
     def _calibrate(self) -> tuple[bool, str]:
         if self.before_calibrate is not None:
@@ -152,6 +176,7 @@ class CalibratorNode(Node):
             return False, f"nothing collected yet in {path}: is the collector running and the wand in view?"
         try:
             observations = read_observations(path, self.rig.camera_names, image_sizes=self.rig.image_sizes)
+            self.get_logger().info(f"/calibrate: calibrating {observations.uv.shape[0]} frames of {path}")
             result, files = run_calibration(
                 self.rig,
                 observations,
@@ -162,6 +187,8 @@ class CalibratorNode(Node):
             )
         except WandCalibError as error:
             return False, f"calibration failed: {error}"
+        if self._stopping.is_set():  # the node is going away: publish nothing
+            return False, STOPPED
         stamp = self.get_clock().now().to_msg()
         for name in self.rig.camera_names:
             self.info_publishers[name].publish(messages.camera_info_message(result, name, stamp))

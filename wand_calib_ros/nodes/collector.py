@@ -25,6 +25,7 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PolygonStamped
+from rclpy.clock import Clock, ClockType
 from rclpy.context import Context
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -129,7 +130,8 @@ class CollectorNode(Node):
         self.heat_maps = {
             name: self.create_publisher(Image, f"wand_calib/{name}/coverage", 1) for name in self.rig.camera_names
         }
-        self.create_timer(1.0, self._publish_feedback)
+        # Feedback on the steady clock: with use_sim_time and no /clock, ROS time stands still.
+        self.create_timer(1.0, self._publish_feedback, clock=Clock(clock_type=ClockType.STEADY_TIME))
         source = {"images": "image topics", "points": "detector points"}[values["input"]]
         self.get_logger().info(
             f"collecting {', '.join(self.rig.camera_names)} from {source} into {self.buffer.path} "

@@ -56,7 +56,11 @@ class Param:
     required: bool = False
 
     def descriptor(self) -> ParameterDescriptor:
-        descriptor = ParameterDescriptor(description=self.description, type=_TYPES[type(self.default)])
+        descriptor = ParameterDescriptor(
+            description=self.description,
+            type=_TYPES[type(self.default)],
+            read_only=True,  # read once at start-up: `ros2 param set` is refused with this reason
+        )
         if isinstance(self.default, float) and self.low is not None and self.high is not None:
             descriptor.floating_point_range = [FloatingPointRange(from_value=self.low, to_value=self.high, step=0.0)]
         elif type(self.default) is int and self.low is not None and self.high is not None:
