@@ -62,3 +62,13 @@ def test_unusable_images_raise_image_errors() -> None:
         to_gray(np.zeros((4, 4), np.uint8), "bgr8")
     with pytest.raises(ImageError, match="empty image"):
         to_gray(np.zeros((0, 0), np.uint8), "mono8")
+
+
+def test_a_spot_cut_by_the_image_border_is_marked() -> None:
+    rng = np.random.default_rng(5)
+    spots = np.array([[0.4, 200.0], [320.0, 200.0], [639.2, 300.0], [320.0, 479.5], [100.0, 100.0]])
+    blobs = find_blobs(to_gray(render_image((640, 480), spots, RenderOptions(), rng), "mono8"))
+    assert blobs.at_border is not None and blobs.centres.shape == (5, 2)
+    near = [int(np.argmin(np.linalg.norm(blobs.centres - spot, axis=1))) for spot in spots]
+    assert blobs.at_border[near].tolist() == [True, False, True, True, False]
+    assert blobs.centres[near[0], 0] > 0.4 + 0.3  # what a cut spot does to its centre: pulled inwards

@@ -156,3 +156,12 @@ def test_a_camera_repeating_a_stamp_is_labelled_without_error() -> None:
             out += stream.push(stamp, image, "mono8") + stream.push(stamp, image, "mono8")  # a driver sent it twice
     out += stream.flush()
     assert len(out) == 40 and [o.stamp_ns for o in out] == sorted(o.stamp_ns for o in out)
+
+
+def test_a_wand_with_an_led_cut_by_the_border_is_not_written() -> None:
+    points = [[2.0, 100.0], [102.0, 100.0], [152.0, 100.0]]
+    whole = _blobs(points)
+    cut = Blobs(whole.centres, whole.areas, whole.peaks, whole.saturated, np.array([True, False, False]))
+    assert identify_wand(whole).points is not None
+    detection = identify_wand(cut)
+    assert detection.points is None and detection.reason == "at_border"

@@ -71,12 +71,19 @@ class Blobs:
         areas: (N,) pixels above the threshold.
         peaks: (N,) brightest value above background.
         saturated: (N,) True where a pixel reached the image's maximum value.
+        at_border: (N,) True where the blob touches the image border (cut: its centre is pulled
+            inwards); None: none does.
     """
 
     centres: FloatArray
     areas: NDArray[np.int64]
     peaks: FloatArray
     saturated: NDArray[np.bool_]
+    at_border: NDArray[np.bool_] | None = None
+
+    def cut(self, index: list[int]) -> bool:
+        """Whether any of the blobs ``index`` touches the image border."""
+        return self.at_border is not None and bool(self.at_border[index].any())
 
 
 def to_gray(image: NDArray, encoding: str) -> NDArray:
@@ -130,7 +137,7 @@ def find_blobs(gray: NDArray, options: BlobOptions = BlobOptions(), *, saturatio
         mask = (gray > threshold).astype(np.uint8)
     # External contours of a sparse mask are much cheaper than labelling the whole image.
     contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
-    centres, areas, peaks, saturated = [], [], [], []
+    centres, areas, peaks, saturated, at_border = [], [], [], [], []
     w = options.window
     for contour in contours:
         x, y, bw, bh = cv2.boundingRect(contour)
@@ -153,6 +160,7 @@ def find_blobs(gray: NDArray, options: BlobOptions = BlobOptions(), *, saturatio
         areas.append(area)
         peaks.append(float(window.max()) - background)
         saturated.append(bool(window.max() >= saturation))
+        at_border.append(x == 0 or y == 0 or x + bw == width or y + bh == height)
     if not centres:
         return empty
     return Blobs(
@@ -160,4 +168,5 @@ def find_blobs(gray: NDArray, options: BlobOptions = BlobOptions(), *, saturatio
         np.array(areas, dtype=np.int64),
         np.array(peaks, dtype=np.float64),
         np.array(saturated, dtype=bool),
+        np.array(at_border, dtype=bool),
     )

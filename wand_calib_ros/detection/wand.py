@@ -24,7 +24,7 @@ from wand_calib_ros.detection.blobs import Blobs
 FloatArray = NDArray[np.float64]
 
 #: Reasons a frame gives no wand (counted per camera by ``wand-calib detect``).
-REASONS = ("no_blobs", "too_few_blobs", "not_collinear", "competing_triples")
+REASONS = ("no_blobs", "too_few_blobs", "not_collinear", "competing_triples", "at_border")
 
 
 @dataclass(frozen=True)
@@ -148,14 +148,16 @@ def identify_wand(
         index = list(triple)
         outcome = _score(blobs.centres[index], options, None if bearings is None else bearings[index])
         if outcome is not None:
-            scored.append(outcome)
+            scored.append((*outcome, index))
     if not scored:
         return WandDetection(None, 0.0, "not_collinear")
-    scored.sort(key=lambda s: s[0])
+    scored.sort(key=lambda s: float(s[0]))
     best = scored[0]
     if len(scored) > 1 and scored[1][0] < options.competing_margin * best[0] + 0.05:
         return WandDetection(None, 0.0, "competing_triples")
-    score, points, ratio = best
+    score, points, ratio, index = best
+    if blobs.cut(index):  # an LED cut by the image border: its centre is biased, the view is not written
+        return WandDetection(None, 0.0, "at_border")
     ambiguous = 1 / options.ambiguous_ratio <= ratio <= options.ambiguous_ratio
     return WandDetection(points, float(1.0 / (1.0 + score)), None, bool(ambiguous), float(ratio))
 
