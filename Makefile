@@ -1,7 +1,7 @@
 # wand_calib_ros: the two entry points of the README.
 #   make demo  - create .venv, install, replay a rendered mixed rig through the live ROS 2 nodes, /calibrate
 #   make demo-offline - the core without ROS on the paper's simulated two-fisheye rig
-#   make test  - create .venv, install with test tools, run ruff and the test suite
+#   make test  - create .venv, install with test tools, run ruff, mypy and the test suite
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
@@ -34,6 +34,7 @@ demo-offline: setup
 lint: setup
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
+	$(BIN)/mypy
 
 test: setup lint
 	$(BIN)/python -m pytest -q

@@ -168,7 +168,7 @@ class ObservationBuffer:
         assert self._cells is not None
         median = np.median(self._cells, axis=(1, 2))
         for c in np.flatnonzero(complete):
-            cells = self._cell_index(c, uv[c])
+            cells = self._cell_index(int(c), uv[c])
             if np.any(self._cells[c, cells[:, 1], cells[:, 0]] < max(median[c], 1)):
                 return True
         return False
@@ -179,7 +179,7 @@ class ObservationBuffer:
         self.uv.append(np.asarray(uv, dtype=np.float64))
         self.stamps.append(np.where(np.any(np.isfinite(uv), axis=(1, 2)), stamps, np.nan))
         for c in np.flatnonzero(np.all(np.isfinite(uv), axis=(1, 2))):
-            cells = self._cell_index(c, uv[c])
+            cells = self._cell_index(int(c), uv[c])
             np.add.at(self._cells[c], (cells[:, 1], cells[:, 0]), 1)
 
     def _append_rows(self, frame: int, uv: FloatArray, stamps: FloatArray) -> None:

@@ -427,7 +427,7 @@ def _inverse_and_root(v: FloatArray) -> tuple[FloatArray, FloatArray]:
     v_inv = np.linalg.inv(v)
     v_inv = 0.5 * (v_inv + v_inv.transpose(0, 2, 1))
     try:
-        return v_inv, np.linalg.cholesky(v_inv)
+        return v_inv, np.asarray(np.linalg.cholesky(v_inv), dtype=np.float64)
     except np.linalg.LinAlgError:  # numerically semi-definite: symmetric square root
         values, vectors = np.linalg.eigh(v_inv)
         return v_inv, vectors * np.sqrt(np.clip(values, 0.0, None))[:, None, :]
@@ -559,7 +559,7 @@ def bundle_adjust(
                 delta_p = _back_substitute(delta_c, v_inv, w, gp, structure)
             else:  # placements only: independent 5x5 systems
                 delta_c = np.zeros((n_cameras, columns.size))
-                delta_p = np.linalg.solve(_damp(v, lam), gp[..., None])[..., 0]
+                delta_p = np.asarray(np.linalg.solve(_damp(v, lam), gp[..., None])[..., 0], dtype=np.float64)
             try:
                 candidate = _apply_step(state, delta_c, delta_p, timing)
             except ModelError:  # e.g. k1 <= 0: not a camera, reject the step

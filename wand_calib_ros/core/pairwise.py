@@ -262,4 +262,4 @@ def _epipolar_agreement(
         essential, unproject(models[0], uv0).reshape(-1, 3), unproject(models[1], uv1).reshape(-1, 3)
     )
     focal_px = min(float(np.min(m.focal_px)) for m in models)
-    return (angles < options.ransac_threshold_px / focal_px).reshape(-1, 3).all(axis=1)
+    return np.asarray((angles < options.ransac_threshold_px / focal_px).reshape(-1, 3).all(axis=1))

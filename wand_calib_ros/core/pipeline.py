@@ -6,6 +6,7 @@ import logging
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from numpy.typing import NDArray
 
 from wand_calib_ros.core.diagnostics import clock_offsets, clock_warnings
 from wand_calib_ros.core.errors import InsufficientDataError
@@ -111,18 +112,18 @@ def calibrate(
     return replace(result, clock_offsets=offsets, warnings=(*warnings, *clock_warnings(offsets)))
 
 
-def _require_whole_views(names: tuple[str, ...], complete: np.ndarray) -> None:
+def _require_whole_views(names: tuple[str, ...], complete: NDArray[np.bool_]) -> None:
     """Every camera must see the whole wand (all three points) in a frame another camera sees it in too.
 
     Raises:
         InsufficientDataError: naming the cameras that never see the whole wand, or that see it
             only in frames no other camera sees it in.
     """
-    never = [name for name, seen in zip(names, complete.any(axis=0), strict=True) if not seen]
+    never = [name for name, seen in zip(names, np.any(complete, axis=0).tolist(), strict=True) if not seen]
     if never:
         raise InsufficientDataError(f"camera(s) {', '.join(never)} never see the whole wand")
     shared = complete & (complete.sum(axis=1, keepdims=True) >= 2)
-    alone = [name for name, seen in zip(names, shared.any(axis=0), strict=True) if not seen]
+    alone = [name for name, seen in zip(names, np.any(shared, axis=0).tolist(), strict=True) if not seen]
     if alone:
         counts = ", ".join(f"{n} in {int(complete[:, names.index(n)].sum())} frames" for n in alone)
         raise InsufficientDataError(

@@ -542,7 +542,7 @@ def _readmit(
 def radial_std_px(model: CameraModel, covariance: FloatArray, theta: float) -> float:
     """Standard deviation (px) of the image radius m*r(theta) from the (5, 5) covariance of k1..k5."""
     gradient = float(np.max(model.m)) * theta ** (2 * np.arange(5) + 1)
-    return float(np.sqrt(max(gradient @ covariance @ gradient, 0.0)))
+    return float(np.sqrt(max(float(gradient @ covariance @ gradient), 0.0)))
 
 
 def check_geometry(points: FloatArray) -> None:

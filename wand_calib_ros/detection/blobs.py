@@ -12,6 +12,7 @@ reject single hot pixels and large reflections.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import cv2
 import numpy as np
@@ -86,7 +87,7 @@ class Blobs:
         return self.at_border is not None and bool(self.at_border[index].any())
 
 
-def to_gray(image: NDArray, encoding: str) -> NDArray:
+def to_gray(image: NDArray[Any], encoding: str) -> NDArray[Any]:
     """A single-channel image (uint8, or uint16 for mono16) from a decoded sensor_msgs/Image array.
 
     Raises:
@@ -113,7 +114,7 @@ def to_gray(image: NDArray, encoding: str) -> NDArray:
     return array if array.dtype in (np.uint8, np.uint16) else array.astype(np.float32)
 
 
-def find_blobs(gray: NDArray, options: BlobOptions = BlobOptions(), *, saturation: float = 255.0) -> Blobs:
+def find_blobs(gray: NDArray[Any], options: BlobOptions = BlobOptions(), *, saturation: float = 255.0) -> Blobs:
     """Bright blobs of a grey image (see the module docstring).
 
     Args:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import cv2
 import numpy as np
 from numpy.typing import NDArray
@@ -14,7 +16,7 @@ _COLOURS = {"A": (0, 0, 255), "B": (0, 200, 0), "C": (255, 0, 0)}  # BGR
 
 
 def draw_overlay(
-    image: NDArray, encoding: str, blobs: Blobs | None, detection: WandDetection | None, reason: str | None
+    image: NDArray[Any], encoding: str, blobs: Blobs | None, detection: WandDetection | None, reason: str | None
 ) -> NDArray[np.uint8]:
     """A BGR picture: blobs as grey circles, A/B/C in red/green/blue, the rejection reason as text."""
     try:
@@ -36,4 +38,4 @@ def draw_overlay(
             )
     text = reason if reason else ("ambiguous A/C" if detection is not None and detection.ambiguous else "wand")
     cv2.putText(picture, text, (8, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (0, 255, 255), 1)
-    return picture
+    return np.asarray(picture, dtype=np.uint8)

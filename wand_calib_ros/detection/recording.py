@@ -13,7 +13,7 @@ from __future__ import annotations
 from collections import Counter, deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -66,7 +66,7 @@ class CameraStats:
 
 
 def detect_image(
-    image: NDArray,
+    image: NDArray[Any],
     encoding: str,
     blob_options: BlobOptions,
     wand_options: WandOptions,
@@ -126,7 +126,7 @@ class CameraStream:
         self.stats = CameraStats()
         self._pending: deque[WandDetection] = deque()  # pushed, not yet released (release keeps the order)
 
-    def detect(self, image: NDArray, encoding: str) -> tuple[Blobs | None, WandDetection | None, str | None]:
+    def detect(self, image: NDArray[Any], encoding: str) -> tuple[Blobs | None, WandDetection | None, str | None]:
         """Blobs, wand and rejection reason (None when the wand was found) of one image."""
         self.stats.images += 1
         height, width = image.shape[:2]
@@ -146,7 +146,7 @@ class CameraStream:
         self._pending.append(detection)
         return self._released(self.labeller.push(stamp_ns, detection))
 
-    def push(self, stamp_ns: int, image: NDArray, encoding: str) -> list[Labelled]:
+    def push(self, stamp_ns: int, image: NDArray[Any], encoding: str) -> list[Labelled]:
         """:meth:`detect` then :meth:`label`."""
         _, detection, reason = self.detect(image, encoding)
         return self.label(stamp_ns, detection, reason)
@@ -203,7 +203,7 @@ def detect_recording(
     grouped = group_by_stamps(rig.camera_names, [(c, out.stamp_ns, out.points) for c, out in outcomes], tolerance_ns)
     observations = frames_to_observations(grouped, rig.camera_names)
     frame_of = {
-        (c, int(f.stamps_ns[c])): k for k, f in enumerate(grouped) for c in np.flatnonzero(f.reported)
+        (int(c), int(f.stamps_ns[c])): k for k, f in enumerate(grouped) for c in np.flatnonzero(f.reported)
     }  # fmt: skip
     index = {name: i for i, name in enumerate(rig.camera_names)}
     ambiguous = [
@@ -247,12 +247,11 @@ class StreamLabeller:
         linked = None
         if self._last is not None and stamp_ns - self._last[0] <= TRACK_GAP_NS:
             linked = resolve_with_previous(detection, self._last[1])
+        chosen = detection.points if linked is None or linked.ambiguous else linked.points
         if linked is None or linked.ambiguous:
             released += self.flush()
-            points = detection.points
-        else:
-            points = linked.points
-        assert points is not None
+        assert chosen is not None
+        points: NDArray[np.float64] = chosen
         same = bool(np.array_equal(points, detection.points))
         vote = float(np.clip(np.log(max(detection.image_ratio, 1e-6)), -1.0, 1.0)) * (1.0 if same else -1.0)
         self._vote += vote
@@ -272,6 +271,7 @@ class StreamLabeller:
         return released
 
     def _decide(self) -> list[tuple[int, NDArray[np.float64] | None]]:
+        released: list[tuple[int, NDArray[np.float64] | None]]
         if abs(self._vote) >= np.log(ANCHOR_RATIO):
             self._forward = self._vote > 0
             forward = self._forward

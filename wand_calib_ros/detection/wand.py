@@ -88,17 +88,17 @@ def _score(
         off_line = abs(axis[0] * (b - a)[1] - axis[1] * (b - a)[0]) / length
     else:
         normal = np.cross(bearings[i], bearings[j])
-        span = np.linalg.norm(normal)  # sin of the angle between the ends' rays
+        span = float(np.linalg.norm(normal))  # sin of the angle between the ends' rays
         off_line = abs(float(normal @ bearings[m])) / max(span * span, 1e-12) if span > 0 else np.inf
     if off_line > options.collinearity:
         return None
-    ab, bc = np.linalg.norm(b - a), np.linalg.norm(c - b)
+    ab, bc = float(np.linalg.norm(b - a)), float(np.linalg.norm(c - b))
     if min(ab, bc) <= 0:
         return None
     if ab < bc:  # A is the end farther from B
         a, c, ab, bc = c, a, bc, ab
     ratio = ab / bc
-    ratio_error = abs(np.log(ratio / options.ratio))
+    ratio_error = abs(float(np.log(ratio / options.ratio)))
     score = off_line / options.collinearity + 0.25 * ratio_error
     return score, np.stack([a, b, c]), ratio
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -41,7 +42,7 @@ class ImageFrame:
 
     camera: str
     stamp_ns: int
-    image: NDArray
+    image: NDArray[Any]
     encoding: str
 
 
@@ -110,15 +111,15 @@ def _write_ros1(path: Path, frames: Iterable[tuple[str, int, NDArray[np.uint8]]]
             writer.write(connections[camera], stamp_ns, store.serialize_ros1(message, IMAGE))
 
 
-def _decode(message: object, msgtype: str, where: str) -> tuple[NDArray, str]:
+def _decode(message: Any, msgtype: str, where: str) -> tuple[NDArray[Any], str]:
     if msgtype == COMPRESSED:
-        data = np.frombuffer(bytes(message.data), dtype=np.uint8)  # type: ignore[attr-defined]
+        data = np.frombuffer(bytes(message.data), dtype=np.uint8)
         image = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE)
         if image is None:
             raise FormatError(where, "compressed image could not be decoded")
         return image, "mono8"
     try:
-        return image_array(message), message.encoding  # type: ignore[attr-defined]
+        return image_array(message), message.encoding
     except ValueError as error:
         raise FormatError(where, str(error)) from None
 
@@ -162,7 +163,7 @@ def read_image_frames(path: Path, topics: dict[str, str]) -> Iterator[ImageFrame
         try:
             for connection, _, raw in reader.messages(connections=connections):
                 where = f"{path} topic {connection.topic}"
-                message = _TYPESTORE.deserialize_cdr(raw, connection.msgtype)
+                message: Any = _TYPESTORE.deserialize_cdr(raw, connection.msgtype)
                 stamp = message.header.stamp
                 image, encoding = _decode(message, connection.msgtype, where)
                 yield ImageFrame(by_topic[connection.topic], stamp.sec * 10**9 + stamp.nanosec, image, encoding)

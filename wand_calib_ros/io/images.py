@@ -26,7 +26,7 @@ BYTES_PER_PIXEL = {
 }
 
 
-def image_array(message: Any) -> NDArray:
+def image_array(message: Any) -> NDArray[Any]:
     """(H, W) or (H, W, channels) pixels of a sensor_msgs/Image (a view of 8-bit data, no copy).
 
     An encoding outside :data:`BYTES_PER_PIXEL` gives an empty (0, 0) array: the detector then
