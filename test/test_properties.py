@@ -1,0 +1,157 @@
+"""Property tests: random bytes, documents and images at the parsers and the detector.
+
+Whatever comes in, the answer is a valid result or a typed error (FormatError, ImageError, ...),
+never another exception. Seeded (``derandomize``) so CI sees the same cases every run.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import string
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from wand_calib_ros.collection.buffer import ObservationBuffer
+from wand_calib_ros.detection.blobs import BlobOptions
+from wand_calib_ros.detection.errors import DetectionError
+from wand_calib_ros.detection.recording import detect_image, nominal_model
+from wand_calib_ros.detection.wand import WandOptions
+from wand_calib_ros.errors import WandCalibError
+from wand_calib_ros.io.observations_csv import read_observations
+from wand_calib_ros.io.result_yaml import read_result
+from wand_calib_ros.io.rig_yaml import load_rig
+from wand_calib_ros.sim.scenarios import paper_fisheye_scenario
+
+RIG = paper_fisheye_scenario().rig
+SETTINGS = settings(
+    max_examples=300, derandomize=True, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+
+cells = st.one_of(
+    st.integers(-3, 300).map(str),
+    st.floats(allow_nan=True, allow_infinity=True).map(repr),
+    st.sampled_from(["cam0", "cam1", "cam9", "A", "B", "C", "D", "", " ", "nan", "1e400", "0x10", '"', "\x00"]),
+    st.text(string.printable, max_size=6),
+)
+headers = st.one_of(
+    st.just("frame,camera,point,u,v"),
+    st.just("frame,camera,point,u,v,stamp"),
+    st.lists(st.sampled_from(["frame", "camera", "point", "u", "v", "stamp", "x", ""]), max_size=7).map(",".join),
+)
+csv_documents = st.tuples(headers, st.lists(st.lists(cells, max_size=8).map(",".join), max_size=12)).map(
+    lambda parts: "\n".join([parts[0], *parts[1]]) + "\n"
+)
+yaml_values: st.SearchStrategy[Any] = st.recursive(
+    st.one_of(st.none(), st.booleans(), st.integers(-5, 2000), st.floats(allow_nan=True), st.text(max_size=6)),
+    lambda inner: st.one_of(
+        st.lists(inner, max_size=4),
+        st.dictionaries(
+            st.sampled_from(["wand", "L1", "L2", "cameras", "name", "image_size", "pixel_size_um", "k", "m"]), inner
+        ),
+    ),
+    max_leaves=12,
+)
+
+
+def _good_rig_document() -> dict[str, Any]:
+    return yaml.safe_load((Path(__file__).parent / "data" / "ewand" / "cameras.yaml").read_text())
+
+
+def _read_csv(path: Path) -> None:
+    try:
+        observations = read_observations(path, RIG.camera_names, image_sizes=RIG.image_sizes)
+    except WandCalibError:
+        return
+    assert observations.uv.shape[1:] == (2, 3, 2)
+
+
+@SETTINGS
+@given(content=st.binary(max_size=300))
+def test_random_bytes_as_any_input_file(tmp_path: Path, content: bytes) -> None:
+    path = tmp_path / "input"
+    path.write_bytes(content)
+    _read_csv(path)
+    for reader in (load_rig, read_result):
+        with contextlib.suppress(WandCalibError):
+            reader(path)
+
+
+@SETTINGS
+@given(text=csv_documents)
+def test_random_csv_documents(tmp_path: Path, text: str) -> None:
+    path = tmp_path / "observations.csv"
+    path.write_text(text, encoding="utf-8")
+    _read_csv(path)
+
+
+@SETTINGS
+@given(document=yaml_values)
+def test_random_yaml_documents_as_cameras_yaml(tmp_path: Path, document: Any) -> None:
+    path = tmp_path / "cameras.yaml"
+    path.write_text(yaml.safe_dump(document))
+    with contextlib.suppress(WandCalibError):
+        load_rig(path)
+
+
+@SETTINGS
+@given(key=st.sampled_from(["wand", "cameras"]), value=yaml_values, camera_key=st.text(max_size=12), item=yaml_values)
+def test_a_real_rig_document_with_one_part_replaced(
+    tmp_path: Path, key: str, value: Any, camera_key: str, item: Any
+) -> None:
+    document = _good_rig_document()
+    document[key] = value
+    if isinstance(document.get("cameras"), list) and document["cameras"]:
+        first = document["cameras"][0]
+        if isinstance(first, dict):
+            first[camera_key or "name"] = item
+    path = tmp_path / "cameras.yaml"
+    path.write_text(yaml.safe_dump(document))
+    with contextlib.suppress(WandCalibError):
+        load_rig(path)
+
+
+@SETTINGS
+@given(content=st.binary(max_size=400), tail=st.binary(max_size=40))
+def test_random_buffer_files_resume_or_are_refused(tmp_path: Path, content: bytes, tail: bytes) -> None:
+    path = tmp_path / "buffer" / "observations.csv"
+    path.parent.mkdir(exist_ok=True)
+    path.write_bytes(b"frame,camera,point,u,v,stamp\n" + content + tail)
+    try:
+        buffer = ObservationBuffer.open(path, RIG)
+    except WandCalibError:
+        return
+    assert buffer.next_frame >= 0
+
+
+MODEL = nominal_model(RIG.cameras[0])
+ENCODINGS = ["mono8", "mono16", "bgr8", "rgb8", "bayer_rggb8", "rgba8", "32FC1", "jpeg", ""]
+
+
+@SETTINGS
+@given(
+    shape=st.tuples(st.integers(0, 40), st.integers(0, 40), st.sampled_from([0, 1, 2, 3, 4])),
+    encoding=st.sampled_from(ENCODINGS),
+    dtype=st.sampled_from([np.uint8, np.uint16, np.float32, np.int8]),
+    seed=st.integers(0, 2**16),
+    spots=st.integers(0, 6),
+)
+def test_random_images_give_a_detection_or_an_image_error(
+    shape: tuple[int, int, int], encoding: str, dtype: type, seed: int, spots: int
+) -> None:
+    rng = np.random.default_rng(seed)
+    size = shape[:2] if shape[2] == 0 else shape
+    image = rng.integers(0, 40, size=size).astype(dtype)
+    if image.ndim >= 2 and image.shape[0] and image.shape[1]:
+        for _ in range(spots):
+            image[rng.integers(0, image.shape[0]), rng.integers(0, image.shape[1])] = 120
+    try:
+        blobs, detection = detect_image(image, encoding, BlobOptions(), WandOptions(), MODEL)
+    except DetectionError:
+        return
+    assert blobs.centres.shape[1:] == (2,)
+    assert (detection.points is None) == (detection.reason is not None)
