@@ -120,3 +120,20 @@ def test_a_buffer_that_is_not_text_is_refused_in_one_line(tmp_path: Path, conten
     with pytest.raises(FormatError, match=r"cannot resume the buffer.*not UTF-8 text") as error:
         ObservationBuffer.open(path, SCENARIO.rig)
     assert "\n" not in str(error.value) and path.read_bytes() == content + b"\n"
+
+
+def test_appends_are_synced_to_disk_at_least_every_second(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from wand_calib_ros.collection import buffer as module
+
+    clock = [100.0]
+    synced: list[float] = []
+    monkeypatch.setattr(module.time, "monotonic", lambda: clock[0])
+    monkeypatch.setattr(module.os, "fsync", lambda descriptor: synced.append(clock[0]))
+    uv = simulate(SCENARIO, 0.5, np.random.default_rng(9), n=60).observations.uv
+    buffer = ObservationBuffer.open(tmp_path / "observations.csv", SCENARIO.rig)
+    for k in range(60):  # 60 frames over 2 s at 30 fps
+        clock[0] = 100.0 + k / 30.0
+        buffer.offer(uv[k], _stamps(k))
+    buffer.sync()  # at exit
+    gaps = np.diff([100.0, *synced, clock[0]])
+    assert gaps.max() <= module.SYNC_INTERVAL_S + 1 / 30.0 and len(synced) <= 5  # not per frame either

@@ -128,3 +128,13 @@ def test_files_that_are_not_text_are_format_errors(tmp_path: Path, content: byte
     with pytest.raises(FormatError, match=message) as error:
         read_observations(path)
     assert str(error.value).startswith(str(path)) and "\n" not in str(error.value)
+
+
+def test_a_last_row_without_its_line_end_is_read_with_a_warning(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    path = tmp_path / "o.csv"
+    path.write_text("frame,camera,point,u,v\n0,cam0,A,348.375807,19")  # as a writer stopped mid-row leaves it
+    back = read_observations(path)
+    assert back.uv[0, 0, 0].tolist() == [348.375807, 19.0]
+    assert "the last row has no line end" in caplog.text and str(path) in caplog.text

@@ -21,7 +21,7 @@ from wand_calib_ros.core.bundle_adjustment import (
     BundleState,
     default_free_mask,
 )
-from wand_calib_ros.core.camera_model import CameraModel, unproject
+from wand_calib_ros.core.camera_model import CameraModel, monotonic_limit, unproject
 from wand_calib_ros.core.errors import CoreError, DegenerateDataError, InsufficientDataError
 from wand_calib_ros.core.essential import RelativePose, epipolar_angles, relative_pose
 from wand_calib_ros.core.geometry import Pose, wand_directions
@@ -34,6 +34,10 @@ from wand_calib_ros.core.wand_lm import WandFit, optimise_wand_lengths
 
 FloatArray = NDArray[np.float64]
 log = logging.getLogger(__name__)
+
+
+#: A lens start whose fitted r(theta) turns over within this angle of the centre (rad) fails its trial.
+FOLDED_RAD = float(np.radians(1.0))
 
 
 @dataclass(frozen=True)
@@ -189,6 +193,9 @@ def initialise_pair(
                     max_evaluations=options.screening_evaluations,
                     tolerance=1e-4,
                 )
+                folded = [s.name for s, m in zip(specs, fit.models, strict=True) if monotonic_limit(m.k) < FOLDED_RAD]
+                if folded:  # r(theta) falls from (nearly) the centre on: no lens images like that
+                    raise DegenerateDataError(f"the lens curve of {', '.join(folded)} turns over at the image centre")
             except CoreError as error:
                 trials.append(LensTrial(names, float("nan"), str(error)))
                 log.info("lens start %s: failed (%s)", "/".join(names), error)

@@ -13,6 +13,7 @@ in time, and each image is placed at its own stamp.
 from __future__ import annotations
 
 import csv
+import logging
 import math
 from collections.abc import Iterable, Mapping
 from pathlib import Path
@@ -25,6 +26,8 @@ from wand_calib_ros.core.rig import POINT_LABELS, WandObservations
 from wand_calib_ros.io.errors import FormatError
 
 COLUMNS = ("frame", "camera", "point", "u", "v")
+log = logging.getLogger(__name__)
+
 #: The optional column of per-image capture stamps (seconds).
 STAMP = "stamp"
 #: How far (px) beyond its image's border a point may lie: real detections never do, but simulated
@@ -61,13 +64,29 @@ def read_observations(
         raise FormatError(path, f"cannot read: {error.strerror}") from None
     with handle:
         try:
-            return _parse(handle, path, known, dict(image_sizes or {}))
+            observations = _parse(handle, path, known, dict(image_sizes or {}))
         except UnicodeDecodeError as error:
             raise FormatError(
                 path, f"not UTF-8 text (it holds the byte 0x{error.object[error.start]:02x}): not an observations CSV?"
             ) from None
         except csv.Error as error:
             raise FormatError(path, f"not a CSV: {error}") from None
+    if not _ends_with_newline(path):
+        log.warning(
+            "%s: the last row has no line end: if its writer was stopped mid-row its last value may be cut "
+            "(a collector cuts a torn row off its buffer when it restarts)",
+            path,
+        )
+    return observations
+
+
+def _ends_with_newline(path: Path) -> bool:
+    with path.open("rb") as handle:
+        handle.seek(0, 2)
+        if handle.tell() == 0:
+            return True
+        handle.seek(-1, 2)
+        return handle.read(1) == b"\n"
 
 
 def _parse(handle: TextIO, path: Path, known: list[str] | None, sizes: dict[str, tuple[int, int]]) -> WandObservations:
