@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import string
+import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -117,15 +118,17 @@ def test_a_real_rig_document_with_one_part_replaced(
 
 @SETTINGS
 @given(content=st.binary(max_size=400), tail=st.binary(max_size=40))
-def test_random_buffer_files_resume_or_are_refused(tmp_path: Path, content: bytes, tail: bytes) -> None:
-    path = tmp_path / "buffer" / "observations.csv"
-    path.parent.mkdir(exist_ok=True)
-    path.write_bytes(b"frame,camera,point,u,v,stamp\n" + content + tail)
-    try:
-        buffer = ObservationBuffer.open(path, RIG)
-    except WandCalibError:
-        return
-    assert buffer.next_frame >= 0
+def test_random_buffer_files_resume_or_are_refused(content: bytes, tail: bytes) -> None:
+    with tempfile.TemporaryDirectory() as folder:  # one per example: a repair leaves a copy behind
+        path = Path(folder) / "observations.csv"
+        path.write_bytes(b"frame,camera,point,u,v,stamp\n" + content + tail)
+        before = path.read_bytes()
+        try:
+            buffer = ObservationBuffer.open(path, RIG)
+        except WandCalibError:
+            assert path.read_bytes() == before and list(path.parent.iterdir()) == [path]  # refused: nothing changed
+            return
+        assert buffer.next_frame >= 0
 
 
 MODEL = nominal_model(RIG.cameras[0])

@@ -92,6 +92,8 @@ class ObservationBuffer:
             try:
                 existing = read_observations(buffer.path, rig.camera_names, image_sizes=rig.image_sizes)
             except FormatError as error:
+                if buffer.repaired is not None:  # not a buffer a tear explains: put the file back as found
+                    os.replace(buffer.repaired.original, buffer.path)
                 raise FormatError(buffer.path, f"cannot resume the buffer ({error}); move the file away") from None
             buffer.with_stamps = existing.stamps is not None
             stamps = existing.stamps if existing.stamps is not None else np.full(existing.uv.shape[:2], np.nan)
