@@ -27,6 +27,7 @@ from wand_calib_ros.io.result_yaml import (
     CameraGeometry,
     calibration_paths,
     camera_entry,
+    read_result,
     write_calibration,
     write_yaml,
 )
@@ -120,6 +121,17 @@ def _parser() -> argparse.ArgumentParser:
     rep.add_argument("--observations", required=True, type=Path, help="observations CSV it was computed from")
     rep.add_argument("--cameras", required=True, type=Path, help="rig description (cameras.yaml)")
     rep.add_argument("--out", required=True, type=Path, help="directory for index.html and the PNG figures")
+
+    exp = commands.add_parser("export", help="write a result in another tool's format")
+    exp.add_argument("--result", required=True, type=Path, help="result YAML of 'calibrate'")
+    exp.add_argument(
+        "--format",
+        required=True,
+        choices=("opencv", "anipose", "kalibr", "camera_info"),
+        help="opencv: FileStorage YAML per camera (cv2.fisheye); anipose: calibration.toml (aniposelib, "
+        "caliscope, freemocap); kalibr: camchain.yaml; camera_info: ROS camera_info YAML per camera",
+    )
+    exp.add_argument("--out", required=True, type=Path, help="directory for the file(s)")
 
     sweep = commands.add_parser("sweep", help="reproduce the paper's Figs. 4-6 (CSV and PNG)")
     sweep.add_argument("--out", required=True, type=Path, help="directory for fig4-6 CSV and PNG files")
@@ -456,6 +468,17 @@ def _report(args: argparse.Namespace) -> int:
     return 0
 
 
+def _export(args: argparse.Namespace) -> int:
+    from wand_calib_ros.io.export import ExportedCamera, export
+
+    reference, geometry = read_result(args.result)
+    order = [reference, *(name for name in geometry if name != reference)]  # the reference first
+    cameras = [ExportedCamera(name, geometry[name].model, geometry[name].pose) for name in order]
+    for path in export(cameras, args.format, args.out):
+        print(f"wrote {path}")
+    return 0
+
+
 def _sweep(args: argparse.Namespace) -> int:
     if args.runs < 1:
         raise WandCalibError("--runs must be positive")
@@ -475,6 +498,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             "simulate": _simulate,
             "sweep": _sweep,
             "report": _report,
+            "export": _export,
             "detect": _detect,
             "render": _render,
         }

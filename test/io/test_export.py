@@ -1,0 +1,174 @@
+"""Exports read back by the other tools' own code project exactly as this package does."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import tomllib
+import yaml
+
+from wand_calib_ros.cli import main
+from wand_calib_ros.core.camera_model import project
+from wand_calib_ros.core.geometry import Pose
+from wand_calib_ros.io.export import ExportedCamera, export
+from wand_calib_ros.io.result_yaml import camera_info_dict
+from wand_calib_ros.sim.scenarios import SCENARIOS
+
+RIGS = ["mixed3", "ring6"]
+
+
+def _cameras(name: str) -> list[ExportedCamera]:
+    return [ExportedCamera(c.spec.name, c.model, c.pose) for c in SCENARIOS[name]().cameras]
+
+
+def _points_seen_by(camera: ExportedCamera, rng: np.random.Generator, n: int = 200) -> np.ndarray:
+    """(n, 3) reference-frame points within 60 deg of the camera's axis, 0.5-5 m away."""
+    theta, phi = rng.uniform(0, np.radians(60), n), rng.uniform(0, 2 * np.pi, n)
+    rays = np.column_stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)])
+    in_camera = rays * rng.uniform(500, 5000, n)[:, None]
+    return (in_camera - camera.pose.translation) @ camera.pose.rotation  # X_ref = R^T (X_cam - T)
+
+
+def _in_image(camera: ExportedCamera, points: np.ndarray) -> np.ndarray:
+    """(N,) points in front of the camera that it images inside its image."""
+    uv = _ours(camera, points)
+    size = np.asarray(camera.model.image_size)
+    return (camera.pose.apply(points)[:, 2] > 0) & np.all((uv >= 0) & (uv <= size - 1), axis=1)
+
+
+def _ours(camera: ExportedCamera, points: np.ndarray) -> np.ndarray:
+    return project(camera.model, camera.pose.apply(points))
+
+
+@pytest.mark.parametrize("rig", RIGS)
+def test_opencv_file_storage_projects_with_cv2_fisheye_as_we_do(tmp_path: Path, rig: str) -> None:
+    cameras = _cameras(rig)
+    paths = export(cameras, "opencv", tmp_path)
+    rng = np.random.default_rng(0)
+    for camera, path in zip(cameras, paths, strict=True):
+        storage = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+        k, d = storage.getNode("K").mat(), storage.getNode("D").mat()
+        rvec, t, r = storage.getNode("rvec").mat(), storage.getNode("T").mat(), storage.getNode("R").mat()
+        assert storage.getNode("camera_model").string() == "fisheye"
+        assert storage.getNode("reference_camera").string() == cameras[0].name
+        assert int(storage.getNode("image_width").real()) == camera.model.image_size[0]
+        storage.release()
+        assert np.allclose(cv2.Rodrigues(rvec)[0], r, atol=1e-12)
+        points = _points_seen_by(camera, rng)
+        theirs, _ = cv2.fisheye.projectPoints(points.reshape(-1, 1, 3), rvec, t, k, d)
+        assert np.max(np.abs(theirs.reshape(-1, 2) - _ours(camera, points))) < 1e-6
+
+
+def _triangulate(calibration: dict, keys: list[str], pixels: list[np.ndarray]) -> np.ndarray:
+    """Linear triangulation from undistorted normalised points, as aniposelib's triangulate does."""
+    rows = []
+    for key, uv in zip(keys, pixels, strict=True):
+        cam = calibration[key]
+        matrix, dist = np.array(cam["matrix"]), np.array(cam["distortions"])
+        normalised = cv2.fisheye.undistortPoints(uv.reshape(-1, 1, 2), matrix, dist).reshape(-1, 2)
+        extrinsic = np.hstack([cv2.Rodrigues(np.array(cam["rotation"]))[0], np.array(cam["translation"])[:, None]])
+        rows.append((normalised, extrinsic))
+    out = []
+    for p in range(rows[0][0].shape[0]):
+        a = np.concatenate([[x[p, 0] * e[2] - e[0], x[p, 1] * e[2] - e[1]] for x, e in rows])
+        _, _, vt = np.linalg.svd(a)
+        out.append(vt[-1, :3] / vt[-1, 3])
+    return np.array(out)
+
+
+@pytest.mark.parametrize("rig", RIGS)
+def test_anipose_toml_projects_and_triangulates_the_wand_as_we_do(tmp_path: Path, rig: str) -> None:
+    cameras = _cameras(rig)
+    (path,) = export(cameras, "anipose", tmp_path)
+    calibration = tomllib.loads(path.read_text())
+    keys = sorted(k for k in calibration if k != "metadata")  # aniposelib's load order
+    assert [calibration[k]["name"] for k in keys] == [c.name for c in cameras]
+    assert calibration["metadata"]["units"] == "mm" and all(calibration[k]["fisheye"] for k in keys)
+    rng = np.random.default_rng(1)
+    for key, camera in zip(keys, cameras, strict=True):
+        entry = calibration[key]
+        points = _points_seen_by(camera, rng)
+        theirs, _ = cv2.fisheye.projectPoints(  # aniposelib's FisheyeCamera.project
+            points.reshape(-1, 1, 3),
+            np.array(entry["rotation"]),
+            np.array(entry["translation"]),
+            np.array(entry["matrix"]),
+            np.array(entry["distortions"]),
+        )
+        assert np.max(np.abs(theirs.reshape(-1, 2) - _ours(camera, points))) < 1e-6
+    # A held-out wand (600 mm) seen by the first two cameras triangulates to its length from the TOML alone.
+    middle = _points_seen_by(cameras[0], rng, 100)
+    direction = rng.normal(size=(100, 3))
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    ends = [middle - 300 * direction, middle + 300 * direction]
+    pixels = [[_ours(cameras[c], end) for c in (0, 1)] for end in ends]
+    seen = np.all([_in_image(cameras[c], end) for end in ends for c in (0, 1)], axis=0)  # both see both ends
+    a, c = (_triangulate(calibration, keys[:2], [p[seen] for p in end]) for end in pixels)
+    assert seen.sum() > 20 and np.max(np.abs(np.linalg.norm(c - a, axis=1) - 600.0)) < 0.1
+
+
+def _kalibr_project(entry: dict, points_in_camera: np.ndarray) -> np.ndarray:
+    """Kalibr's pinhole camera with equidistant distortion (its documented model)."""
+    fu, fv, pu, pv = entry["intrinsics"]
+    k1, k2, k3, k4 = entry["distortion_coeffs"]
+    x, y, z = points_in_camera.T
+    r = np.hypot(x, y)
+    theta = np.arctan2(r, z)
+    theta_d = theta * (1 + k1 * theta**2 + k2 * theta**4 + k3 * theta**6 + k4 * theta**8)
+    scale = np.where(r > 0, theta_d / np.maximum(r, 1e-300), 1.0)
+    return np.column_stack([fu * x * scale + pu, fv * y * scale + pv])
+
+
+@pytest.mark.parametrize("rig", RIGS)
+def test_kalibr_camchain_field_by_field(tmp_path: Path, rig: str) -> None:
+    cameras = _cameras(rig)
+    (path,) = export(cameras, "kalibr", tmp_path)
+    chain = yaml.safe_load(path.read_text())
+    assert list(chain) == [f"cam{i}" for i in range(len(cameras))]
+    rng = np.random.default_rng(2)
+    pose_of_previous = Pose.identity()  # cam0 is the reference
+    for index, camera in enumerate(cameras):
+        entry = chain[f"cam{index}"]
+        assert entry["camera_model"] == "pinhole" and entry["distortion_model"] == "equidistant"
+        assert len(entry["intrinsics"]) == 4 and len(entry["distortion_coeffs"]) == 4
+        assert entry["resolution"] == list(camera.model.image_size)
+        assert entry["rostopic"] == f"/{camera.name}/image_raw"
+        if index == 0:
+            assert "T_cn_cnm1" not in entry
+            pose = Pose.identity()
+        else:
+            t = np.array(entry["T_cn_cnm1"])
+            assert t.shape == (4, 4) and np.allclose(t[3], [0, 0, 0, 1])
+            pose = Pose(t[:3, :3], t[:3, 3] * 1000.0).compose(pose_of_previous)  # metres -> mm, chained
+        assert np.allclose(pose.rotation, camera.pose.rotation, atol=1e-12)
+        assert np.allclose(pose.translation, camera.pose.translation, atol=1e-9)
+        pose_of_previous = pose
+        points = _points_seen_by(camera, rng)
+        assert np.max(np.abs(_kalibr_project(entry, camera.pose.apply(points)) - _ours(camera, points))) < 1e-6
+
+
+def test_camera_info_export_is_the_ros_document(tmp_path: Path) -> None:
+    cameras = _cameras("mixed3")
+    paths = export(cameras, "camera_info", tmp_path)
+    for camera, path in zip(cameras, paths, strict=True):
+        assert yaml.safe_load(path.read_text()) == camera_info_dict(camera.name, camera.model)
+
+
+def test_the_export_command_writes_a_result_in_each_format(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    folder = tmp_path / "run"
+    assert main(["-q", "simulate", "mixed", "--seed", "2", "--noise", "0.5", "--out", str(folder)]) == 0
+    argv = ["--cameras", str(folder / "cameras.yaml"), "--observations", str(folder / "observations.csv")]
+    assert main(["-q", "calibrate", *argv, "--output", str(folder / "result.yaml")]) == 0
+    for name, files in (("opencv", 2), ("anipose", 1), ("kalibr", 1), ("camera_info", 2)):
+        out = tmp_path / name
+        assert main(["export", "--result", str(folder / "result.yaml"), "--format", name, "--out", str(out)]) == 0
+        assert len(list(out.iterdir())) == files
+    (tmp_path / "plain").write_text("a file\n")
+    capsys.readouterr()
+    code = main(
+        ["export", "--result", str(folder / "result.yaml"), "--format", "kalibr", "--out", str(tmp_path / "plain")]
+    )
+    assert code == 2 and "plain is a file, not a folder" in capsys.readouterr().err

@@ -1,0 +1,59 @@
+"""A calibration in the formats of the tools users work with.
+
+Each format module turns the cameras of a result (intrinsics as OpenCV's fisheye model, which is
+ROS's ``equidistant``, and poses X_cam = R X_ref + T in mm) into text documents; :func:`export`
+writes them as one set. Every format keeps this package's projection exactly: a point projected with
+the exported parameters by the other tool's own code (``cv2.fisheye.projectPoints`` for OpenCV,
+aniposelib and Kalibr's equidistant model) lands on the pixel this package computes.
+
+Formats: ``opencv`` (a FileStorage YAML per camera), ``anipose`` (aniposelib / anipose / caliscope /
+freemocap ``calibration.toml``), ``kalibr`` (camchain YAML), ``camera_info`` (ROS, per camera).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from wand_calib_ros.core.camera_model import CameraModel
+from wand_calib_ros.core.geometry import Pose
+from wand_calib_ros.io.outputs import write_together
+
+
+@dataclass(frozen=True, eq=False)
+class ExportedCamera:
+    """One camera as the formats need it: name, intrinsics and pose (X_cam = R X_ref + T, mm)."""
+
+    name: str
+    model: CameraModel
+    pose: Pose
+
+
+#: A format: the cameras (reference first or in the result's order) -> {file name: text}.
+Writer = Callable[[Sequence[ExportedCamera]], dict[str, str]]
+
+
+def formats() -> dict[str, Writer]:
+    """Every format by name."""
+    from wand_calib_ros.io.export import anipose, camera_info, kalibr, opencv
+
+    return {
+        "opencv": opencv.documents,
+        "anipose": anipose.documents,
+        "kalibr": kalibr.documents,
+        "camera_info": camera_info.documents,
+    }
+
+
+def export(cameras: Sequence[ExportedCamera], format_name: str, folder: Path) -> list[Path]:
+    """Write the cameras in ``format_name`` into ``folder`` as one set; returns the paths written.
+
+    Raises:
+        KeyError: an unknown format (the CLI offers only known ones).
+        OutputError: a file could not be written (none was replaced).
+    """
+    documents = formats()[format_name](cameras)
+    paths = {Path(folder) / name: text for name, text in documents.items()}
+    write_together(paths)
+    return list(paths)

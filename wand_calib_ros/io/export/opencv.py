@@ -1,0 +1,60 @@
+"""OpenCV FileStorage YAML per camera, as ``cv2.fisheye`` takes the parameters.
+
+``<camera>.yaml`` holds ``image_width``, ``image_height``, ``camera_model`` (``fisheye``), ``K``
+(3x3), ``D`` (4x1, k1..k4 of cv2.fisheye), ``R`` (3x3) and ``rvec`` (3x1 Rodrigues), ``T`` (3x1, mm)
+with X_cam = R X_ref + T, and ``reference_camera``: ``cv2.fisheye.projectPoints(X_ref, rvec, T, K,
+D)`` gives this package's pixels. Written by cv2.FileStorage itself (so any OpenCV reads it).
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from collections.abc import Sequence
+
+import cv2
+import numpy as np
+
+from wand_calib_ros.core.camera_model import to_opencv_fisheye
+from wand_calib_ros.io.export import ExportedCamera
+
+
+def documents(cameras: Sequence[ExportedCamera]) -> dict[str, str]:
+    """``<camera>.yaml`` per camera (see the module docstring)."""
+    out = {}
+    for camera in cameras:
+        opencv = to_opencv_fisheye(camera.model)
+        fields: list[tuple[str, np.ndarray | str | int]] = [
+            ("image_width", int(camera.model.image_size[0])),
+            ("image_height", int(camera.model.image_size[1])),
+            ("camera_model", "fisheye"),
+            ("K", opencv.camera_matrix),
+            ("D", opencv.distortion.reshape(4, 1)),
+            ("R", camera.pose.rotation),
+            ("rvec", camera.pose.rotvec.reshape(3, 1)),
+            ("T", camera.pose.translation.reshape(3, 1)),
+            ("translation_unit", "mm"),
+            ("reference_camera", cameras[0].name),
+        ]
+        out[f"{camera.name}.yaml"] = _file_storage_text(fields)
+    return out
+
+
+def _file_storage_text(fields: list[tuple[str, np.ndarray | str | int]]) -> str:
+    """The YAML text cv2.FileStorage writes for ``fields`` (it writes only to files)."""
+    handle, name = tempfile.mkstemp(suffix=".yaml")
+    os.close(handle)
+    try:
+        storage = cv2.FileStorage(name, cv2.FILE_STORAGE_WRITE)
+        for key, value in fields:
+            if isinstance(value, np.ndarray):
+                storage.write(key, np.asarray(value, dtype=np.float64))
+            elif isinstance(value, str):
+                storage.write(key, value)
+            else:
+                storage.write(key, int(value))
+        storage.release()
+        with open(name, encoding="utf-8") as text:
+            return text.read()
+    finally:
+        os.unlink(name)
