@@ -21,6 +21,7 @@ from wand_calib_ros.core.pipeline import CalibrationOptions, calibrate
 from wand_calib_ros.core.result import CalibrationResult, CameraCalibration
 from wand_calib_ros.core.timing import TIMING_MODES
 from wand_calib_ros.errors import WandCalibError
+from wand_calib_ros.io.export import FORMATS as EXPORT_FORMATS
 from wand_calib_ros.io.observations_csv import read_observations, write_observations
 from wand_calib_ros.io.outputs import check_writable
 from wand_calib_ros.io.result_yaml import (
@@ -127,7 +128,7 @@ def _parser() -> argparse.ArgumentParser:
     exp.add_argument(
         "--format",
         required=True,
-        choices=("opencv", "anipose", "kalibr", "camera_info"),
+        choices=EXPORT_FORMATS,
         help="opencv: FileStorage YAML per camera (cv2.fisheye); anipose: calibration.toml (aniposelib, "
         "caliscope, freemocap); kalibr: camchain.yaml; camera_info: ROS camera_info YAML per camera",
     )

@@ -46,7 +46,10 @@ def test_collect_calibrate_and_publish(ros: Ros, tmp_path: Path) -> None:
     collector = ros.add(
         CollectorNode(context=ros.context, parameter_overrides=[*overrides, Parameter("image_qos", value="reliable")])
     )
-    ros.add(CalibratorNode(context=ros.context, parameter_overrides=overrides, before_calibrate=collector.flush))
+    exports = Parameter("export_formats", value="anipose, kalibr")
+    ros.add(
+        CalibratorNode(context=ros.context, parameter_overrides=[*overrides, exports], before_calibrate=collector.flush)
+    )
     publishers = {
         name: ros.helper.create_publisher(Image, f"/{name}/image_raw", 50) for name in scenario.rig.camera_names
     }
@@ -98,6 +101,10 @@ def test_collect_calibrate_and_publish(ros: Ros, tmp_path: Path) -> None:
         assert np.array_equal(written[name].pose.translation, camera.pose.translation)
     assert yaml.safe_load((out / "camera_info" / "cam1.yaml").read_text())["distortion_model"] == "equidistant"
     assert (out / "report" / "index.html").exists()
+    assert (out / "export" / "anipose" / "calibration.toml").exists()
+    assert (
+        yaml.safe_load((out / "export" / "kalibr" / "camchain.yaml").read_text())["cam1"]["camera_model"] == "pinhole"
+    )
 
     # Feedback: per camera diagnostics with counts, a heat map shaped like the image.
     names = {status.name for status in diagnostics[-1].status}

@@ -17,6 +17,7 @@ from wand_calib_ros.collection.errors import CoverageError
 from wand_calib_ros.core.pipeline import CalibrationOptions, calibrate
 from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.core.rig import RigSpec, WandObservations
+from wand_calib_ros.io.export import cameras_of, export
 from wand_calib_ros.io.outputs import check_writable
 from wand_calib_ros.io.result_yaml import calibration_paths, write_calibration
 
@@ -31,11 +32,13 @@ class CalibrationFiles:
         result: ``result.yaml`` (the core's result contract).
         camera_info: one camera_info YAML per camera (``equidistant``).
         report: the HTML report, or None when not asked for (or it failed).
+        exports: the files of the other tools' formats asked for (``export/<format>/``).
     """
 
     result: Path
     camera_info: tuple[Path, ...]
     report: Path | None
+    exports: tuple[Path, ...] = ()
 
 
 def coverage_of(rig: RigSpec, observations: WandObservations, thresholds: CoverageThresholds) -> CoverageStatus:
@@ -54,8 +57,10 @@ def run_calibration(
     thresholds: CoverageThresholds | None = None,
     report: bool = True,
     options: CalibrationOptions = CalibrationOptions(),
+    exports: tuple[str, ...] = (),
 ) -> tuple[CalibrationResult, CalibrationFiles]:
-    """Calibrate and write ``result.yaml``, ``camera_info/<cam>.yaml`` and ``report/index.html``.
+    """Calibrate and write ``result.yaml``, ``camera_info/<cam>.yaml``, ``report/index.html`` and
+    ``export/<format>/`` for each of ``exports`` (formats of :mod:`wand_calib_ros.io.export`).
 
     Args:
         rig: the rig description.
@@ -74,9 +79,14 @@ def run_calibration(
         if not status.ready:
             raise CoverageError(status.messages())
     result_path = output_dir / "result.yaml"
-    check_writable(calibration_paths(rig.camera_names, result_path, output_dir / "camera_info"))
+    folders = [output_dir / "export" / name for name in exports]
+    files_in_folders = [folder / "calibration" for folder in folders]  # a file's folder is what gets checked
+    check_writable([*calibration_paths(rig.camera_names, result_path, output_dir / "camera_info"), *files_in_folders])
     result = calibrate(rig, observations, options)
     infos = tuple(write_calibration(result, result_path, output_dir / "camera_info")[1:])
+    exported = tuple(
+        p for name, folder in zip(exports, folders, strict=True) for p in export(cameras_of(result), name, folder)
+    )
     report_path = None
     if report:
         from wand_calib_ros.report.html import write_report  # matplotlib only when a report is asked for
@@ -85,7 +95,7 @@ def run_calibration(
             report_path = write_report(rig, observations, result_path, output_dir / "report")
         except (OSError, ValueError, np.linalg.LinAlgError) as error:
             log.warning("the calibration is written, but its report failed: %s", error)
-    return result, CalibrationFiles(result_path, infos, report_path)
+    return result, CalibrationFiles(result_path, infos, report_path, exported)
 
 
 def summary(result: CalibrationResult, files: CalibrationFiles) -> str:

@@ -41,10 +41,19 @@ from wand_calib_ros.core.pipeline import CalibrationOptions
 from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.core.timing import TIMING_MODES
 from wand_calib_ros.errors import WandCalibError
+from wand_calib_ros.io.export import FORMATS
 from wand_calib_ros.io.observations_csv import read_observations
 from wand_calib_ros.io.rig_yaml import load_camera_endpoints, load_rig
 from wand_calib_ros.nodes import messages
-from wand_calib_ros.nodes.params import COVERAGE, RIG, Param, coverage_thresholds, declare, existing_file
+from wand_calib_ros.nodes.params import (
+    COVERAGE,
+    RIG,
+    Param,
+    SettingsError,
+    coverage_thresholds,
+    declare,
+    existing_file,
+)
 from wand_calib_ros.nodes.runner import run
 
 PARAMS = (
@@ -52,6 +61,13 @@ PARAMS = (
     *COVERAGE,
     Param("require_coverage", True, "refuse /calibrate until the coverage thresholds are met"),
     Param("write_report", True, "write output_dir/report/index.html after each calibration"),
+    Param(
+        "export_formats",
+        "",
+        "other tools' formats also written into output_dir/export/<format>/ (comma-separated: "
+        + ", ".join(FORMATS)
+        + ")",
+    ),
     Param("commit_to_drivers", False, "send the results to each camera driver's set_camera_info service"),
     Param("driver_timeout_s", 5.0, "how long to wait for a driver's set_camera_info (s)", 0.1, 600.0),
     Param(
@@ -105,6 +121,7 @@ class CalibratorNode(Node):
         self.output_dir = Path(values["output_dir"]).expanduser()
         self.thresholds = coverage_thresholds(values) if values["require_coverage"] else None
         self.write_report = bool(values["write_report"])
+        self.exports = export_formats(values["export_formats"])
         self.commit = bool(values["commit_to_drivers"])
         self.driver_timeout = float(values["driver_timeout_s"])
         self.options = CalibrationOptions(
@@ -114,6 +131,7 @@ class CalibratorNode(Node):
         self.after_calibrate = after_calibrate
         self._running = threading.Lock()
         self._stopping = threading.Event()
+        self._worker: threading.Thread | None = None
         # Reentrant: a second /calibrate during a solve gets its "in progress" answer at once,
         # and driver answers arrive while the solve's thread waits for them.
         group = ReentrantCallbackGroup()
@@ -140,6 +158,7 @@ class CalibratorNode(Node):
         try:  # the solve runs in its own thread so that a stop can still answer the caller
             outcome: list[tuple[bool, str]] = []
             worker = threading.Thread(target=self._solve, args=(outcome,), name="calibration", daemon=True)
+            self._worker = worker
             worker.start()
             while worker.is_alive() and not self._stopping.wait(0.05):
                 pass
@@ -161,6 +180,11 @@ class CalibratorNode(Node):
         except Exception as error:  # a bug: still answer, so the caller does not wait forever
             self.get_logger().error(f"/calibrate: unexpected error\n{traceback.format_exc()}")
             outcome.append((False, f"unexpected error (please report): {error!r}"))
+
+    @property
+    def working(self) -> bool:
+        """Whether a calibration is still computing (a stop answered its caller but could not end it)."""
+        return self._worker is not None and self._worker.is_alive()
 
     def close(self) -> None:
         """At exit (Ctrl-C, SIGTERM): answer a /calibrate in progress before the node goes away."""
@@ -184,6 +208,7 @@ class CalibratorNode(Node):
                 thresholds=self.thresholds,
                 report=self.write_report,
                 options=self.options,
+                exports=self.exports,
             )
         except WandCalibError as error:
             return False, f"calibration failed: {error}"
@@ -222,6 +247,17 @@ class CalibratorNode(Node):
             elif not future.result().success:
                 failures.append(f"{name}: {future.result().status_message}")
         return failures
+
+
+def export_formats(text: str) -> tuple[str, ...]:
+    """The ``export_formats`` parameter as format names (SettingsError naming an unknown one)."""
+    names = tuple(name.strip() for name in text.split(",") if name.strip())
+    unknown = [name for name in names if name not in FORMATS]
+    if unknown:
+        raise SettingsError(
+            f"parameter export_formats: unknown format(s) {', '.join(unknown)}; known: {', '.join(FORMATS)}"
+        )
+    return names
 
 
 def build(context: Context) -> list[Node]:

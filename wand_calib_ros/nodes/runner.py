@@ -226,4 +226,11 @@ def run(name: str, build: Callable[[Context], list[Node]], argv: Sequence[str] |
             signal.signal(sig, signal.SIG_IGN)
         spinner.close()
         _shutdown(context)
+    if any(getattr(node, "working", False) for node in spinner.nodes):
+        # A solve still runs in a daemon thread: interpreter finalisation would end it with
+        # pthread_exit inside scipy's C++ code, and the process would abort (SIGABRT) instead of
+        # exiting with its code. Everything collected is already stored and synced.
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
     return code

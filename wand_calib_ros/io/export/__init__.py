@@ -18,6 +18,7 @@ from pathlib import Path
 
 from wand_calib_ros.core.camera_model import CameraModel
 from wand_calib_ros.core.geometry import Pose
+from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.io.outputs import write_together
 
 
@@ -29,6 +30,15 @@ class ExportedCamera:
     model: CameraModel
     pose: Pose
 
+
+def cameras_of(result: CalibrationResult) -> list[ExportedCamera]:
+    """A result's cameras, the reference first."""
+    order = sorted(result.cameras, key=lambda c: c.name != result.reference_camera)
+    return [ExportedCamera(c.name, c.model, c.pose) for c in order]
+
+
+#: The format names :func:`export` takes.
+FORMATS = ("opencv", "anipose", "kalibr", "camera_info")
 
 #: A format: the cameras (reference first or in the result's order) -> {file name: text}.
 Writer = Callable[[Sequence[ExportedCamera]], dict[str, str]]
