@@ -45,6 +45,21 @@ log = logging.getLogger("wand_calib_ros")
 HELDOUT_PLACEMENTS = 100
 
 
+def _frame_ranges(text: str) -> tuple[int, ...]:
+    """``120-160,300`` as frame ids (argparse type: a bad range is a usage error naming it)."""
+    frames: list[int] = []
+    for part in (p.strip() for p in text.split(",") if p.strip()):
+        first, dash, last = part.partition("-")
+        try:
+            lo, hi = int(first), int(last) if dash else int(first)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{part!r} is not a frame or a range of frames like 120-160") from None
+        if hi < lo:
+            raise argparse.ArgumentTypeError(f"{part!r}: the range ends before it starts")
+        frames.extend(range(lo, hi + 1))
+    return tuple(sorted(set(frames)))
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="wand-calib", description="Wand calibration of fisheye, conventional and mixed camera rigs."
@@ -67,6 +82,14 @@ def _parser() -> argparse.ArgumentParser:
         "--max-placements",
         type=int,
         help="use at most this many placements, spread over the recording (a time budget for large rigs)",
+    )
+    cal.add_argument(
+        "--floor",
+        type=_frame_ranges,
+        default=(),
+        metavar="FRAMES",
+        help="frames (e.g. 120-160,300-340) where the wand lies still on the floor, in two directions: they "
+        "set the world frame (z up, origin at the first lay's A, x along its A->C) instead of being calibrated from",
     )
     cal.add_argument(
         "--time-offsets",
@@ -228,6 +251,12 @@ def _print_summary(result: CalibrationResult, output: Path) -> None:
         f"{result.placements_used} placements used, {result.placements_rejected} rejected"
     )
     print("  model = OpenCV/ROS 'equidistant': fx = k1*mu, fy = k1*mv, D = [k2..k5]/k1")
+    if result.world is not None:
+        world = result.world
+        print(
+            f"  world frame from the floor ({world.placements} placements): plane residual {world.residual_mm:.2f} mm, "
+            f"normal +- {world.normal_std_deg:.3f} deg, origin +- {world.origin_std_mm:.2f} mm"
+        )
     for warning in result.warnings:
         print(f"  warning: {warning}")
 
@@ -261,6 +290,7 @@ def _calibrate(args: argparse.Namespace) -> int:
         pair=PairOptions(seed=args.seed),
         max_placements=args.max_placements,
         time_offsets=args.time_offsets,
+        floor_frames=args.floor,
         rolling_shutter=args.rolling_shutter,
     )
     check_writable(calibration_paths(rig.camera_names, args.output, args.camera_info_dir))  # before the solve

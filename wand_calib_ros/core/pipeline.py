@@ -18,6 +18,7 @@ from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.core.rig import RigSpec, WandObservations, spread_subset
 from wand_calib_ros.core.timing import align_views, offset_warnings, rate_warnings, timing_input
 from wand_calib_ros.core.vision_graph import build_vision_graph
+from wand_calib_ros.core.world_frame import floor_of
 
 log = logging.getLogger(__name__)
 
@@ -43,6 +44,7 @@ class CalibrationOptions:
     max_placements: int | None = None
     time_offsets: str = "auto"
     rolling_shutter: str = "auto"
+    floor_frames: tuple[int, ...] = ()  # frames of the wand laid still on the floor: the world frame
 
 
 def calibrate(
@@ -71,6 +73,7 @@ def calibrate(
         if name not in observations.camera_names:
             raise InsufficientDataError(f"camera '{name}' has no observations")
     obs = observations.select_cameras(names)
+    obs, floor = _split_floor(obs, options.floor_frames)
     check_rig(rig)
     check_views(rig, obs)
     timing = timing_input(rig, obs, offsets=options.time_offsets, rolling_shutter=options.rolling_shutter)
@@ -105,6 +108,9 @@ def calibrate(
         start_uv=aligned,
     )
     check_result(rig, result)
+    if floor is not None:
+        models = tuple(result.camera(n).model for n in names)
+        result = replace(result, world=floor_of(models, tuple(result.camera(n).pose for n in names), floor.uv))
     warnings = [*result.warnings, *rate_warnings(obs, timing.line), *offset_warnings(result)]
     if result.timing is not None and result.timing.time_offsets == "estimated":
         return replace(result, warnings=tuple(warnings))
@@ -130,3 +136,17 @@ def _require_whole_views(names: tuple[str, ...], complete: NDArray[np.bool_]) ->
             f"camera(s) {', '.join(alone)} see the whole wand ({counts}) but never in a frame another camera "
             "sees it in too: wave it where they overlap"
         )
+
+
+def _split_floor(
+    observations: WandObservations, floor_frames: tuple[int, ...]
+) -> tuple[WandObservations, WandObservations | None]:
+    """(the frames to calibrate from, the floor frames or None): the wand laid still is not waved."""
+    if not floor_frames:
+        return observations, None
+    on_floor = np.isin(observations.frames, np.asarray(floor_frames, dtype=np.int64))
+    if not on_floor.any():
+        raise InsufficientDataError(
+            f"floor frames {floor_frames[0]}..{floor_frames[-1]}: none of them is in the observations"
+        )
+    return observations.select_frames(~on_floor), observations.select_frames(on_floor)

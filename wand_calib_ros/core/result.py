@@ -10,6 +10,7 @@ from numpy.typing import NDArray
 from wand_calib_ros.core.camera_model import CameraModel
 from wand_calib_ros.core.geometry import Pose
 from wand_calib_ros.core.rig import WandSpec
+from wand_calib_ros.core.world_frame import WorldFrame
 
 FloatArray = NDArray[np.float64]
 
@@ -125,6 +126,8 @@ class CalibrationResult:
         clock_offsets: per camera timing diagnostics (empty when frames are not a time series or the
             offsets were estimated).
         timing: how the cameras' timing was treated (None: not modelled, as for simultaneous views).
+        world: the world frame of a floor fit (None: no floor given; poses stay relative to the
+            reference camera).
     """
 
     reference_camera: str
@@ -142,6 +145,7 @@ class CalibrationResult:
     warnings: tuple[str, ...]
     clock_offsets: tuple[ClockOffset, ...] = ()
     timing: TimingSummary | None = None
+    world: WorldFrame | None = None
 
     def camera(self, name: str) -> CameraCalibration:
         for camera in self.cameras:

@@ -78,6 +78,29 @@ def timing_keys(unit: str) -> dict[str, str]:
     return {"time_offset": f"time_offset_{unit}", "readout": f"rolling_shutter_readout_{unit}"}
 
 
+def _world_dict(result: CalibrationResult) -> dict[str, Any]:
+    """The ``world`` block: the floor's frame and every camera in it, or a note that there is none."""
+    world = result.world
+    if world is None:
+        return {"frame": "reference_camera", "note": f"no floor given: poses are relative to {result.reference_camera}"}
+    cameras = {}
+    for camera in result.cameras:
+        pose = world.camera_in_world(camera.pose)
+        cameras[camera.name] = {"rotation": _floats(pose.rotation), "translation": _floats(pose.translation)}
+    return {
+        "frame": "floor",
+        "rotation": _floats(world.world_from_reference.rotation),
+        "translation": _floats(world.world_from_reference.translation),
+        "floor": {
+            "placements": int(world.placements),
+            "residual_mm": float(world.residual_mm),
+            "normal_std_deg": float(world.normal_std_deg),
+            "origin_std_mm": float(world.origin_std_mm),
+        },
+        "cameras": cameras,
+    }
+
+
 def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
     """The result YAML document."""
     cameras: dict[str, Any] = {}
@@ -119,6 +142,7 @@ def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
             "iterations": int(result.iterations),
         },
         "timing": _timing_dict(result),
+        "world": _world_dict(result),
         "lens_trials": [
             {"projections": list(t.projections), "wand_rms_mm": float(t.wand_rms_mm)}
             | ({"failure": t.failure} if t.failure else {})

@@ -1,0 +1,125 @@
+"""A world frame from the wand laid on the floor: z up, the origin and x where the user put the wand.
+
+The user lays the wand on the floor and holds it still, in at least two directions (e.g. along the
+room's x, then along y). Triangulated with the calibrated cameras, those placements' points fit
+the floor plane; its normal, turned towards the cameras, is z; the first placement's A (or its
+centre) is the origin; its A->C projected onto the floor is x. Poses in the result stay relative
+to the reference camera (X_cam = R X_ref + T); the world frame is one more transform:
+X_world = R_w X_ref + T_w.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wand_calib_ros.core.camera_model import CameraModel
+from wand_calib_ros.core.errors import DegenerateDataError, InsufficientDataError
+from wand_calib_ros.core.geometry import Pose
+from wand_calib_ros.core.placements import triangulate_placements
+
+FloatArray = NDArray[np.float64]
+
+#: Floor placements whose wand directions (on the floor) all lie within this angle of each other
+#: (degrees) leave the floor's tilt about that direction undetermined.
+MIN_DIRECTION_SPREAD_DEG = 20.0
+#: Placements whose A lies within this distance (mm) of the first one's, pointing the same way, are
+#: the same lay of the wand held still: the origin and x are their average.
+LAY_RADIUS_MM = 50.0
+#: The fewest still placements a floor needs.
+MIN_FLOOR_PLACEMENTS = 2
+
+
+@dataclass(frozen=True, eq=False)
+class WorldFrame:
+    """The world frame a floor fit defines.
+
+    Attributes:
+        world_from_reference: X_world = R X_ref + T (mm).
+        residual_mm: RMS distance of the floor points from the fitted plane, mm.
+        normal_std_deg: standard deviation of the floor normal's direction, degrees (from the residual).
+        origin_std_mm: standard deviation of the origin, mm: a point's noise (the residual, triangulation
+            noise being largest along the cameras' depth, near the normal) and the plane's offset.
+        placements: floor placements used.
+    """
+
+    world_from_reference: Pose
+    residual_mm: float
+    normal_std_deg: float
+    origin_std_mm: float
+    placements: int
+
+    def camera_in_world(self, camera: Pose) -> Pose:
+        """A camera's pose X_cam = R X_world + T from its pose relative to the reference camera."""
+        world = self.world_from_reference
+        reference_from_world = Pose(world.rotation.T, -world.rotation.T @ world.translation)
+        return camera.compose(reference_from_world)
+
+
+def fit_floor(points: FloatArray, camera_centres: FloatArray, *, origin: str = "A") -> WorldFrame:
+    """The world frame of wand placements lying on the floor.
+
+    Args:
+        points: (P, K, 3) the floor placements' wand points (A first, C last) in the reference frame,
+            mm (NaN rows: placements that could not be triangulated).
+        camera_centres: (C, 3) the cameras' centres in the reference frame (z points towards them).
+        origin: "A" (the first lay's A) or "centre" (its midpoint), projected onto the floor; the
+            first lay is the first placement and every still one like it, averaged.
+
+    Raises:
+        InsufficientDataError: fewer than MIN_FLOOR_PLACEMENTS placements.
+        DegenerateDataError: the placements all point the same way, or the cameras lie in the floor.
+    """
+    usable = points[np.all(np.isfinite(points), axis=(1, 2))]
+    if usable.shape[0] < MIN_FLOOR_PLACEMENTS:
+        raise InsufficientDataError(
+            f"the floor needs the wand laid still in at least {MIN_FLOOR_PLACEMENTS} placements seen by two "
+            f"cameras; got {usable.shape[0]}"
+        )
+    flat = usable.reshape(-1, 3)
+    centroid = flat.mean(axis=0)
+    _, singular, vt = np.linalg.svd(flat - centroid, full_matrices=False)
+    normal = vt[2]
+    above = float(np.median((camera_centres - centroid) @ normal))
+    if abs(above) < 1e-9:
+        raise DegenerateDataError("the cameras lie in the fitted floor plane: no side of it is up")
+    normal = normal if above > 0 else -normal
+    directions = _on_plane(usable[:, -1] - usable[:, 0], normal)
+    spread = float(np.degrees(np.max(np.arccos(np.clip(np.abs(directions @ directions.T), 0.0, 1.0)))))
+    if spread < MIN_DIRECTION_SPREAD_DEG:
+        raise DegenerateDataError(
+            f"the wand lay on the floor in one direction only (within {spread:.0f} deg): lay it in a second "
+            f"direction, at least {MIN_DIRECTION_SPREAD_DEG:.0f} deg from the first, so the floor's tilt is known"
+        )
+    # The first lay of the wand: every still placement of it (A within LAY_RADIUS_MM of the first
+    # one's, pointing the same way), averaged.
+    lay = (np.linalg.norm(usable[:, 0] - usable[0, 0], axis=1) < LAY_RADIUS_MM) & (directions @ directions[0] > 0.99)
+    first = usable[lay].mean(axis=0)
+    anchor = first[0] if origin == "A" else first.mean(axis=0)
+    anchor = anchor - ((anchor - centroid) @ normal) * normal  # onto the floor
+    x = _on_plane((first[-1] - first[0])[None], normal)[0]
+    rotation = np.stack([x, np.cross(normal, x), normal])  # rows: the world axes in the reference frame
+    residual = float(np.sqrt(np.mean(((flat - centroid) @ normal) ** 2)))
+    in_plane = float(np.sqrt((singular[0] ** 2 + singular[1] ** 2) / 2.0))  # RMS spread x sqrt(n)
+    return WorldFrame(
+        Pose(rotation, -rotation @ anchor),
+        residual,
+        float(np.degrees(residual / max(in_plane, 1e-12))),
+        residual * float(np.sqrt(1.0 / lay.sum() + 1.0 / flat.shape[0])),  # the anchor's noise, the plane's offset
+        int(usable.shape[0]),
+    )
+
+
+def _on_plane(vectors: FloatArray, normal: FloatArray) -> FloatArray:
+    """(N, 3) unit vectors of ``vectors`` projected onto the plane with unit ``normal``."""
+    flat = vectors - (vectors @ normal)[:, None] * normal
+    return flat / np.linalg.norm(flat, axis=1, keepdims=True)
+
+
+def floor_of(result_models: tuple[CameraModel, ...], poses: tuple[Pose, ...], uv: FloatArray) -> WorldFrame:
+    """:func:`fit_floor` of (F, C, 3, 2) views of the wand on the floor, triangulated with calibrated cameras
+    (``poses`` relative to the reference camera)."""
+    points = triangulate_placements(result_models, poses, uv)
+    return fit_floor(points, np.array([pose.center for pose in poses]))
