@@ -16,6 +16,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from wand_calib_ros.collection.floor import read_floor_frames
 from wand_calib_ros.core.pairwise import PairOptions
 from wand_calib_ros.core.pipeline import CalibrationOptions, calibrate
 from wand_calib_ros.core.result import CalibrationResult, CameraCalibration
@@ -46,7 +47,10 @@ HELDOUT_PLACEMENTS = 100
 
 
 def _frame_ranges(text: str) -> tuple[int, ...]:
-    """``120-160,300`` as frame ids (argparse type: a bad range is a usage error naming it)."""
+    """``120-160,300`` as frame ids, or a collector's floor_frames.txt (argparse type: a bad range is a
+    usage error naming it)."""
+    if Path(text).is_file():
+        return read_floor_frames(Path(text))
     frames: list[int] = []
     for part in (p.strip() for p in text.split(",") if p.strip()):
         first, dash, last = part.partition("-")
@@ -88,7 +92,8 @@ def _parser() -> argparse.ArgumentParser:
         type=_frame_ranges,
         default=(),
         metavar="FRAMES",
-        help="frames (e.g. 120-160,300-340) where the wand lies still on the floor, in two directions: they "
+        help="frames (e.g. 120-160,300-340, or a collector's floor_frames.txt) where the wand lies still on "
+        "the floor, in two directions: they "
         "set the world frame (z up, origin at the first lay's A, x along its A->C) instead of being calibrated from",
     )
     cal.add_argument(

@@ -119,6 +119,22 @@ def test_floor_frames_of_a_recording_set_the_world_of_the_result_file(tmp_path, 
     assert all(np.linalg.norm(np.array(c["translation"])) > 100 for c in world["cameras"].values())
     centre_z = [-(np.array(c["rotation"]).T @ np.array(c["translation"]))[2] for c in world["cameras"].values()]
     assert min(centre_z) > 100.0  # every camera above the floor
+    (tmp_path / "floor_frames.txt").write_text("".join(f"{f}\n" for f in range(10_000, last + 1)))  # the collector's
+    assert (
+        main(
+            [
+                "-q",
+                "calibrate",
+                *argv,
+                "--output",
+                str(tmp_path / "f.yaml"),
+                "--floor",
+                str(tmp_path / "floor_frames.txt"),
+            ]
+        )
+        == 0
+    )
+    assert yaml.safe_load((tmp_path / "f.yaml").read_text())["world"] == world
     assert main(["-q", "calibrate", *argv, "--output", str(tmp_path / "n.yaml")]) == 0
     assert yaml.safe_load((tmp_path / "n.yaml").read_text())["world"]["frame"] == "reference_camera"
     assert main(["-q", "calibrate", *argv, "--output", str(tmp_path / "x.yaml"), "--floor", "90000-90010"]) == 2

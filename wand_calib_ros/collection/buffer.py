@@ -109,9 +109,10 @@ class ObservationBuffer:
         """Frame id for the next accepted frame (continues after a resume)."""
         return self.frames[-1] + 1 if self.frames else 0
 
-    def offer(self, uv: FloatArray, stamps: FloatArray | None = None) -> bool:
+    def offer(self, uv: FloatArray, stamps: FloatArray | None = None, *, keep: bool = False) -> bool:
         """Consider one synchronised frame ((C, 3, 2), NaN where unseen) with its views' stamps ((C,) s,
-        NaN where a camera has no image in it); True when it was stored."""
+        NaN where a camera has no image in it); True when it was stored. ``keep``: store it even when
+        the wand is still or the buffer full (the wand laid on the floor)."""
         if stamps is None and self.with_stamps:
             raise ValueError("this buffer stores the views' stamps: offer them with the frame")
         stamps = np.full(uv.shape[0], np.nan) if stamps is None else np.asarray(stamps, dtype=np.float64)
@@ -119,14 +120,14 @@ class ObservationBuffer:
         if complete.sum() < 1:
             self.stats.empty += 1
             return False
-        if self.uv:
+        if self.uv and not keep:
             last = self.uv[-1]
             moved = np.linalg.norm(uv - last, axis=-1).max(axis=-1)  # (C,) NaN where either is missing
             both = complete & np.all(np.isfinite(last), axis=(1, 2))
             if both.any() and not np.any(moved[both] > self.min_motion_px) and np.array_equal(both, complete):
                 self.stats.still += 1
                 return False
-        if len(self.frames) >= self.capacity and not self._adds_coverage(uv, complete):
+        if not keep and len(self.frames) >= self.capacity and not self._adds_coverage(uv, complete):
             self.stats.full += 1
             return False
         frame = self.next_frame

@@ -23,6 +23,7 @@ import sys
 import threading
 import traceback
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +37,7 @@ from sensor_msgs.srv import SetCameraInfo
 from std_srvs.srv import Trigger
 
 from wand_calib_ros.collection.buffer import BUFFER_FILE, has_rows
+from wand_calib_ros.collection.floor import FLOOR_FILE, read_floor_frames
 from wand_calib_ros.collection.job import run_calibration, summary
 from wand_calib_ros.core.pipeline import CalibrationOptions
 from wand_calib_ros.core.result import CalibrationResult
@@ -61,6 +63,7 @@ PARAMS = (
     *COVERAGE,
     Param("require_coverage", True, "refuse /calibrate until the coverage thresholds are met"),
     Param("write_report", True, "write output_dir/report/index.html after each calibration"),
+    Param("world_frame", "world", "parent frame of the published extrinsics once a floor was set (/set_floor)"),
     Param(
         "export_formats",
         "",
@@ -122,6 +125,7 @@ class CalibratorNode(Node):
         self.thresholds = coverage_thresholds(values) if values["require_coverage"] else None
         self.write_report = bool(values["write_report"])
         self.exports = export_formats(values["export_formats"])
+        self.world_frame = str(values["world_frame"])
         self.commit = bool(values["commit_to_drivers"])
         self.driver_timeout = float(values["driver_timeout_s"])
         self.options = CalibrationOptions(
@@ -201,13 +205,14 @@ class CalibratorNode(Node):
         try:
             observations = read_observations(path, self.rig.camera_names, image_sizes=self.rig.image_sizes)
             self.get_logger().info(f"/calibrate: calibrating {observations.uv.shape[0]} frames of {path}")
+            floor = read_floor_frames(self.output_dir / FLOOR_FILE)  # from the collector's /set_floor
             result, files = run_calibration(
                 self.rig,
                 observations,
                 self.output_dir,
                 thresholds=self.thresholds,
                 report=self.write_report,
-                options=self.options,
+                options=replace(self.options, floor_frames=floor),
                 exports=self.exports,
             )
         except WandCalibError as error:
@@ -217,7 +222,7 @@ class CalibratorNode(Node):
         stamp = self.get_clock().now().to_msg()
         for name in self.rig.camera_names:
             self.info_publishers[name].publish(messages.camera_info_message(result, name, stamp))
-            self.extrinsics_publishers[name].publish(messages.extrinsics_message(result, name, stamp))
+            self.extrinsics_publishers[name].publish(messages.extrinsics_message(result, name, stamp, self.world_frame))
         if self.after_calibrate is not None:
             self.after_calibrate(result)
         answer = summary(result, files)

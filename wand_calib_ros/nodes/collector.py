@@ -16,6 +16,7 @@ workflow. Only message and parameter translation lives here.
 
 from __future__ import annotations
 
+import os
 import sys
 import threading
 import time
@@ -34,6 +35,8 @@ from std_srvs.srv import Trigger
 
 from wand_calib_ros.collection.buffer import BUFFER_FILE, ObservationBuffer
 from wand_calib_ros.collection.coverage import CoverageTracker
+from wand_calib_ros.collection.floor import FLOOR_FILE, FloorWindow, append_floor_frame
+from wand_calib_ros.collection.recovery import backup_path
 from wand_calib_ros.collection.sync import FrameSynchroniser, SyncedFrame
 from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.detection.recording import CameraStream, Labelled
@@ -73,6 +76,13 @@ PARAMS = (
     ),
     Param("buffer_capacity", 20000, "frames stored before only coverage-adding frames are kept", 100, 10**7),
     Param("min_motion_px", 2.0, "a frame whose wand moved less than this (px) in every camera is skipped", 0.0, 1000.0),
+    Param(
+        "floor_hold_s",
+        2.0,
+        "after each /set_floor, frames of this long are floor frames (the wand still on the floor)",
+        0.1,
+        60.0,
+    ),
     LABEL_HOLD,
     Param("with_calibrator", True, "also run the calibrator node (/calibrate) in this process"),
 )
@@ -126,6 +136,8 @@ class CollectorNode(Node):
                     PolygonStamped, endpoint.points_topic, lambda m, n=name: self._on_points(n, m), POINTS_QOS
                 )
         self.create_service(Trigger, "reset", self._on_reset)
+        self.floor = FloorWindow(float(values["floor_hold_s"]))
+        self.create_service(Trigger, "set_floor", self._on_set_floor)
         self.diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.heat_maps = {
             name: self.create_publisher(Image, f"wand_calib/{name}/coverage", 1) for name in self.rig.camera_names
@@ -172,8 +184,11 @@ class CollectorNode(Node):
 
     def _store(self, frames: list[SyncedFrame]) -> None:
         for frame in frames:
-            if self.buffer.offer(frame.uv, messages.frame_stamps(frame)):
+            on_floor = self.floor.is_open(time.monotonic())
+            if self.buffer.offer(frame.uv, messages.frame_stamps(frame), keep=on_floor):
                 self.coverage.add(frame.uv)
+                if on_floor:
+                    append_floor_frame(self.buffer.path.with_name(FLOOR_FILE), self.buffer.frames[-1])
 
     def flush(self) -> None:
         """Store everything still held (ambiguous views, pending frames): before /calibrate, at exit."""
@@ -235,9 +250,25 @@ class CollectorNode(Node):
                 self.get_logger().info("still missing: " + " | ".join(status.messages()))
             self._logged = (status.ready, now)
 
+    def _on_set_floor(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        with self.lock:
+            lay = self.floor.open(time.monotonic())
+        after = "call /set_floor again with the wand in a second direction" if lay == 1 else "then /calibrate"
+        response.success = True
+        response.message = (
+            f"floor lay {lay}: hold the wand still on the floor for {self.floor.hold_s:g} s; {after} "
+            "(the world frame: z up, the origin at the first lay's A, x along its A->C)"
+        )
+        self.get_logger().info(response.message)
+        return response
+
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         with self.lock:  # serialised with the frames being stored and with other resets
             backup = self.buffer.reset()
+            floor = self.buffer.path.with_name(FLOOR_FILE)
+            if floor.exists():  # its frame ids belong to the buffer just moved away
+                os.replace(floor, backup_path(floor, "bak"))
+            self.floor.lays = 0
             self.coverage = CoverageTracker(self.rig, self.coverage.thresholds)
         kept = "it was empty" if backup is None else f"backup {backup}"
         response.success, response.message = True, f"buffer cleared; {kept}"

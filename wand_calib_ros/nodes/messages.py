@@ -84,18 +84,22 @@ def camera_info_message(result: CalibrationResult, name: str, stamp: Time) -> Ca
     return info
 
 
-def extrinsics_message(result: CalibrationResult, name: str, stamp: Time) -> TransformStamped:
-    """geometry_msgs/TransformStamped of a camera in the reference camera's frame (metres).
+def extrinsics_message(
+    result: CalibrationResult, name: str, stamp: Time, world_frame: str = "world"
+) -> TransformStamped:
+    """geometry_msgs/TransformStamped of a camera in the world (a floor was given: parent ``world_frame``)
+    or else in the reference camera's frame (parent = the reference camera); metres.
 
-    The transform maps the camera's frame into the reference camera's frame
-    (ROS convention: parent = reference camera, child = this camera), i.e. the
-    inverse of the result's X_cam = R X_ref + T.
+    The transform maps the camera's frame into the parent's (ROS convention: child = this camera),
+    i.e. the inverse of X_cam = R X_parent + T.
     """
     pose = result.camera(name).pose
+    if result.world is not None:
+        pose = result.world.camera_in_world(pose)
     x, y, z, w = Rotation.from_matrix(pose.rotation.T).as_quat()
     message = TransformStamped()
     message.header.stamp = stamp
-    message.header.frame_id = result.reference_camera
+    message.header.frame_id = result.reference_camera if result.world is None else world_frame
     message.child_frame_id = name
     t = message.transform.translation
     t.x, t.y, t.z = (float(v) for v in pose.center / 1000.0)

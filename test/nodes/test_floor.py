@@ -1,0 +1,102 @@
+"""/set_floor live: the wand laid still on the floor twice, then /calibrate publishes the cameras in the world."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from conftest import LATCHED, Ros, wait_until
+
+from wand_calib_ros.collection.floor import FLOOR_FILE, read_floor_frames
+from wand_calib_ros.io.rig_yaml import save_rig
+from wand_calib_ros.sim.scenarios import image_placements, paper_three_camera_scenario, simulate
+
+rclpy = pytest.importorskip("rclpy")
+
+from builtin_interfaces.msg import Time  # noqa: E402
+from geometry_msgs.msg import PolygonStamped, TransformStamped  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from std_msgs.msg import Header  # noqa: E402
+from std_srvs.srv import Trigger  # noqa: E402
+
+from wand_calib_ros.nodes.calibrator import CalibratorNode  # noqa: E402
+from wand_calib_ros.nodes.collector import POINTS_QOS, CollectorNode  # noqa: E402
+from wand_calib_ros.nodes.messages import points_message  # noqa: E402
+
+HOLD_S = 1.0
+
+
+def test_set_floor_twice_then_calibrate_publishes_the_cameras_in_the_world(ros: Ros, tmp_path: Path) -> None:
+    scenario = paper_three_camera_scenario()
+    save_rig(scenario.rig, tmp_path / "cameras.yaml")
+    common = [
+        Parameter("cameras_file", value=str(tmp_path / "cameras.yaml")),
+        Parameter("output_dir", value=str(tmp_path / "out")),
+        Parameter("require_coverage", value=False),
+    ]
+    collector = ros.add(
+        CollectorNode(
+            context=ros.context,
+            parameter_overrides=[
+                *common,
+                Parameter("input", value="points"),
+                Parameter("with_calibrator", value=False),
+                Parameter("floor_hold_s", value=HOLD_S),
+            ],
+        )
+    )
+    ros.add(
+        CalibratorNode(
+            context=ros.context,
+            parameter_overrides=[*common, Parameter("write_report", value=False)],
+            before_calibrate=collector.flush,
+        )
+    )
+    transforms = ros.collect(TransformStamped, "wand_calib/cam1/extrinsics", LATCHED)
+    publishers = {
+        n: ros.helper.create_publisher(PolygonStamped, f"/{n}/wand_points", POINTS_QOS)
+        for n in scenario.rig.camera_names
+    }
+    assert wait_until(lambda: all(p.get_subscription_count() for p in publishers.values()), 10)
+    sent = [0]
+
+    def play(uv: np.ndarray) -> None:
+        for frame in uv:
+            sent[0] += 1
+            stamp = Time(sec=1000 + sent[0] // 30, nanosec=int(sent[0] % 30 * 1e9 / 30))
+            for c, name in enumerate(scenario.rig.camera_names):
+                points = frame[c] if np.all(np.isfinite(frame[c])) else None
+                publishers[name].publish(points_message(points, Header(stamp=stamp, frame_id=name)))
+            time.sleep(0.002)
+        assert wait_until(lambda: min(collector.received.values()) == sent[0], 20)
+
+    floor_service = ros.helper.create_client(Trigger, "set_floor")
+    assert floor_service.wait_for_service(timeout_sec=5)
+    play(simulate(scenario, 0.5, np.random.default_rng(0)).observations.uv)  # the wave
+    rng = np.random.default_rng(1)
+    centre = scenario.volume.mean(axis=0)
+    normal = -np.mean([c.pose.rotation[2] for c in scenario.cameras], axis=0)
+    normal /= np.linalg.norm(normal)
+    x = np.cross(normal, [0.0, 1.0, 0.0])
+    x /= np.linalg.norm(x)
+    for lay, direction in enumerate((x, np.cross(normal, x))):
+        answer = floor_service.call(Trigger.Request(), timeout_sec=5)
+        assert answer.success and f"floor lay {lay + 1}" in answer.message
+        a = np.tile(centre - 0.5 * scenario.wand.L * direction, (15, 1))
+        still = image_placements(scenario, a, np.tile(direction, (15, 1)), np.tile(normal, (15, 1)), 0.5, rng)
+        play(still.observations.uv)
+        time.sleep(HOLD_S + 0.2)  # the window closes: later frames are waved frames again
+    floor = read_floor_frames(tmp_path / "out" / FLOOR_FILE)
+    assert len(floor) == 30  # every still frame kept (the still filter would keep one per lay)
+
+    client = ros.helper.create_client(Trigger, "calibrate")
+    answer = client.call(Trigger.Request(), timeout_sec=120)
+    assert answer.success, answer.message
+    world = yaml.safe_load((tmp_path / "out" / "result.yaml").read_text())["world"]
+    assert world["frame"] == "floor" and world["floor"]["placements"] == 30
+    assert wait_until(lambda: bool(transforms), 5)
+    assert transforms[-1].header.frame_id == "world" and transforms[-1].child_frame_id == "cam1"
+    assert transforms[-1].transform.translation.z > 0.1  # cam1 above the floor (metres)
