@@ -81,3 +81,17 @@ def test_a_binary_file_is_a_format_error(tmp_path: Path) -> None:
     path.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(range(256)))
     with pytest.raises(FormatError, match=r"cameras.yaml: not UTF-8 text \(it holds the byte 0x89\)"):
         load_rig(path)
+
+
+def test_frame_ids_default_to_the_camera_names_and_are_checked(tmp_path: Path) -> None:
+    from wand_calib_ros.io.rig_yaml import load_camera_endpoints
+
+    path = tmp_path / "cameras.yaml"
+    save_rig(mixed_pair_scenario().rig, path)
+    assert {n: e.frame_id for n, e in load_camera_endpoints(path).items()} == {"cam0": "cam0", "cam1": "cam1"}
+    text = path.read_text()
+    path.write_text(text.replace("- name: cam1\n", "- name: cam1\n  frame_id: cam1_optical_frame\n"))
+    assert load_camera_endpoints(path)["cam1"].frame_id == "cam1_optical_frame"
+    path.write_text(text.replace("- name: cam1\n", "- name: cam1\n  frame_id: /cam1\n"))
+    with pytest.raises(FormatError, match="camera 'cam1' frame_id must be a tf frame name"):
+        load_camera_endpoints(path)

@@ -100,3 +100,18 @@ def test_set_floor_twice_then_calibrate_publishes_the_cameras_in_the_world(ros: 
     assert wait_until(lambda: bool(transforms), 5)
     assert transforms[-1].header.frame_id == "world" and transforms[-1].child_frame_id == "cam1"
     assert transforms[-1].transform.translation.z > 0.1  # cam1 above the floor (metres)
+
+
+def test_published_frames_follow_the_rig_files_frame_ids() -> None:
+    from rigs import scenario_data
+
+    from wand_calib_ros.core.pipeline import calibrate
+    from wand_calib_ros.nodes.messages import camera_info_message, extrinsics_message
+
+    scenario, data, _ = scenario_data("paper", 0, noise=0.5)
+    result = calibrate(scenario.rig, data.observations)
+    frames = {"cam0": "left_optical", "cam1": "right_optical"}
+    other = "cam1" if result.reference_camera == "cam0" else "cam0"
+    transform = extrinsics_message(result, other, Time(), frame_ids=frames)
+    assert (transform.header.frame_id, transform.child_frame_id) == (frames[result.reference_camera], frames[other])
+    assert camera_info_message(result, "cam1", Time(), frames["cam1"]).header.frame_id == "right_optical"

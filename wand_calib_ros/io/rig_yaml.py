@@ -149,16 +149,25 @@ class CameraEndpoints:
         image_topic: its images (sensor_msgs/Image).
         points_topic: its wand points from a detector node (geometry_msgs/PolygonStamped).
         set_camera_info: its driver's sensor_msgs/srv/SetCameraInfo service.
+        frame_id: its tf frame (the drivers' ``header.frame_id``; default the camera's name).
     """
 
     image_topic: str
     points_topic: str
     set_camera_info: str
+    frame_id: str
 
 
 def _ros_name(path: Path, where: str, value: Any) -> str:
     if not isinstance(value, str) or not value.startswith("/") or value.endswith("/") or " " in value:
         raise FormatError(path, f"{where} must be an absolute ROS name such as /cam0/image_raw, got {value!r}")
+    return value
+
+
+def _frame_id(path: Path, name: str, value: Any) -> str:
+    """A tf frame id: a non-empty name without spaces or a leading slash (tf2 refuses those)."""
+    if not isinstance(value, str) or not value or value.startswith("/") or any(c.isspace() for c in value):
+        raise FormatError(path, f"camera '{name}' frame_id must be a tf frame name such as cam0_optical, got {value!r}")
     return value
 
 
@@ -178,5 +187,6 @@ def load_camera_endpoints(path: str | Path) -> dict[str, CameraEndpoints]:
             _ros_name(
                 path, f"camera '{name}' set_camera_info", item.get("set_camera_info", f"{namespace}/set_camera_info")
             ),
+            _frame_id(path, name, item.get("frame_id", name)),
         )
     return endpoints

@@ -121,6 +121,7 @@ class CalibratorNode(Node):
         cameras_file = existing_file(values, "cameras_file")
         self.rig = load_rig(cameras_file)
         self.endpoints = load_camera_endpoints(cameras_file)
+        self.frame_ids = {name: endpoint.frame_id for name, endpoint in self.endpoints.items()}
         self.output_dir = Path(values["output_dir"]).expanduser()
         self.thresholds = coverage_thresholds(values) if values["require_coverage"] else None
         self.write_report = bool(values["write_report"])
@@ -221,8 +222,9 @@ class CalibratorNode(Node):
             return False, STOPPED
         stamp = self.get_clock().now().to_msg()
         for name in self.rig.camera_names:
-            self.info_publishers[name].publish(messages.camera_info_message(result, name, stamp))
-            self.extrinsics_publishers[name].publish(messages.extrinsics_message(result, name, stamp, self.world_frame))
+            self.info_publishers[name].publish(messages.camera_info_message(result, name, stamp, self.frame_ids[name]))
+            transform = messages.extrinsics_message(result, name, stamp, self.world_frame, self.frame_ids)
+            self.extrinsics_publishers[name].publish(transform)
         if self.after_calibrate is not None:
             self.after_calibrate(result)
         answer = summary(result, files)
@@ -241,7 +243,8 @@ class CalibratorNode(Node):
             if not client.wait_for_service(timeout_sec=self.driver_timeout):
                 failures.append(f"{name}: no service {client.srv_name}")
                 continue
-            request = SetCameraInfo.Request(camera_info=messages.camera_info_message(result, name, stamp))
+            info = messages.camera_info_message(result, name, stamp, self.frame_ids[name])
+            request = SetCameraInfo.Request(camera_info=info)
             pending[name] = client.call_async(request)
         for name, future in pending.items():
             done = threading.Event()

@@ -8,6 +8,8 @@ showed no usable wand.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import cv2
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -69,12 +71,13 @@ def message_points(message: PolygonStamped) -> NDArray[np.float64] | None:
     return points
 
 
-def camera_info_message(result: CalibrationResult, name: str, stamp: Time) -> CameraInfo:
-    """sensor_msgs/CameraInfo (``equidistant``) exactly equivalent to a calibrated camera."""
+def camera_info_message(result: CalibrationResult, name: str, stamp: Time, frame_id: str | None = None) -> CameraInfo:
+    """sensor_msgs/CameraInfo (``equidistant``) exactly equivalent to a calibrated camera, in its tf frame
+    ``frame_id`` (default its name)."""
     document = camera_info_dict(name, result.camera(name).model)
     info = CameraInfo()
     info.header.stamp = stamp
-    info.header.frame_id = name
+    info.header.frame_id = frame_id or name
     info.width, info.height = document["image_width"], document["image_height"]
     info.distortion_model = document["distortion_model"]
     info.d = [float(v) for v in document["distortion_coefficients"]["data"]]
@@ -85,22 +88,29 @@ def camera_info_message(result: CalibrationResult, name: str, stamp: Time) -> Ca
 
 
 def extrinsics_message(
-    result: CalibrationResult, name: str, stamp: Time, world_frame: str = "world"
+    result: CalibrationResult,
+    name: str,
+    stamp: Time,
+    world_frame: str = "world",
+    frame_ids: Mapping[str, str] | None = None,
 ) -> TransformStamped:
     """geometry_msgs/TransformStamped of a camera in the world (a floor was given: parent ``world_frame``)
     or else in the reference camera's frame (parent = the reference camera); metres.
 
     The transform maps the camera's frame into the parent's (ROS convention: child = this camera),
-    i.e. the inverse of X_cam = R X_parent + T.
+    i.e. the inverse of X_cam = R X_parent + T. Frames are named by ``frame_ids`` (camera -> tf
+    frame; default the camera names).
     """
+    frame_of = dict(frame_ids or {})
     pose = result.camera(name).pose
     if result.world is not None:
         pose = result.world.camera_in_world(pose)
     x, y, z, w = Rotation.from_matrix(pose.rotation.T).as_quat()
     message = TransformStamped()
     message.header.stamp = stamp
-    message.header.frame_id = result.reference_camera if result.world is None else world_frame
-    message.child_frame_id = name
+    reference = frame_of.get(result.reference_camera, result.reference_camera)
+    message.header.frame_id = reference if result.world is None else world_frame
+    message.child_frame_id = frame_of.get(name, name)
     t = message.transform.translation
     t.x, t.y, t.z = (float(v) for v in pose.center / 1000.0)
     r = message.transform.rotation
