@@ -108,8 +108,8 @@ def test_collect_calibrate_and_publish(ros: Ros, tmp_path: Path) -> None:
 
     # Feedback: per camera diagnostics with counts, a heat map shaped like the image.
     names = {status.name for status in diagnostics[-1].status}
-    assert {"wand_calib: cam0", "wand_calib: cam1", "wand_calib: rig"} <= names
-    cam1 = next(s for s in diagnostics[-1].status if s.name == "wand_calib: cam1")
+    assert {"wand_calib_collector: cam0", "wand_calib_collector: cam1", "wand_calib_collector: rig"} <= names
+    cam1 = next(s for s in diagnostics[-1].status if s.name == "wand_calib_collector: cam1")
     values = {kv.key: kv.value for kv in cam1.values}
     assert abs(float(values["frame_rate_hz"]) - 30.0) < 0.1 and float(values["phase_ms"]) == 0.0  # triggered
     stored = read_observations(tmp_path / "out" / "observations.csv", scenario.rig.camera_names)

@@ -110,5 +110,7 @@ def test_feedback_keeps_flowing_with_sim_time_and_no_clock(ros: Ros, tmp_path: P
         Parameter("use_sim_time", value=True),  # and nobody publishes /clock
     ]
     diagnostics = ros.collect(DiagnosticArray, "/diagnostics")
-    ros.add(CollectorNode(context=ros.context, parameter_overrides=overrides))
+    ros.add(CollectorNode(context=ros.context, parameter_overrides=overrides, namespace="rig1"))
     assert wait_until(lambda: len(diagnostics) >= 2, 10)
+    names = {status.name for status in diagnostics[-1].status}  # which collector: an aggregator tells rigs apart
+    assert {"rig1/wand_calib_collector: cam0", "rig1/wand_calib_collector: rig"} <= names

@@ -237,7 +237,8 @@ class CollectorNode(Node):
             }
             cells = {name: self.coverage.cells[c].copy() for c, name in enumerate(self.rig.camera_names)}
         stamp = self.get_clock().now().to_msg()
-        self.diagnostics.publish(messages.diagnostics_message(status, counts, rig_values, stamp))
+        source = self.get_fully_qualified_name().lstrip("/")  # e.g. rig1/wand_calib_collector
+        self.diagnostics.publish(messages.diagnostics_message(status, counts, rig_values, stamp, source))
         for spec in self.rig.cameras:
             self.heat_maps[spec.name].publish(
                 messages.heat_map_message(cells[spec.name], spec.image_size, stamp, spec.name)

@@ -148,9 +148,15 @@ def timing_values(sync: FrameSynchroniser, camera: str, result: CalibrationResul
 
 
 def diagnostics_message(
-    status: CoverageStatus, counts: dict[str, dict[str, int | str]], rig_values: dict[str, int | str], stamp: Time
+    status: CoverageStatus,
+    counts: dict[str, dict[str, int | str]],
+    rig_values: dict[str, int | str],
+    stamp: Time,
+    source: str = "wand_calib_collector",
 ) -> DiagnosticArray:
-    """/diagnostics: one OK/WARN entry per camera (what is missing) and one for the rig.
+    """/diagnostics: one OK/WARN entry per camera (what is missing) and one for the rig, named
+    ``<source>: <camera>`` and ``<source>: rig`` (``source`` the collector's namespaced name, so an
+    aggregator tells two rigs apart).
 
     Args:
         status: coverage of what the buffer holds.
@@ -161,7 +167,7 @@ def diagnostics_message(
     array = DiagnosticArray()
     array.header.stamp = stamp
     for camera in status.cameras:
-        entry = DiagnosticStatus(name=f"wand_calib: {camera.name}", hardware_id=camera.name)
+        entry = DiagnosticStatus(name=f"{source}: {camera.name}", hardware_id=camera.name)
         entry.level = DiagnosticStatus.OK if camera.ok else DiagnosticStatus.WARN
         entry.message = "ready" if camera.ok else "; ".join(camera.missing)
         values = {
@@ -173,7 +179,7 @@ def diagnostics_message(
         }
         entry.values = [KeyValue(key=key, value=str(value)) for key, value in values.items()]
         array.status.append(entry)
-    rig = DiagnosticStatus(name="wand_calib: rig", hardware_id="rig")
+    rig = DiagnosticStatus(name=f"{source}: rig", hardware_id="rig")
     rig.level = DiagnosticStatus.OK if status.ready else DiagnosticStatus.WARN
     rig.message = "ready to calibrate" if status.ready else " | ".join(status.messages())
     rig.values = [KeyValue(key=key, value=str(value)) for key, value in rig_values.items()]
