@@ -79,7 +79,7 @@ def test_shipped_params_files_name_only_declared_parameters(name: str) -> None:
     document = yaml.safe_load((Path(__file__).parents[2] / "config" / f"{name}.params.yaml").read_text())
     for node, section in document.items():
         keys = set(section["ros__parameters"])
-        allowed = set.union(*declared.values()) if node == "/**" else declared[node]
+        allowed = set.union(*declared.values()) if node == "/**" else declared[node.removeprefix("/**/")]
         assert keys <= allowed, (node, keys - allowed)
 
 
