@@ -97,6 +97,12 @@ def _parser() -> argparse.ArgumentParser:
         "set the world frame (z up, origin at the first lay's A, x along its A->C) instead of being calibrated from",
     )
     cal.add_argument(
+        "--floor-origin",
+        choices=("A", "centre"),
+        default="A",
+        help="the world's origin: the first lay's A (default) or the wand's centre there",
+    )
+    cal.add_argument(
         "--time-offsets",
         choices=TIMING_MODES,
         default="auto",
@@ -296,6 +302,7 @@ def _calibrate(args: argparse.Namespace) -> int:
         max_placements=args.max_placements,
         time_offsets=args.time_offsets,
         floor_frames=args.floor,
+        floor_origin=args.floor_origin,
         rolling_shutter=args.rolling_shutter,
     )
     check_writable(calibration_paths(rig.camera_names, args.output, args.camera_info_dir))  # before the solve

@@ -135,6 +135,11 @@ def test_floor_frames_of_a_recording_set_the_world_of_the_result_file(tmp_path, 
         == 0
     )
     assert yaml.safe_load((tmp_path / "f.yaml").read_text())["world"] == world
+    floor = ["--floor", f"10000-{last}", "--floor-origin", "centre"]
+    assert main(["-q", "calibrate", *argv, "--output", str(tmp_path / "c.yaml"), *floor]) == 0
+    centred = yaml.safe_load((tmp_path / "c.yaml").read_text())["world"]
+    shift = np.array(world["translation"]) - np.array(centred["translation"])  # origin moved L/2 along x
+    assert np.allclose(shift, [scenario.wand.L / 2, 0.0, 0.0], atol=1.0)
     assert main(["-q", "calibrate", *argv, "--output", str(tmp_path / "n.yaml")]) == 0
     assert yaml.safe_load((tmp_path / "n.yaml").read_text())["world"]["frame"] == "reference_camera"
     assert main(["-q", "calibrate", *argv, "--output", str(tmp_path / "x.yaml"), "--floor", "90000-90010"]) == 2

@@ -45,6 +45,7 @@ class CalibrationOptions:
     time_offsets: str = "auto"
     rolling_shutter: str = "auto"
     floor_frames: tuple[int, ...] = ()  # frames of the wand laid still on the floor: the world frame
+    floor_origin: str = "A"  # the world's origin: the first lay's "A" or its "centre"
 
 
 def calibrate(
@@ -110,7 +111,8 @@ def calibrate(
     check_result(rig, result)
     if floor is not None:
         models = tuple(result.camera(n).model for n in names)
-        result = replace(result, world=floor_of(models, tuple(result.camera(n).pose for n in names), floor.uv))
+        poses = tuple(result.camera(n).pose for n in names)
+        result = replace(result, world=floor_of(models, poses, floor.uv, origin=options.floor_origin))
     warnings = [*result.warnings, *rate_warnings(obs, timing.line), *offset_warnings(result)]
     if result.timing is not None and result.timing.time_offsets == "estimated":
         return replace(result, warnings=tuple(warnings))

@@ -65,7 +65,7 @@ def fit_floor(points: FloatArray, camera_centres: FloatArray, *, origin: str = "
         points: (P, K, 3) the floor placements' wand points (A first, C last) in the reference frame,
             mm (NaN rows: placements that could not be triangulated).
         camera_centres: (C, 3) the cameras' centres in the reference frame (z points towards them).
-        origin: "A" (the first lay's A) or "centre" (its midpoint), projected onto the floor; the
+        origin: "A" (the first lay's A) or "centre" (the midpoint of its A and C), projected onto the floor; the
             first lay is the first placement and every still one like it, averaged.
 
     Raises:
@@ -97,7 +97,7 @@ def fit_floor(points: FloatArray, camera_centres: FloatArray, *, origin: str = "
     # one's, pointing the same way), averaged.
     lay = (np.linalg.norm(usable[:, 0] - usable[0, 0], axis=1) < LAY_RADIUS_MM) & (directions @ directions[0] > 0.99)
     first = usable[lay].mean(axis=0)
-    anchor = first[0] if origin == "A" else first.mean(axis=0)
+    anchor = first[0] if origin == "A" else (first[0] + first[-1]) / 2.0  # A, or the midpoint of A and C
     anchor = anchor - ((anchor - centroid) @ normal) * normal  # onto the floor
     x = _on_plane((first[-1] - first[0])[None], normal)[0]
     rotation = np.stack([x, np.cross(normal, x), normal])  # rows: the world axes in the reference frame
@@ -118,8 +118,10 @@ def _on_plane(vectors: FloatArray, normal: FloatArray) -> FloatArray:
     return flat / np.linalg.norm(flat, axis=1, keepdims=True)
 
 
-def floor_of(result_models: tuple[CameraModel, ...], poses: tuple[Pose, ...], uv: FloatArray) -> WorldFrame:
+def floor_of(
+    models: tuple[CameraModel, ...], poses: tuple[Pose, ...], uv: FloatArray, *, origin: str = "A"
+) -> WorldFrame:
     """:func:`fit_floor` of (F, C, 3, 2) views of the wand on the floor, triangulated with calibrated cameras
     (``poses`` relative to the reference camera)."""
-    points = triangulate_placements(result_models, poses, uv)
-    return fit_floor(points, np.array([pose.center for pose in poses]))
+    points = triangulate_placements(models, poses, uv)
+    return fit_floor(points, np.array([pose.center for pose in poses]), origin=origin)
