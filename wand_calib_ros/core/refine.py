@@ -318,7 +318,7 @@ def _final_adjustment(
         if clocks.modelled:
             points = np.full((len(uv), 3, 3), np.nan)
             rest = np.setdiff1d(np.arange(len(uv)), used)
-            rest = rest[(np.all(np.isfinite(uv[rest]), axis=(2, 3)).sum(axis=1) >= 2)]  # the others it can place
+            rest = rest[_enough_views(uv[rest])]  # the others it can place
             if rest.size:
                 aligned = align_views(uv, clocks.line, state.camera_timing, clocks.heights)  # type: ignore[arg-type]
                 points[rest] = triangulate_placements(state.models, state.poses, aligned[rest])

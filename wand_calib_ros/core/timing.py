@@ -268,9 +268,8 @@ def fit_motion(
 def smooth_motion(
     times: FloatArray, points: FloatArray, period: float, window: tuple[int, int] | None = None
 ) -> Motion:
-    """:func:`fit_motion` with the window (of MOTION_WINDOWS) that predicts each placement best from its
-    neighbours (RMS of the leave-one-out residuals over the placements every window determines), or
-    with a window chosen before; the ends of stretches get one-sided quadratic fits.
+    """:func:`fit_motion` with the window :func:`choose_window` picks (or one chosen before); the ends of
+    stretches get one-sided quadratic fits.
 
     How far apart in time a window may reach depends on how fast the wand moved and how noisy its
     points are: the recording itself decides.

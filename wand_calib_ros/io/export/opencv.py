@@ -8,8 +8,6 @@ D)`` gives this package's pixels. Written by cv2.FileStorage itself (so any Open
 
 from __future__ import annotations
 
-import os
-import tempfile
 from collections.abc import Sequence
 
 import cv2
@@ -41,20 +39,13 @@ def documents(cameras: Sequence[ExportedCamera]) -> dict[str, str]:
 
 
 def _file_storage_text(fields: list[tuple[str, np.ndarray | str | int]]) -> str:
-    """The YAML text cv2.FileStorage writes for ``fields`` (it writes only to files)."""
-    handle, name = tempfile.mkstemp(suffix=".yaml")
-    os.close(handle)
-    try:
-        storage = cv2.FileStorage(name, cv2.FILE_STORAGE_WRITE)
-        for key, value in fields:
-            if isinstance(value, np.ndarray):
-                storage.write(key, np.asarray(value, dtype=np.float64))
-            elif isinstance(value, str):
-                storage.write(key, value)
-            else:
-                storage.write(key, int(value))
-        storage.release()
-        with open(name, encoding="utf-8") as text:
-            return text.read()
-    finally:
-        os.unlink(name)
+    """The YAML text cv2.FileStorage writes for ``fields``."""
+    storage = cv2.FileStorage(".yaml", cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_MEMORY)
+    for key, value in fields:
+        if isinstance(value, np.ndarray):
+            storage.write(key, np.asarray(value, dtype=np.float64))
+        elif isinstance(value, str):
+            storage.write(key, value)
+        else:
+            storage.write(key, int(value))
+    return str(storage.releaseAndGetString())
