@@ -12,7 +12,18 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-SOURCES = ("setup.py", "setup.cfg", "package.xml", "pyproject.toml", "README.md", "LICENSE", "resource", "config")
+SOURCES = (
+    "setup.py",
+    "setup.cfg",
+    "package.xml",
+    "pyproject.toml",
+    "README.md",
+    "LICENSE",
+    "resource",
+    "config",
+    "launch",
+)
+NODES = ("collector", "calibrator", "detector", "replay", "trigger")
 
 
 def test_plain_pip_install_puts_the_console_script_and_ament_resources_in_place(tmp_path: Path) -> None:
@@ -44,8 +55,9 @@ def test_plain_pip_install_puts_the_console_script_and_ament_resources_in_place(
     )
     script = prefix / "bin" / "wand-calib"
     assert script.exists()
-    for node in ("collector", "calibrator", "detector", "wand-calib-replay", "wand-calib-trigger"):
-        assert (prefix / "bin" / node).exists(), node
+    for node in NODES:  # on a user's PATH with the package's prefix, never as a generic "collector"
+        assert (prefix / "bin" / f"wand-calib-{node}").exists(), node
+        assert not (prefix / "bin" / node).exists(), node
     assert (prefix / "share" / "ament_index" / "resource_index" / "packages" / "wand_calib_ros").exists()
     assert (prefix / "share" / "wand_calib_ros" / "package.xml").exists()
     assert (prefix / "share" / "wand_calib_ros" / "config" / "paper_fisheye_pair.yaml").exists()
@@ -56,6 +68,14 @@ def test_plain_pip_install_puts_the_console_script_and_ament_resources_in_place(
         [sys.executable, str(script), "--help"], capture_output=True, text=True, env=env, timeout=120
     )
     assert completed.returncode == 0 and "calibrate" in completed.stdout
+    completed = subprocess.run(
+        [sys.executable, str(prefix / "bin" / "wand-calib-collector"), "--help"],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=120,
+    )
+    assert completed.returncode == 0 and "parameters of wand_calib_collector" in completed.stdout
 
 
 def test_colcon_build_then_start_the_collector_as_ros2_run_would(tmp_path: Path) -> None:
@@ -84,13 +104,20 @@ def test_colcon_build_then_start_the_collector_as_ros2_run_would(tmp_path: Path)
     environment = dict(item.split("=", 1) for item in environ.split("\0") if "=" in item)
     executable = Path(prefix) / "lib" / "wand_calib_ros" / "collector"
     assert executable.exists() and Path(prefix) == workspace / "install" / "wand_calib_ros"
-    rig = Path(share) / "config" / "paper_fisheye_pair.yaml"
-    assert rig.exists() and (Path(share) / "config" / "collector.params.yaml").exists()
+    for node in NODES:
+        assert (Path(prefix) / "lib" / "wand_calib_ros" / node).exists(), node
+    assert (Path(share) / "launch" / "wand_calib.launch.py").exists()
+    params = Path(share) / "config" / "collector.params.yaml"
+    assert (Path(share) / "config" / "paper_fisheye_pair.yaml").exists() and params.exists()
     environment["ROS_DOMAIN_ID"] = str(random.SystemRandom().randrange(30, 200))
     log = tmp_path / "collector.log"
+    elsewhere = tmp_path / "elsewhere"  # not the source tree: the params file's config/... comes from share/
+    elsewhere.mkdir()
+    command = [str(executable), "--ros-args", "--params-file", str(params), "-r", "__node:=my_collector"]
     with log.open("wb") as output:
         process = subprocess.Popen(
-            [str(executable), "--ros-args", "-p", f"cameras_file:={rig}", "-p", f"output_dir:={tmp_path / 'out'}"],
+            [*command, "-p", f"output_dir:={tmp_path / 'out'}"],
+            cwd=elsewhere,
             env=environment,
             stdout=output,
             stderr=subprocess.STDOUT,
@@ -100,7 +127,11 @@ def test_colcon_build_then_start_the_collector_as_ros2_run_would(tmp_path: Path)
         while "/calibrate reads" not in log.read_text() and time.monotonic() < deadline:
             assert process.poll() is None, log.read_text()
             time.sleep(0.2)
-        assert "collecting cam0, cam1" in log.read_text() and "/calibrate reads" in log.read_text()
+        text = log.read_text()
+        assert "collecting cam0, cam1" in text and "/calibrate reads" in text
+        # The rename is the collector's; the calibrator keeps its name (and its params-file section).
+        assert "[my_collector]: collecting" in text and "[wand_calib_calibrator]: /calibrate reads" in text
+        assert "is not a parameter" not in text, text
     finally:
         process.send_signal(signal.SIGTERM)
         code = process.wait(timeout=30)

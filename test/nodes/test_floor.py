@@ -26,6 +26,11 @@ from wand_calib_ros.nodes.calibrator import CalibratorNode  # noqa: E402
 from wand_calib_ros.nodes.collector import POINTS_QOS, CollectorNode  # noqa: E402
 from wand_calib_ros.nodes.messages import points_message  # noqa: E402
 
+try:  # tf2_msgs comes with ROS, not with the PyPI wheels
+    from tf2_msgs.msg import TFMessage
+except ImportError:
+    TFMessage = None
+
 HOLD_S = 1.0
 
 
@@ -56,6 +61,7 @@ def test_set_floor_twice_then_calibrate_publishes_the_cameras_in_the_world(ros: 
         )
     )
     transforms = ros.collect(TransformStamped, "wand_calib/cam1/extrinsics", LATCHED)
+    tf_static = ros.collect(TFMessage, "/tf_static", LATCHED) if TFMessage is not None else None
     publishers = {
         n: ros.helper.create_publisher(PolygonStamped, f"/{n}/wand_points", POINTS_QOS)
         for n in scenario.rig.camera_names
@@ -100,6 +106,30 @@ def test_set_floor_twice_then_calibrate_publishes_the_cameras_in_the_world(ros: 
     assert wait_until(lambda: bool(transforms), 5)
     assert transforms[-1].header.frame_id == "world" and transforms[-1].child_frame_id == "cam1"
     assert transforms[-1].transform.translation.z > 0.1  # cam1 above the floor (metres)
+    if tf_static is not None:  # tf2_msgs is in every ROS install, not in the PyPI wheels
+        assert wait_until(lambda: bool(tf_static), 5)
+        published = {t.child_frame_id: t for t in tf_static[-1].transforms}
+        assert sorted(published) == ["cam0", "cam1", "cam2"]
+        assert {t.header.frame_id for t in published.values()} == {"world"}
+        assert published["cam1"].transform == transforms[-1].transform
+
+
+def test_tf_static_holds_every_camera_but_none_as_its_own_parent() -> None:
+    from rigs import scenario_data
+
+    from wand_calib_ros.core.pipeline import calibrate
+    from wand_calib_ros.nodes.messages import extrinsics_message, static_transforms
+
+    scenario, data, _ = scenario_data("paper3", 0, noise=0.5)
+    result = calibrate(scenario.rig, data.observations)
+    transforms = static_transforms(result, Time(), frame_ids={"cam0": "left"})
+    names = {"cam0": "left", "cam1": "cam1", "cam2": "cam2"}
+    reference = names[result.reference_camera]
+    assert sorted(t.child_frame_id for t in transforms) == sorted(set(names.values()) - {reference})
+    assert {t.header.frame_id for t in transforms} == {reference}
+    for t in transforms:
+        camera = next(c for c, f in names.items() if f == t.child_frame_id)
+        assert t == extrinsics_message(result, camera, Time(), frame_ids={"cam0": "left"})
 
 
 def test_published_frames_follow_the_rig_files_frame_ids() -> None:

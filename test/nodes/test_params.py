@@ -114,3 +114,24 @@ def test_feedback_keeps_flowing_with_sim_time_and_no_clock(ros: Ros, tmp_path: P
     assert wait_until(lambda: len(diagnostics) >= 2, 10)
     names = {status.name for status in diagnostics[-1].status}  # which collector: an aggregator tells rigs apart
     assert {"rig1/wand_calib_collector: cam0", "rig1/wand_calib_collector: rig"} <= names
+
+
+def test_a_relative_rig_path_is_also_looked_up_in_the_installed_share_folder(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from wand_calib_ros.nodes.params import existing_file
+
+    prefix = tmp_path / "install"
+    (prefix / "share" / "ament_index" / "resource_index" / "packages").mkdir(parents=True)
+    (prefix / "share" / "ament_index" / "resource_index" / "packages" / "wand_calib_ros").touch()
+    (prefix / "share" / "wand_calib_ros" / "config").mkdir(parents=True)
+    save_rig(paper_fisheye_scenario().rig, prefix / "share" / "wand_calib_ros" / "config" / "rig.yaml")
+    monkeypatch.setenv("AMENT_PREFIX_PATH", str(prefix))
+    monkeypatch.chdir(tmp_path)
+    found = existing_file({"cameras_file": "config/rig.yaml"}, "cameras_file")
+    assert found == prefix / "share" / "wand_calib_ros" / "config" / "rig.yaml"
+    (tmp_path / "config").mkdir()
+    save_rig(paper_fisheye_scenario().rig, tmp_path / "config" / "rig.yaml")  # the working directory wins
+    assert existing_file({"cameras_file": "config/rig.yaml"}, "cameras_file") == Path("config/rig.yaml")
+    with pytest.raises(SettingsError, match=r"no such file config/none.yaml \(nor in .*share/wand_calib_ros\)"):
+        existing_file({"cameras_file": "config/none.yaml"}, "cameras_file")

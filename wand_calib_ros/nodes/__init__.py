@@ -14,7 +14,8 @@ from pathlib import Path
 from types import FrameType
 
 #: The executables whose start this package guards (console scripts, ``ros2 run`` names).
-EXECUTABLES = frozenset({"collector", "calibrator", "detector", "wand-calib-replay", "wand-calib-trigger", "demo"})
+_NODES = ("collector", "calibrator", "detector", "replay", "trigger")
+EXECUTABLES = frozenset({*_NODES, *(f"wand-calib-{name}" for name in _NODES), "demo"})
 
 
 def _stop_quietly(signum: int, frame: FrameType | None) -> None:

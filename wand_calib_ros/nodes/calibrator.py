@@ -7,8 +7,10 @@ when a run is already in progress, and with what is missing or why the solve
 failed otherwise; on success with per camera RMS, the wand-length RMS and the
 result's path. It publishes per camera ``wand_calib/<cam>/camera_info``
 (sensor_msgs/CameraInfo, ``equidistant``) and ``wand_calib/<cam>/extrinsics``
-(geometry_msgs/TransformStamped, parent = reference camera), both
-transient-local, and writes ``result.yaml``, ``camera_info/<cam>.yaml`` and
+(geometry_msgs/TransformStamped, parent = reference camera, or ``world_frame``
+once a floor was set), both transient-local, the same transforms on ``/tf_static``
+(tf2_msgs/TFMessage, latched like tf2's static broadcaster) whenever tf2_msgs is
+importable (every ROS install; not the PyPI wheels), and writes ``result.yaml``, ``camera_info/<cam>.yaml`` and
 ``report/index.html``. With ``commit_to_drivers`` it sends each camera's
 CameraInfo to its driver's ``set_camera_info`` service, as ROS
 camera_calibration's commit does.
@@ -28,6 +30,11 @@ from pathlib import Path
 from typing import Any
 
 from geometry_msgs.msg import TransformStamped
+
+try:  # any ROS install has tf2_msgs; the PyPI wheels do not (README: "Camera poses on /tf_static")
+    from tf2_msgs.msg import TFMessage
+except ImportError:  # pragma: no cover - depends on the ROS install
+    TFMessage = None
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.context import Context
 from rclpy.node import Node
@@ -55,6 +62,7 @@ from wand_calib_ros.nodes.params import (
     coverage_thresholds,
     declare,
     existing_file,
+    usage,
 )
 from wand_calib_ros.nodes.runner import run
 
@@ -149,6 +157,9 @@ class CalibratorNode(Node):
             name: self.create_publisher(TransformStamped, f"wand_calib/{name}/extrinsics", LATCHED)
             for name in self.rig.camera_names
         }
+        self.tf_static = self.create_publisher(TFMessage, "/tf_static", LATCHED) if TFMessage is not None else None
+        if self.tf_static is None:
+            self.get_logger().info("tf2_msgs is not installed: camera poses go to wand_calib/<cam>/extrinsics only")
         self.drivers = {  # only when committing: idle clients would list services no driver offers
             name: self.create_client(SetCameraInfo, endpoint.set_camera_info, callback_group=group)
             for name, endpoint in self.endpoints.items()
@@ -225,6 +236,9 @@ class CalibratorNode(Node):
             self.info_publishers[name].publish(messages.camera_info_message(result, name, stamp, self.frame_ids[name]))
             transform = messages.extrinsics_message(result, name, stamp, self.world_frame, self.frame_ids)
             self.extrinsics_publishers[name].publish(transform)
+        if self.tf_static is not None and TFMessage is not None:
+            transforms = messages.static_transforms(result, stamp, self.world_frame, self.frame_ids)
+            self.tf_static.publish(TFMessage(transforms=transforms))
         if self.after_calibrate is not None:
             self.after_calibrate(result)
         answer = summary(result, files)
@@ -268,14 +282,14 @@ def export_formats(text: str) -> tuple[str, ...]:
     return names
 
 
-def build(context: Context) -> list[Node]:
+def build(context: Context, args: Sequence[str] = ()) -> list[Node]:
     """A calibrator on its own (on the buffer file of a collector elsewhere)."""
     return [CalibratorNode(context=context)]
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``ros2 run wand_calib_ros calibrator --ros-args -p cameras_file:=... -p output_dir:=...``"""
-    return run("calibrator", build, argv)
+    return run("calibrator", build, argv, help_text=usage("calibrator", __doc__, ("wand_calib_calibrator", PARAMS)))
 
 
 if __name__ == "__main__":

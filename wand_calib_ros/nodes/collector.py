@@ -54,8 +54,9 @@ from wand_calib_ros.nodes.params import (
     declare,
     existing_file,
     image_qos,
+    usage,
 )
-from wand_calib_ros.nodes.runner import run
+from wand_calib_ros.nodes.runner import run, second_node_arguments
 
 PARAMS = (
     *RIG,
@@ -277,22 +278,34 @@ class CollectorNode(Node):
         return response
 
 
-def build(context: Context) -> list[Node]:
-    """The collector and, unless ``with_calibrator`` is false, the calibrator fed by it."""
+def build(context: Context, args: Sequence[str] = ()) -> list[Node]:
+    """The collector and, unless ``with_calibrator`` is false, the calibrator fed by it.
+
+    The calibrator keeps its own name under ``-r __node:=NAME`` (which renames the collector).
+    """
     from wand_calib_ros.nodes.calibrator import CalibratorNode
 
     collector = CollectorNode(context=context)
     if not collector.with_calibrator:
         return [collector]
     calibrator = CalibratorNode(
-        context=context, before_calibrate=collector.flush, after_calibrate=collector.after_calibrate
+        context=context,
+        before_calibrate=collector.flush,
+        after_calibrate=collector.after_calibrate,
+        cli_args=second_node_arguments(args),
+        use_global_arguments=False,
     )
     return [collector, calibrator]
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``ros2 run wand_calib_ros collector --ros-args --params-file config/<rig>.params.yaml``"""
-    return run("collector", build, argv)
+    from wand_calib_ros.nodes import calibrator
+
+    help_text = usage(
+        "collector", __doc__, ("wand_calib_collector", PARAMS), ("wand_calib_calibrator", calibrator.PARAMS)
+    )
+    return run("collector", build, argv, help_text=help_text)
 
 
 if __name__ == "__main__":

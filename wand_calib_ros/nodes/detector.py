@@ -38,6 +38,7 @@ from wand_calib_ros.nodes.params import (
     declare,
     existing_file,
     image_qos,
+    usage,
 )
 from wand_calib_ros.nodes.runner import run
 
@@ -91,13 +92,13 @@ class DetectorNode(Node):
             self._publish(outcomes)
 
 
-def build(context: Context) -> list[Node]:
+def build(context: Context, args: Sequence[str] = ()) -> list[Node]:
     return [DetectorNode(context=context)]
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``ros2 run wand_calib_ros detector --ros-args -p cameras_file:=... -p camera:=cam0``"""
-    return run("detector", build, argv)
+    return run("detector", build, argv, help_text=usage("detector", __doc__, ("wand_calib_detector", PARAMS)))
 
 
 if __name__ == "__main__":

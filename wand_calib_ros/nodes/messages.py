@@ -118,6 +118,16 @@ def extrinsics_message(
     return message
 
 
+def static_transforms(
+    result: CalibrationResult, stamp: Time, world_frame: str = "world", frame_ids: Mapping[str, str] | None = None
+) -> list[TransformStamped]:
+    """Every camera's :func:`extrinsics_message` for ``/tf_static``, except a frame that would be its own
+    parent (the reference camera when no floor was given): tf refuses such a transform."""
+    names = [camera.name for camera in result.cameras]
+    transforms = [extrinsics_message(result, name, stamp, world_frame, frame_ids) for name in names]
+    return [t for t in transforms if t.header.frame_id != t.child_frame_id]
+
+
 def frame_stamps(frame: SyncedFrame) -> NDArray[np.float64]:
     """(C,) each view's stamp in seconds (NaN where a camera has no image in the frame)."""
     return np.where(frame.reported, frame.stamps_ns / 1e9, np.nan)

@@ -8,7 +8,7 @@ names the parameter and what to write instead.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -98,12 +98,70 @@ def declare(node: Node, params: Iterable[Param]) -> dict[str, Any]:
     return values
 
 
+def package_share() -> Path | None:
+    """This package's installed share directory (colcon or pip install), None when not installed."""
+    try:
+        from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
+    except ImportError:  # pragma: no cover - rclpy's wheels bring ament_index_python
+        return None
+    try:
+        return Path(get_package_share_directory("wand_calib_ros"))
+    except (PackageNotFoundError, ValueError):  # ValueError: AMENT_PREFIX_PATH unset
+        return None
+
+
 def existing_file(values: dict[str, Any], name: str) -> Path:
-    """The file a parameter names (SettingsError when it does not exist)."""
+    """The file a parameter names (SettingsError when it does not exist).
+
+    A relative path is read from the working directory or, failing that, from the package's share
+    directory, so the shipped params files (``cameras_file: config/...``) work from any directory
+    once the package is installed.
+    """
     path = Path(values[name]).expanduser()
-    if not path.is_file():
-        raise SettingsError(f"parameter {name}: no such file {path}")
-    return path
+    if path.is_file():
+        return path
+    share = package_share() if not path.is_absolute() else None
+    if share is not None and (share / path).is_file():
+        return share / path
+    where = f" (nor in {share})" if share is not None and not path.is_absolute() else ""
+    raise SettingsError(f"parameter {name}: no such file {path}{where}")
+
+
+def usage(executable: str, summary: str | None, *groups: tuple[str, Sequence[Param]]) -> str:
+    """The ``--help`` text of a node executable: what it does and every parameter it reads.
+
+    Args:
+        executable: the ``ros2 run wand_calib_ros`` name.
+        summary: the node module's docstring (its first paragraph is used).
+        groups: (node name, its parameters) for each node the executable starts.
+    """
+    first = (summary or "").strip().split("\n\n")[0]
+    lines = [
+        f"usage: ros2 run wand_calib_ros {executable} --ros-args [-p NAME:=VALUE ...] [--params-file FILE]",
+        "",
+        " ".join(first.split()),
+    ]
+    shown: set[str] = set()
+    for node, params in groups:
+        shared = [param.name for param in params if param.name in shown]
+        lines += ["", f"parameters of {node}" + (f" (also {', '.join(shared)}, above):" if shared else ":")]
+        for param in params:
+            if param.name in shown:
+                continue
+            shown.add(param.name)
+            kind = type(param.default).__name__
+            number = int if kind == "int" else float
+            limits = (
+                f", one of {'|'.join(param.choices)}"
+                if param.choices
+                else f", {number(param.low)}..{number(param.high)}"
+                if param.low is not None and param.high is not None
+                else ""
+            )
+            default = "required" if param.required else f"default {param.default!r}"
+            lines.append(f"  {param.name} ({kind}, {default}{limits})")
+            lines.append(f"      {param.description}")
+    return "\n".join(lines)
 
 
 #: Parameters every wand_calib node reads.

@@ -20,7 +20,7 @@ from wand_calib_ros.errors import WandCalibError
 from wand_calib_ros.io.bags import read_image_frames
 from wand_calib_ros.io.rig_yaml import load_camera_endpoints
 from wand_calib_ros.nodes import messages
-from wand_calib_ros.nodes.params import Param, declare, existing_file, image_qos
+from wand_calib_ros.nodes.params import Param, declare, existing_file, image_qos, usage
 from wand_calib_ros.nodes.runner import EXIT_SETTINGS, run
 
 REPLAY_PARAMS = (
@@ -85,7 +85,12 @@ class ReplayNode(Node):
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``ros2 run wand_calib_ros replay --ros-args -p bag:=... -p cameras_file:=...``"""
-    return run("replay", lambda context: [ReplayNode(context=context, on_done=context.try_shutdown)], argv)
+    return run(
+        "replay",
+        lambda context, _args: [ReplayNode(context=context, on_done=context.try_shutdown)],
+        argv,
+        help_text=usage("replay", __doc__, ("wand_calib_replay", REPLAY_PARAMS)),
+    )
 
 
 if __name__ == "__main__":

@@ -21,7 +21,13 @@ exits 0. A :class:`WandCalibError` while building the nodes (a bad parameter, an
 unreadable rig file), a ``--params-file`` that cannot be read, or a node that ends
 with ``exit_code`` set (the replay of an unreadable bag) is one FATAL log line and
 exit code 2; a parameter given that no node of the process declares gets a warning
-naming the declared one it resembles.
+naming the declared one it resembles. ``--help`` (before ``--ros-args``) prints what the
+executable does and every parameter it reads, and exits 0.
+
+A node rename on the command line (``-r __node:=NAME``) is meant for the executable's main
+node: a second node of the process (the collector's calibrator) is built with
+:func:`second_node_arguments`, the process's ROS arguments without that rename, so it keeps
+its own name and its params-file section.
 """
 
 from __future__ import annotations
@@ -171,20 +177,68 @@ def _init_error(message: str) -> str:
     return "cannot start ROS: " + " ".join(message.split(", at /")[0].split())
 
 
-def run(name: str, build: Callable[[Context], list[Node]], argv: Sequence[str] | None = None) -> int:
+#: Remap rules that rename "the" node of a process (rcl applies them to every node it starts).
+_RENAMES = ("__node:=", "__name:=")
+
+
+def second_node_arguments(args: Sequence[str]) -> list[str]:
+    """The ROS arguments of ``args`` (every ``--ros-args`` block) without an untargeted node rename.
+
+    Passed as ``cli_args`` with ``use_global_arguments=False`` to a second node of the process,
+    it keeps namespace remaps, parameters, params files and log levels but not the main node's
+    new name (a rename targeted at it, ``wand_calib_calibrator:__node:=cal``, still applies).
+    """
+    kept: list[str] = ["--ros-args"]
+    inside = dropping = False
+    for index, token in enumerate(args):
+        if dropping:
+            dropping = False
+        elif token == "--ros-args":
+            inside = True
+        elif token == "--":
+            inside = False
+        elif inside:
+            following = args[index + 1] if index + 1 < len(args) else ""
+            if token in ("-r", "--remap") and following.startswith(_RENAMES):
+                dropping = True
+            else:
+                kept.append(token)
+    return kept
+
+
+def wants_help(args: Sequence[str]) -> bool:
+    """``-h`` or ``--help`` among the arguments before the first ``--ros-args``."""
+    before = list(args[1:])
+    if "--ros-args" in before:
+        before = before[: before.index("--ros-args")]
+    return "-h" in before or "--help" in before
+
+
+def run(
+    name: str,
+    build: Callable[[Context, Sequence[str]], list[Node]],
+    argv: Sequence[str] | None = None,
+    *,
+    help_text: str = "",
+) -> int:
     """Run the nodes ``build`` makes until Ctrl-C, SIGTERM or their context shuts down.
 
     Args:
         name: the executable's name (for the start-up error line).
-        build: makes the nodes in the given context (raises WandCalibError on bad settings).
+        build: makes the nodes in the given context from the command line (raises
+            WandCalibError on bad settings).
         argv: command line (``--ros-args ...``); ``sys.argv`` when None.
+        help_text: printed for ``--help`` (exit 0 without starting ROS).
 
     Returns:
         The process exit code.
     """
+    args = list(argv) if argv is not None else sys.argv
+    if help_text and wants_help(args):
+        print(help_text)
+        return 0
     use_large_image_transport(os.environ)  # before the first participant reads the profile
     sys.unraisablehook = _quiet_half_built_executors
-    args = list(argv) if argv is not None else sys.argv
     problem = params_file_problem(args)
     if problem is not None:  # before rcl, which would add its own error line
         rclpy.logging.get_logger(name).fatal(problem)
@@ -203,7 +257,7 @@ def run(name: str, build: Callable[[Context], list[Node]], argv: Sequence[str] |
     stopped = threading.Event()
     context.on_shutdown(stopped.set)
     try:
-        nodes = build(context)
+        nodes = build(context, args)
         for node in nodes:
             spinner.add(node)
         for line in undeclared_parameters(nodes):
