@@ -287,3 +287,25 @@ def test_estimating_offsets_of_independent_placements_is_one_clear_line(
     assert _calibrate(simulated, tmp_path, "--time-offsets", "estimate") == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "time offsets cannot be estimated" in err[0]
+
+
+def test_calibrate_with_the_intrinsics_given_in_cameras_yaml(simulated: Path, tmp_path: Path) -> None:
+    truth = yaml.safe_load((simulated / "truth.yaml").read_text())
+    rig = yaml.safe_load((simulated / "cameras.yaml").read_text())
+    for camera in rig["cameras"]:  # a board calibration of each camera: OpenCV fisheye K and D
+        opencv = truth["cameras"][camera["name"]]["opencv_equidistant"]
+        camera["intrinsics"] = {"K": opencv["camera_matrix"], "D": opencv["distortion"]}
+    sim = tmp_path / "sim"
+    sim.mkdir()
+    (sim / "cameras.yaml").write_text(yaml.safe_dump(rig))
+    (sim / "observations.csv").write_bytes((simulated / "observations.csv").read_bytes())
+    assert _calibrate(sim, tmp_path) == 0
+    result = yaml.safe_load((tmp_path / "result.yaml").read_text())
+    for name in ("cam0", "cam1"):
+        camera = result["cameras"][name]
+        assert camera["intrinsics"] == "given" and camera["initial_projection"] == "given"
+        given = truth["cameras"][name]["opencv_equidistant"]
+        assert np.allclose(camera["opencv_equidistant"]["camera_matrix"], given["camera_matrix"], rtol=1e-12)
+        assert np.allclose(camera["opencv_equidistant"]["distortion"], given["distortion"], rtol=1e-9, atol=1e-15)
+        assert not {"k1", "u0", "v0"} & set(camera["std"])
+    assert np.allclose(result["cameras"]["cam1"]["translation"], truth["cameras"]["cam1"]["translation"], atol=10.0)

@@ -512,11 +512,14 @@ def _report(args: argparse.Namespace) -> int:
 
 
 def _export(args: argparse.Namespace) -> int:
-    from wand_calib_ros.io.export import ExportedCamera, export
+    from wand_calib_ros.io.export import WORLD_FORMATS, ExportedCamera, export
+    from wand_calib_ros.io.result_yaml import read_world_poses
 
     reference, geometry = read_result(args.result)
     order = [reference, *(name for name in geometry if name != reference)]  # the reference first
-    cameras = [ExportedCamera(name, geometry[name].model, geometry[name].pose) for name in order]
+    world = read_world_poses(args.result) if args.format in WORLD_FORMATS else None
+    poses = {name: geometry[name].pose for name in order} if world is None else world
+    cameras = [ExportedCamera(name, geometry[name].model, poses[name]) for name in order]
     for path in export(cameras, args.format, args.out):
         print(f"wrote {path}")
     return 0

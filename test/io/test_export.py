@@ -13,6 +13,7 @@ import yaml
 from wand_calib_ros.cli import main
 from wand_calib_ros.core.camera_model import project
 from wand_calib_ros.core.geometry import Pose
+from wand_calib_ros.io.errors import ExportError
 from wand_calib_ros.io.export import ExportedCamera, export
 from wand_calib_ros.io.result_yaml import camera_info_dict
 from wand_calib_ros.sim.scenarios import SCENARIOS
@@ -166,9 +167,53 @@ def test_the_export_command_writes_a_result_in_each_format(tmp_path: Path, capsy
         out = tmp_path / name
         assert main(["export", "--result", str(folder / "result.yaml"), "--format", name, "--out", str(out)]) == 0
         assert len(list(out.iterdir())) == files
+    capsys.readouterr()
+    code = main(["export", "--result", str(folder / "result.yaml"), "--format", "dlt", "--out", str(tmp_path / "d")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "camera cam0: DLT coefficients describe distortion-free pinhole cameras" in err
+    assert "\n" not in err and "Traceback" not in err and not (tmp_path / "d").exists()
     (tmp_path / "plain").write_text("a file\n")
     capsys.readouterr()
     code = main(
         ["export", "--result", str(folder / "result.yaml"), "--format", "kalibr", "--out", str(tmp_path / "plain")]
     )
     assert code == 2 and "plain is a file, not a folder" in capsys.readouterr().err
+
+
+def test_dlt_coefficients_of_pinhole_cameras_project_as_we_do_with_the_bottom_left_origin(tmp_path: Path) -> None:
+    from wand_calib_ros.core.known_intrinsics import from_pinhole_radtan
+    from wand_calib_ros.io.export.dlt import MAX_PINHOLE_ERROR_PX
+
+    rng = np.random.default_rng(3)
+    cameras, at_origin = [], []
+    offset = np.array([100.0, 200.0, -2500.0])  # a world frame: X_ref = X_world + offset
+    for index, camera in enumerate(_cameras("conventional")):  # the poses of a rig, pinhole lenses
+        K = np.array([[900.0 + 50 * index, 0.0, 630.0], [0.0, 905.0 + 50 * index, 515.0], [0.0, 0.0, 1.0]])
+        model, _ = from_pinhole_radtan(K, np.zeros(4), camera.model.m, (1280, 1024))
+        world_pose = Pose(camera.pose.rotation, camera.pose.rotation @ offset + camera.pose.translation)
+        cameras.append(ExportedCamera(camera.name, model, world_pose))
+        at_origin.append(ExportedCamera(camera.name, model, camera.pose))
+    with pytest.raises(ExportError, match="cam0: DLT coefficients cannot describe a camera whose focal plane holds"):
+        export(at_origin, "dlt", tmp_path)  # the reference frame: cam0 sits at its origin
+    (path,) = export(cameras, "dlt", tmp_path)
+    table = np.loadtxt(path, delimiter=",")
+    assert table.shape == (11, len(cameras))
+    for c, camera in enumerate(cameras):
+        points = _points_seen_by(camera, rng)
+        points = points[_in_image(camera, points)]
+        L = table[:, c]
+        w = points @ L[8:11] + 1.0
+        u = (points @ L[0:3] + L[3]) / w
+        v = (points @ L[4:7] + L[7]) / w
+        ours = _ours(camera, points)
+        expected = np.column_stack([ours[:, 0], camera.model.image_size[1] - ours[:, 1]])
+        assert len(points) > 50
+        assert np.abs(np.column_stack([u, v]) - expected).max() < MAX_PINHOLE_ERROR_PX
+
+
+def test_dlt_refuses_a_fisheye_by_name(tmp_path: Path) -> None:
+    with pytest.raises(ExportError, match=r"camera cam0: DLT coefficients describe distortion-free pinhole cameras"):
+        export(_cameras("mixed"), "dlt", tmp_path / "mixed")
+    with pytest.raises(ExportError, match=r"camera cam0: .*differs from any pinhole by \d+\.\d px"):
+        export(_cameras("conventional"), "dlt", tmp_path / "conventional")
+    assert not (tmp_path / "mixed").exists() and not (tmp_path / "conventional").exists()

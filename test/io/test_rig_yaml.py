@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import re
 from dataclasses import replace
 from pathlib import Path
 
 import pytest
+import yaml
 
 from wand_calib_ros.core.rig import RigSpec
 from wand_calib_ros.io.errors import FormatError
@@ -95,3 +97,59 @@ def test_frame_ids_default_to_the_camera_names_and_are_checked(tmp_path: Path) -
     path.write_text(text.replace("- name: cam1\n", "- name: cam1\n  frame_id: /cam1\n"))
     with pytest.raises(FormatError, match="camera 'cam1' frame_id must be a tf frame name"):
         load_camera_endpoints(path)
+
+
+def test_known_intrinsics_round_trip_and_come_from_a_camera_info_file(tmp_path: Path) -> None:
+    import numpy as np
+
+    from wand_calib_ros.io.result_yaml import camera_info_dict, write_yaml
+    from wand_calib_ros.sim.scenarios import paper_fisheye_scenario
+
+    scenario = paper_fisheye_scenario()
+    truth = scenario.cameras[1].model
+    given = replace(scenario.rig.cameras[1], intrinsics=truth, intrinsics_fixed=False)
+    rig = RigSpec(scenario.rig.wand, (scenario.rig.cameras[0], given))
+    save_rig(rig, tmp_path / "rig.yaml")
+    back = load_rig(tmp_path / "rig.yaml").cameras[1]
+    assert back.intrinsics is not None and not back.intrinsics_fixed and not back.holds_intrinsics
+    assert np.allclose(back.intrinsics.intrinsic_vector(), truth.intrinsic_vector(), rtol=1e-12, atol=1e-12)
+    # a ROS camera_info YAML (as camera_calibration or this package writes it), relative to cameras.yaml
+    (tmp_path / "info").mkdir()
+    write_yaml(camera_info_dict("cam1", truth), tmp_path / "info" / "cam1.yaml")
+    document = yaml.safe_load((tmp_path / "rig.yaml").read_text())
+    document["cameras"][1]["intrinsics"] = "info/cam1.yaml"
+    (tmp_path / "rig.yaml").write_text(yaml.safe_dump(document))
+    from_file = load_rig(tmp_path / "rig.yaml").cameras[1]
+    assert from_file.holds_intrinsics and from_file.intrinsics is not None
+    assert np.allclose(from_file.intrinsics.intrinsic_vector(), truth.intrinsic_vector(), rtol=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("intrinsics", "message"),
+    [
+        ("{K: [800, 0, 320, 0, 800, 240, 0, 0, 1]}", "camera 'cam0' intrinsics lacks D"),
+        ("{K: [800, 0, 320, 0, 800], D: [0, 0, 0, 0]}", "camera 'cam0' intrinsics K must be a list of 9 numbers"),
+        ("{K: [800, 0, 320, 0, 800, 240, 0, 0, 1], D: [0, 0, 0, 0], fixed: yes please}", "fixed must be true or false"),
+        ("{K: [800, 0, 320, 0, 800, 240, 0, 0, 1], D: [0, 0, 0]}", "equidistant distortion has 4 coefficients"),
+        (
+            "{K: [800, 0, 320, 0, 800, 240, 0, 0, 1], D: [0, 0, 0, 0], distortion_model: kb8}",
+            "distortion model 'kb8' is not supported",
+        ),
+        (
+            "{K: [300, 0, 320, 0, 300, 240, 0, 0, 1], D: [-0.05, 0, 0.002, 0], distortion_model: plumb_bob}",
+            "camera 'cam0': the plumb_bob intrinsics differ",
+        ),
+        ("missing.yaml", "camera 'cam0' intrinsics: no such camera_info file"),
+        ("wrong_size.yaml", "is for 1280x1024 images, the camera's image_size is 640x480"),
+    ],
+)
+def test_known_intrinsics_that_cannot_be_used_are_named(tmp_path: Path, intrinsics: str, message: str) -> None:
+    (tmp_path / "wrong_size.yaml").write_text(
+        "image_width: 1280\nimage_height: 1024\ncamera_matrix: {data: [800, 0, 640, 0, 800, 512, 0, 0, 1]}\n"
+        "distortion_model: equidistant\ndistortion_coefficients: {data: [0, 0, 0, 0]}\n"
+    )
+    text = GOOD.replace("max_view_angle_deg: 92.5}", f"max_view_angle_deg: 92.5, intrinsics: {intrinsics}}}", 1)
+    (tmp_path / "cameras.yaml").write_text(text)
+    with pytest.raises(FormatError, match=re.escape(message)) as raised:
+        load_rig(tmp_path / "cameras.yaml")
+    assert "cameras.yaml" in str(raised.value) or "wrong_size" in str(raised.value)

@@ -32,7 +32,7 @@ from wand_calib_ros.nodes.runner import EXIT_SETTINGS  # noqa: E402
         (CollectorNode, {"input": "video"}, "input must be one of images, points"),
         (CollectorNode, {"min_image_fraction": 1.5}, "min_image_fraction must lie in [0.0, 1.0]"),
         (CalibratorNode, {"commit_to_drivers": "yes"}, "commit_to_drivers must be a bool"),
-        (CalibratorNode, {"export_formats": "opencv, dlt"}, "export_formats: unknown format(s) dlt; known: opencv"),
+        (CalibratorNode, {"export_formats": "opencv, mat"}, "export_formats: unknown format(s) mat; known: opencv"),
         (DetectorNode, {}, "parameter camera is required"),
         (DetectorNode, {"camera": "cam7"}, "'cam7' is not in"),
     ],

@@ -17,7 +17,8 @@ from wand_calib_ros.collection.errors import CoverageError
 from wand_calib_ros.core.pipeline import CalibrationOptions, calibrate
 from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.core.rig import RigSpec, WandObservations
-from wand_calib_ros.io.export import cameras_of, export
+from wand_calib_ros.io.errors import ExportError
+from wand_calib_ros.io.export import WORLD_FORMATS, cameras_of, export
 from wand_calib_ros.io.outputs import check_writable
 from wand_calib_ros.io.result_yaml import calibration_paths, write_calibration
 
@@ -33,12 +34,15 @@ class CalibrationFiles:
         camera_info: one camera_info YAML per camera (``equidistant``).
         report: the HTML report, or None when not asked for (or it failed).
         exports: the files of the other tools' formats asked for (``export/<format>/``).
+        export_failures: why a format asked for could not express this calibration (e.g. a fisheye
+            as DLT coefficients); the rest is written.
     """
 
     result: Path
     camera_info: tuple[Path, ...]
     report: Path | None
     exports: tuple[Path, ...] = ()
+    export_failures: tuple[str, ...] = ()
 
 
 def coverage_of(rig: RigSpec, observations: WandObservations, thresholds: CoverageThresholds) -> CoverageStatus:
@@ -84,9 +88,14 @@ def run_calibration(
     check_writable([*calibration_paths(rig.camera_names, result_path, output_dir / "camera_info"), *files_in_folders])
     result = calibrate(rig, observations, options)
     infos = tuple(write_calibration(result, result_path, output_dir / "camera_info")[1:])
-    exported = tuple(
-        p for name, folder in zip(exports, folders, strict=True) for p in export(cameras_of(result), name, folder)
-    )
+    exported: list[Path] = []
+    failures: list[str] = []
+    for name, folder in zip(exports, folders, strict=True):
+        try:
+            exported += export(cameras_of(result, in_world=name in WORLD_FORMATS), name, folder)
+        except ExportError as error:
+            log.warning("the calibration is written, but its %s export failed: %s", name, error)
+            failures.append(f"{name}: {error}")
     report_path = None
     if report:
         from wand_calib_ros.report.html import write_report  # matplotlib only when a report is asked for
@@ -95,7 +104,7 @@ def run_calibration(
             report_path = write_report(rig, observations, result_path, output_dir / "report")
         except (OSError, ValueError, np.linalg.LinAlgError) as error:
             log.warning("the calibration is written, but its report failed: %s", error)
-    return result, CalibrationFiles(result_path, infos, report_path, exported)
+    return result, CalibrationFiles(result_path, infos, report_path, tuple(exported), tuple(failures))
 
 
 def summary(result: CalibrationResult, files: CalibrationFiles) -> str:
@@ -106,4 +115,5 @@ def summary(result: CalibrationResult, files: CalibrationFiles) -> str:
         scale, unit = (1000.0, "ms") if result.timing.unit == "s" else (1.0, "frames")
         offsets = ", ".join(f"{c.name} {scale * c.time_offset:+.2f}" for c in result.cameras)
         timing = f"; time offsets ({unit}, reference {result.reference_camera}) {offsets}"
-    return f"RMS {cameras}; wand {result.wand_length_rms_mm:.2f} mm RMS{timing}; {files.result}"
+    failed = "".join(f"; export {failure}" for failure in files.export_failures)
+    return f"RMS {cameras}; wand {result.wand_length_rms_mm:.2f} mm RMS{timing}; {files.result}{failed}"

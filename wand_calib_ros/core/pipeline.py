@@ -97,13 +97,16 @@ def calibrate(
     line = timing.line.subset(usable)
     aligned = align_views(uv, line)  # free-running views moved to their placement's time, for the starts
     init = initialise_rig(rig, aligned, graph, options.pair)
+    given = [spec.intrinsics is not None for spec in rig.cameras]
+    if any(given):
+        log.info("intrinsics given for %s", ", ".join(n for n, g in zip(names, given, strict=True) if g))
     result = refine_calibration(
         rig,
         uv,
-        init.models,
+        tuple(spec.intrinsics or model for spec, model in zip(rig.cameras, init.models, strict=True)),
         init.poses,
         reference=graph.reference,
-        initial_projections=init.projections,
+        initial_projections=tuple("given" if g else p for g, p in zip(given, init.projections, strict=True)),
         lens_trials=init.trials,
         timing=replace(timing, line=line),
         start_uv=aligned,

@@ -25,6 +25,7 @@ from wand_calib_ros.core.bundle_adjustment import (
     residuals,
 )
 from wand_calib_ros.core.camera_model import (
+    N_INTRINSIC,
     CameraModel,
     inverse_radius,
     max_image_radius_mm,
@@ -102,16 +103,24 @@ class _Fixed:
     Attributes:
         per_camera: per camera the fixed radial indices.
         timing: (C, 2) whether each camera's time offset and readout time are estimated.
+        held: (C,) cameras whose given intrinsics are held fixed (all seven).
     """
 
     per_camera: tuple[tuple[int, ...], ...]
     timing: NDArray[np.bool_]
+    held: NDArray[np.bool_]
+
+
+def _held(rig: RigSpec) -> NDArray[np.bool_]:
+    """(C,) cameras of the rig whose intrinsics are given and held fixed."""
+    return np.array([spec.holds_intrinsics for spec in rig.cameras], dtype=bool)
 
 
 def _free_mask(n_cameras: int, reference: int, fixed: _Fixed) -> NDArray[np.bool_]:
     free = default_free_mask(n_cameras, reference)
     for camera, indices in enumerate(fixed.per_camera):
         free[camera, list(indices)] = False
+    free[fixed.held, :N_INTRINSIC] = False
     free[:, N_GEOMETRIC:] = fixed.timing
     return free
 
@@ -169,7 +178,11 @@ def refine_calibration(
     wand = rig.wand
     n_cameras = len(rig.cameras)
     full = default_free_mask(n_cameras, reference)
-    models = tuple(m.with_intrinsic_vector(np.r_[m.k[:2], 0.0, 0.0, 0.0, m.principal_point]) for m in models)
+    full[_held(rig), :N_INTRINSIC] = False
+    models = tuple(  # given intrinsics start as given; estimated ones from the low-order model
+        m if spec.intrinsics is not None else m.with_intrinsic_vector(np.r_[m.k[:2], 0.0, 0.0, 0.0, m.principal_point])
+        for m, spec in zip(models, rig.cameras, strict=True)
+    )
     points = triangulate_placements(models, poses, uv if start_uv is None else start_uv)
     clocks = start_clocks(rig, timing, points, reference)
     errors = ac_length_errors(points, wand)
@@ -452,7 +465,7 @@ def _adjust_with_model_selection(
         uv: (P, C, 3, 2) the placements to adjust, ``used`` (P,) their indices in the timeline.
     """
     problem = BundleProblem.from_dense(rig.wand, uv, clocks.placements(used))
-    fixed = _Fixed(tuple(() for _ in rig.cameras), clocks.free.copy())
+    fixed = _Fixed(tuple(() for _ in rig.cameras), clocks.free.copy(), _held(rig))
     start = initial
     while True:
         result = bundle_adjust(start, problem, _free_mask(len(rig.cameras), reference, fixed))
@@ -460,14 +473,15 @@ def _adjust_with_model_selection(
         per_camera = list(fixed.per_camera)
         models = list(result.state.models)
         for c, spec in enumerate(rig.cameras):
-            per_camera[c], models[c] = _reduce_radial(spec, result, c, per_camera[c])
+            if not fixed.held[c]:  # given intrinsics held fixed have no model order to decide
+                per_camera[c], models[c] = _reduce_radial(spec, result, c, per_camera[c])
         timing = reduce_timing(clocks, result, fixed.timing)
         if tuple(per_camera) == fixed.per_camera and np.array_equal(timing, fixed.timing):
             return result, fixed
         state = result.state
         values = state.camera_timing.copy()
         values[fixed.timing & ~timing] = clocks.start[fixed.timing & ~timing]
-        fixed = _Fixed(tuple(per_camera), timing)
+        fixed = _Fixed(tuple(per_camera), timing, fixed.held)
         start = BundleState(_zero_fixed(tuple(models), fixed), state.poses, state.wand_a, state.wand_direction, values)
 
 
@@ -690,6 +704,7 @@ def _assemble(
                 result.camera_block(c, slice(0, 5)).copy(),
                 float(state.camera_timing[c, 0]),
                 float(state.camera_timing[c, 1]),
+                "estimated" if spec.intrinsics is None else "given" if spec.intrinsics_fixed else "given_start",
             )
         )
     points = triangulate_placements(state.models, state.poses, synchronised_pixels(state, problem, uv))

@@ -37,6 +37,8 @@ class CameraCalibration:
         time_offset: exposure = stamp - time_offset, relative to the reference camera, in the
             result's time unit (:class:`TimingSummary`); 0 when held fixed.
         readout: rolling-shutter readout time of the whole image in the time unit (0: global shutter).
+        intrinsics: "estimated", "given" (the rig description's, held fixed) or "given_start" (the
+            rig description's, refined).
     """
 
     name: str
@@ -53,6 +55,7 @@ class CameraCalibration:
     radial_covariance: FloatArray
     time_offset: float = 0.0
     readout: float = 0.0
+    intrinsics: str = "estimated"
 
 
 @dataclass(frozen=True)

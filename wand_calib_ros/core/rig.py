@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from wand_calib_ros.core.camera_model import CameraModel
 from wand_calib_ros.core.errors import InsufficientDataError, ModelError
 
 FloatArray = NDArray[np.float64]
@@ -53,6 +54,9 @@ class CameraSpec:
         lens: optional hint: "fisheye", "conventional" or a projection name.
         readout_ms: rolling-shutter readout time of the whole image, ms, held fixed (0: a global
             shutter); None: estimated when the data say so.
+        intrinsics: intrinsics the user already has (a board calibration), None: estimated.
+        intrinsics_fixed: the given intrinsics are held fixed (only the pose is estimated); False:
+            they are the start of the estimate.
     """
 
     name: str
@@ -62,6 +66,13 @@ class CameraSpec:
     max_view_angle_deg: float
     lens: str | None = None
     readout_ms: float | None = None
+    intrinsics: CameraModel | None = None
+    intrinsics_fixed: bool = True
+
+    @property
+    def holds_intrinsics(self) -> bool:
+        """Whether this camera's intrinsics are given and held fixed."""
+        return self.intrinsics is not None and self.intrinsics_fixed
 
     @property
     def m(self) -> FloatArray:

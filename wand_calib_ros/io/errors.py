@@ -23,3 +23,8 @@ class OutputError(WandCalibError):
     def __init__(self, path: str | Path, reason: str) -> None:
         super().__init__(f"cannot write {path}: {reason}")
         self.path = Path(path)
+
+
+class ExportError(WandCalibError):
+    """A calibration that a format cannot express (e.g. a fisheye as DLT coefficients); the message
+    names the camera and why."""

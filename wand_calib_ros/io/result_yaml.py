@@ -120,6 +120,7 @@ def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
                 keys["readout"]: float(camera.readout),
                 "radial_covariance": _floats(camera.radial_covariance),
                 "max_observed_theta_deg": float(camera.max_observed_theta_deg),
+                "intrinsics": camera.intrinsics,
                 "initial_projection": camera.initial_projection,
                 "fixed_coefficients": list(camera.fixed_coefficients),
             }
@@ -256,6 +257,19 @@ def read_result(path: str | Path) -> tuple[str, dict[str, CameraGeometry]]:
         raise FormatError(path, f"not a wand_calib_ros result file: {where} has no {error}") from None
     except (TypeError, ValueError, AttributeError, ModelError) as error:
         raise FormatError(path, f"not a wand_calib_ros result file: {where}: {error}") from None
+
+
+def read_world_poses(path: str | Path) -> dict[str, Pose] | None:
+    """Each camera's pose in the world (X_cam = R X_world + T, mm) from a result YAML's ``world`` block,
+    or None when the calibration had no floor."""
+    path = Path(path)
+    world = read_yaml(path).get("world") or {}
+    if world.get("frame") != "floor":
+        return None
+    try:
+        return {str(n): Pose(e["rotation"], e["translation"]) for n, e in world["cameras"].items()}
+    except (KeyError, TypeError, ValueError, AttributeError) as error:
+        raise FormatError(path, f"world block: {error}") from None
 
 
 def camera_info_dict(name: str, model: CameraModel) -> dict[str, Any]:

@@ -5,7 +5,9 @@ wand: {L1: 400.0, L2: 200.0}        # mm, |AB| = L1, |BC| = L2, A-B-C collinear
 cameras:
   - {name: cam0, image_size: [640, 480], pixel_size_um: [5.6, 5.6],
      nominal_focal_mm: 1.8, max_view_angle_deg: 92.5, lens: fisheye,   # lens optional
-     readout_ms: 0.0}                                                  # optional: fixed rolling-shutter readout
+     readout_ms: 0.0,                                                  # optional: fixed rolling-shutter readout
+     intrinsics: {K: [fx, 0, cx, 0, fy, cy, 0, 0, 1], D: [d1, d2, d3, d4],   # optional: known intrinsics
+                  distortion_model: equidistant, fixed: true}}       # (or {camera_info: file.yaml}, or file.yaml)
 ```
 The ROS nodes read three optional keys per camera with :func:`load_camera_endpoints`:
 ``image_topic`` (default ``/<name>/image_raw``), ``points_topic`` (default ``wand_points`` next to
@@ -20,10 +22,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import yaml
 
+from wand_calib_ros.core.camera_model import CameraModel, to_opencv_fisheye
 from wand_calib_ros.core.errors import ModelError
 from wand_calib_ros.core.intrinsics_init import PROJECTIONS
+from wand_calib_ros.core.known_intrinsics import known_model
 from wand_calib_ros.core.rig import LENS_CLASSES, CameraSpec, RigSpec, WandSpec
 from wand_calib_ros.io.errors import FormatError
 from wand_calib_ros.io.text import read_yaml
@@ -45,6 +50,74 @@ def _pair(path: Path, where: str, value: Any) -> tuple[float, float]:
     if not isinstance(value, list | tuple) or len(value) != 2:
         raise FormatError(path, f"{where} must be a list of two numbers, got {value!r}")
     return _number(path, where, value[0]), _number(path, where, value[1])
+
+
+def _matrix(path: Path, where: str, value: Any, size: int) -> list[float]:
+    """``size`` numbers from a flat or nested list (a 3x3 K may be written either way)."""
+    flat = [v for row in value for v in (row if isinstance(row, list) else [row])] if isinstance(value, list) else None
+    if flat is None or len(flat) != size:
+        raise FormatError(path, f"{where} must be a list of {size} numbers, got {value!r}")
+    return [_number(path, where, v, positive=False) for v in flat]
+
+
+def _camera_info_intrinsics(path: Path, label: str, file: Any) -> dict[str, Any]:
+    """K, D, distortion model and image size of a ROS camera_info YAML named relative to ``path``."""
+    if not isinstance(file, str) or not file:
+        raise FormatError(path, f"{label} intrinsics camera_info must be a file name, got {file!r}")
+    info_path = Path(file).expanduser()
+    info_path = info_path if info_path.is_absolute() else path.parent / info_path
+    if not info_path.is_file():
+        raise FormatError(path, f"{label} intrinsics: no such camera_info file {info_path}")
+    info = read_yaml(info_path)
+    try:
+        return {
+            "K": info["camera_matrix"]["data"],
+            "D": info["distortion_coefficients"]["data"],
+            "distortion_model": info.get("distortion_model", "plumb_bob"),
+            "image_size": [info["image_width"], info["image_height"]],
+        }
+    except (KeyError, TypeError):
+        raise FormatError(
+            info_path, "not a ROS camera_info YAML: needs image_width, image_height, camera_matrix.data, "
+            "distortion_coefficients.data"
+        ) from None  # fmt: skip
+
+
+def _intrinsics(
+    path: Path, label: str, value: Any, m: Any, image_size: tuple[int, int]
+) -> tuple[CameraModel | None, bool]:
+    """A camera's known intrinsics (``intrinsics`` key) and whether they are held fixed."""
+    if value is None:
+        return None, True
+    if isinstance(value, str):
+        value = {"camera_info": value}
+    if not isinstance(value, dict):
+        raise FormatError(path, f"{label} intrinsics must be a mapping ({{K: ..., D: ...}}) or a camera_info file")
+    fixed = value.get("fixed", True)
+    if not isinstance(fixed, bool):
+        raise FormatError(path, f"{label} intrinsics fixed must be true or false, got {fixed!r}")
+    given = dict(value)
+    if "camera_info" in value:
+        given |= _camera_info_intrinsics(path, label, value["camera_info"])
+        if tuple(int(v) for v in given["image_size"]) != image_size:
+            raise FormatError(
+                path, f"{label} intrinsics: {value['camera_info']} is for {given['image_size'][0]}x"
+                f"{given['image_size'][1]} images, the camera's image_size is {image_size[0]}x{image_size[1]}"
+            )  # fmt: skip
+    for key in ("K", "D"):
+        if key not in given:
+            raise FormatError(path, f"{label} intrinsics lacks {key} (or give camera_info: file.yaml)")
+    model_name = str(given.get("distortion_model", "equidistant"))
+    K = np.array(_matrix(path, f"{label} intrinsics K", given["K"], 9)).reshape(3, 3)
+    D = given["D"] if isinstance(given["D"], list) else None
+    if D is None:
+        raise FormatError(path, f"{label} intrinsics D must be a list of numbers, got {given['D']!r}")
+    D_values = np.array([_number(path, f"{label} intrinsics D", v, positive=False) for v in D])
+    try:
+        model = known_model(model_name, K, D_values, np.asarray(m), image_size, name=label)
+    except ModelError as error:
+        raise FormatError(path, f"intrinsics: {error}") from None
+    return model, fixed
 
 
 def parse_rig(data: Any, path: str | Path = "<rig>") -> RigSpec:
@@ -93,15 +166,21 @@ def parse_rig(data: Any, path: str | Path = "<rig>") -> RigSpec:
                     path, f"{label} readout_ms is the rolling-shutter readout time of one image, 0 to 1000 ms; "
                     f"got {item['readout_ms']!r}"
                 )  # fmt: skip
+        pixel_size = _pair(path, f"{label} pixel_size_um", item["pixel_size_um"])
+        size = (int(width), int(height))
+        m = 1000.0 / np.asarray(pixel_size)
+        intrinsics, fixed = _intrinsics(path, label, item.get("intrinsics"), m, size)
         cameras.append(
             CameraSpec(
                 name=str(item["name"]),
-                image_size=(int(width), int(height)),
-                pixel_size_um=_pair(path, f"{label} pixel_size_um", item["pixel_size_um"]),
+                image_size=size,
+                pixel_size_um=pixel_size,
                 nominal_focal_mm=_number(path, f"{label} nominal_focal_mm", item["nominal_focal_mm"]),
                 max_view_angle_deg=angle,
                 lens=lens,
                 readout_ms=readout,
+                intrinsics=intrinsics,
+                intrinsics_fixed=fixed,
             )
         )
     names = [c.name for c in cameras]
@@ -132,6 +211,14 @@ def rig_to_dict(rig: RigSpec) -> dict[str, Any]:
             item["lens"] = spec.lens
         if spec.readout_ms is not None:
             item["readout_ms"] = float(spec.readout_ms)
+        if spec.intrinsics is not None:
+            opencv = to_opencv_fisheye(spec.intrinsics)
+            item["intrinsics"] = {
+                "K": [float(v) for v in opencv.camera_matrix.ravel()],
+                "D": [float(v) for v in opencv.distortion],
+                "distortion_model": "equidistant",
+                "fixed": bool(spec.intrinsics_fixed),
+            }
         cameras.append(item)
     return {"wand": {"L1": float(rig.wand.L1), "L2": float(rig.wand.L2)}, "cameras": cameras}
 

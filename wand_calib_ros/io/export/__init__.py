@@ -7,7 +7,8 @@ the exported parameters by the other tool's own code (``cv2.fisheye.projectPoint
 aniposelib and Kalibr's equidistant model) lands on the pixel this package computes.
 
 Formats: ``opencv`` (a FileStorage YAML per camera), ``anipose`` (aniposelib / anipose / caliscope /
-freemocap ``calibration.toml``), ``kalibr`` (camchain YAML), ``camera_info`` (ROS, per camera).
+freemocap ``calibration.toml``), ``kalibr`` (camchain YAML), ``camera_info`` (ROS, per camera),
+``dlt`` (easyWand / Argus / DLTdv coefficients; pinhole cameras only, fisheyes refused).
 """
 
 from __future__ import annotations
@@ -31,14 +32,19 @@ class ExportedCamera:
     pose: Pose
 
 
-def cameras_of(result: CalibrationResult) -> list[ExportedCamera]:
-    """A result's cameras, the reference first."""
+def cameras_of(result: CalibrationResult, *, in_world: bool = False) -> list[ExportedCamera]:
+    """A result's cameras, the reference first; poses in the world frame when ``in_world`` and the
+    result has one (a floor was given), else relative to the reference camera."""
     order = sorted(result.cameras, key=lambda c: c.name != result.reference_camera)
-    return [ExportedCamera(c.name, c.model, c.pose) for c in order]
+    world = result.world if in_world else None
+    return [ExportedCamera(c.name, c.model, c.pose if world is None else world.camera_in_world(c.pose)) for c in order]
 
 
 #: The format names :func:`export` takes.
-FORMATS = ("opencv", "anipose", "kalibr", "camera_info")
+FORMATS = ("opencv", "anipose", "kalibr", "camera_info", "dlt")
+#: Formats written in the world frame when the result has one: DLT coefficients cannot describe a
+#: camera that sits at the frame's origin (the reference camera does).
+WORLD_FORMATS = ("dlt",)
 
 #: A format: the cameras (reference first or in the result's order) -> {file name: text}.
 Writer = Callable[[Sequence[ExportedCamera]], dict[str, str]]
@@ -46,13 +52,14 @@ Writer = Callable[[Sequence[ExportedCamera]], dict[str, str]]
 
 def formats() -> dict[str, Writer]:
     """Every format by name."""
-    from wand_calib_ros.io.export import anipose, camera_info, kalibr, opencv
+    from wand_calib_ros.io.export import anipose, camera_info, dlt, kalibr, opencv
 
     return {
         "opencv": opencv.documents,
         "anipose": anipose.documents,
         "kalibr": kalibr.documents,
         "camera_info": camera_info.documents,
+        "dlt": dlt.documents,
     }
 
 
@@ -61,6 +68,7 @@ def export(cameras: Sequence[ExportedCamera], format_name: str, folder: Path) ->
 
     Raises:
         KeyError: an unknown format (the CLI offers only known ones).
+        ExportError: the format cannot express a camera (the message names it).
         OutputError: a file could not be written (none was replaced).
     """
     documents = formats()[format_name](cameras)

@@ -1,0 +1,154 @@
+"""Intrinsics a user already has (a board calibration) as this package's camera model.
+
+OpenCV's fisheye (ROS ``equidistant``) parameters convert exactly
+(:func:`wand_calib_ros.core.camera_model.from_opencv_fisheye`). OpenCV's pinhole model with radial
+and tangential distortion (ROS ``plumb_bob``, Kalibr ``radtan``; ``rational_polynomial`` too) maps
+theta to the radius f * rho_d(tan theta): its radial part is fitted by r(theta) = k1 theta + ... +
+k5 theta^9 over the angles the image reaches, and converted only when the fit and the neglected
+tangential terms stay below :data:`MAX_CONVERSION_ERROR_PX` everywhere in the image.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wand_calib_ros.core.camera_model import CameraModel, from_opencv_fisheye, radius_derivative
+from wand_calib_ros.core.errors import ModelError
+
+FloatArray = NDArray[np.float64]
+
+#: Distortion models accepted, by their ROS (and Kalibr) names.
+EQUIDISTANT = ("equidistant", "fisheye")
+PINHOLE_RADTAN = ("plumb_bob", "radtan", "rational_polynomial")
+
+#: Largest image error (px) a conversion from a pinhole model may introduce.
+MAX_CONVERSION_ERROR_PX = 0.1
+#: Samples of the fitted angle range.
+N_SAMPLES = 400
+
+
+def _pinhole_radius(distortion: FloatArray, rho: FloatArray) -> FloatArray:
+    """Distorted normalised radius rho_d of OpenCV's radial model (k1, k2, [p1, p2], k3, [k4, k5, k6])."""
+    d = np.zeros(8)
+    d[: min(distortion.size, 8)] = distortion[:8]
+    k1, k2, _, _, k3, k4, k5, k6 = d
+    r2 = rho * rho
+    numerator = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    denominator = 1.0 + r2 * (k4 + r2 * (k5 + r2 * k6))
+    return rho * numerator / denominator
+
+
+def _corner_radius_px(camera_matrix: FloatArray, image_size: tuple[int, int]) -> float:
+    """Distance (px) from the principal point to the farthest image corner (OpenCV pixel centres)."""
+    width, height = image_size
+    corners = np.array([[-0.5, -0.5], [width - 0.5, -0.5], [-0.5, height - 0.5], [width - 0.5, height - 0.5]])
+    return float(np.max(np.linalg.norm(corners - camera_matrix[:2, 2], axis=1)))
+
+
+def from_pinhole_radtan(
+    camera_matrix: FloatArray,
+    distortion: FloatArray,
+    m: FloatArray,
+    image_size: tuple[int, int],
+    *,
+    name: str = "camera",
+) -> tuple[CameraModel, float]:
+    """A camera model equivalent (within :data:`MAX_CONVERSION_ERROR_PX`) to OpenCV's pinhole model.
+
+    Args:
+        camera_matrix: (3, 3) K.
+        distortion: OpenCV's (k1, k2, p1, p2[, k3[, k4, k5, k6]]).
+        m: (2,) pixel densities px/mm of the rig description (m_v follows K's fy/fx).
+        image_size: (width, height) px.
+        name: the camera, for messages.
+
+    Returns:
+        The model and the largest image difference (px) between it and the given one.
+
+    Raises:
+        ModelError: the distortion folds back inside the image, or the conversion would move image
+            points by more than MAX_CONVERSION_ERROR_PX (tangential terms, a radial shape the
+            polynomial cannot follow).
+    """
+    K = np.asarray(camera_matrix, dtype=np.float64)
+    d = np.asarray(distortion, dtype=np.float64).ravel()
+    if d.size not in (4, 5, 8):
+        raise ModelError(f"{name}: plumb_bob/radtan distortion has 4, 5 or 8 coefficients, got {d.size}")
+    fx, fy = K[0, 0], K[1, 1]
+    reach = _corner_radius_px(K, image_size) / fx  # normalised distorted radius of the farthest corner
+    rho = np.linspace(0.0, 20.0, 20001)  # undistorted radius up to 87 deg
+    rho_d = _pinhole_radius(d, rho)
+    growing = np.diff(rho_d) > 0
+    last = int(np.argmin(growing)) if not growing.all() else growing.size
+    if rho_d[last] < reach:
+        raise ModelError(
+            f"{name}: the plumb_bob distortion folds back at {np.degrees(np.arctan(rho[last])):.0f} deg, inside "
+            "the image: it cannot describe this lens there"
+        )
+    theta_max = float(np.arctan(np.interp(reach, rho_d[: last + 1], rho[: last + 1])))
+    theta = np.linspace(0.0, theta_max, N_SAMPLES)
+    target_mm = fx * _pinhole_radius(d, np.tan(theta)) / m[0]
+    powers = np.stack([theta ** (2 * i + 1) for i in range(5)], axis=1)
+    scale = np.max(np.abs(powers), axis=0)
+    k = np.linalg.lstsq(powers / scale, target_mm, rcond=None)[0] / scale
+    fit_px = float(np.max(np.abs(powers @ k - target_mm)) * m[0])
+    if k[0] <= 0 or np.any(radius_derivative(k, theta) <= 0):
+        raise ModelError(f"{name}: the plumb_bob distortion cannot be written as a monotonic r(theta)")
+    p1, p2 = (d[2], d[3]) if d.size >= 4 else (0.0, 0.0)
+    x = reach * np.cos(np.linspace(0, 2 * np.pi, 73))
+    y = reach * np.sin(np.linspace(0, 2 * np.pi, 73))
+    r2 = x * x + y * y
+    tangential_px = float(
+        np.max(np.hypot(fx * (2 * p1 * x * y + p2 * (r2 + 2 * x * x)), fy * (p1 * (r2 + 2 * y * y) + 2 * p2 * x * y)))
+    )
+    error = fit_px + tangential_px
+    if error > MAX_CONVERSION_ERROR_PX:
+        what = "tangential terms" if tangential_px >= fit_px else "radial shape"
+        raise ModelError(
+            f"{name}: the plumb_bob intrinsics differ from the nearest equidistant model by {error:.2f} px in the "
+            f"image ({what}; at most {MAX_CONVERSION_ERROR_PX} px): calibrate the intrinsics with an equidistant "
+            "(fisheye) model, or let wand_calib estimate them"
+        )
+    model = CameraModel(k, np.array([m[0], m[0] * fy / fx]), K[:2, 2], image_size)
+    return model, error
+
+
+def from_equidistant(
+    camera_matrix: FloatArray, distortion: FloatArray, m: FloatArray, image_size: tuple[int, int]
+) -> CameraModel:
+    """The exact model of OpenCV fisheye parameters; m_v follows K's fy/fx (the rig's m_u is kept)."""
+    K = np.asarray(camera_matrix, dtype=np.float64)
+    d = np.asarray(distortion, dtype=np.float64).ravel()
+    if d.size != 4:
+        raise ModelError(f"equidistant distortion has 4 coefficients (k1..k4), got {d.size}")
+    return from_opencv_fisheye(K, d, np.array([m[0], m[0] * K[1, 1] / K[0, 0]]), image_size)
+
+
+def known_model(
+    distortion_model: str,
+    camera_matrix: FloatArray,
+    distortion: FloatArray,
+    m: FloatArray,
+    image_size: tuple[int, int],
+    *,
+    name: str = "camera",
+) -> CameraModel:
+    """The camera model of given intrinsics in any accepted distortion model (see module docstring).
+
+    Raises:
+        ModelError: an unknown distortion model, or one that does not convert (the message says why).
+    """
+    K = np.asarray(camera_matrix, dtype=np.float64)
+    if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0 or K[0, 1] != 0:
+        raise ModelError(f"{name}: K must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0 (no skew)")
+    if not np.all(np.isfinite(np.asarray(distortion, dtype=np.float64))):
+        raise ModelError(f"{name}: distortion coefficients must be finite numbers")
+    if distortion_model in EQUIDISTANT:
+        return from_equidistant(K, distortion, m, image_size)
+    if distortion_model in PINHOLE_RADTAN:
+        return from_pinhole_radtan(K, distortion, m, image_size, name=name)[0]
+    raise ModelError(
+        f"{name}: distortion model {distortion_model!r} is not supported; give {' or '.join(EQUIDISTANT[:1])} "
+        f"(OpenCV fisheye) or {', '.join(PINHOLE_RADTAN)} (converted when within {MAX_CONVERSION_ERROR_PX} px)"
+    )
