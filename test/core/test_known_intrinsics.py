@@ -105,3 +105,16 @@ def test_one_camera_given_the_others_estimated_and_given_as_a_start() -> None:
     full = errors_against_truth(scenario, held, *in_truth_frame(calibrate(scenario.rig, data.observations), scenario))
     refined = errors_against_truth(scenario, held, *in_truth_frame(start, scenario))
     assert refined["D_RMS"] <= 1.2 * full["D_RMS"]
+
+
+def test_given_intrinsics_that_contradict_the_rig_description_are_named() -> None:
+    from wand_calib_ros.core.errors import PlausibilityError
+    from wand_calib_ros.core.plausibility import check_rig
+
+    scenario, _, _ = scenario_data("paper", 0, noise=1.0)
+    wrong = scenario.cameras[1].model.with_intrinsic_vector(
+        scenario.cameras[1].model.intrinsic_vector() * [3, 3, 3, 3, 3, 1, 1]
+    )
+    rig = replace(scenario.rig, cameras=(scenario.rig.cameras[0], replace(scenario.rig.cameras[1], intrinsics=wrong)))
+    with pytest.raises(PlausibilityError, match=r"camera 'cam1': its given intrinsics \(fx \d+ px\) mean a focal"):
+        check_rig(rig)

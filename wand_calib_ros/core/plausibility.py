@@ -68,6 +68,13 @@ def check_rig(rig: RigSpec) -> None:
                 f"ray {ratio:.3g}x as far from the centre as the image's corner; one of them is wrong "
                 f"(for this view angle and pixel size, a focal near {fitting:.3g} mm)"
             )
+        given = spec.intrinsics
+        if given is not None and not FOCAL_RANGE[0] <= float(given.k[0]) / spec.nominal_focal_mm <= FOCAL_RANGE[1]:
+            raise PlausibilityError(
+                f"camera '{spec.name}': its given intrinsics (fx {float(given.focal_px[0]):.0f} px) mean a focal of "
+                f"{float(given.k[0]):.3g} mm with pixel_size_um {spec.pixel_size_um[0]:g}, against the nominal "
+                f"{spec.nominal_focal_mm:g} mm: check pixel_size_um, nominal_focal_mm, or that K is this camera's"
+            )
 
 
 def image_lengths(uv: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -140,7 +147,8 @@ def check_result(rig: RigSpec, result: CalibrationResult) -> None:
     for spec in rig.cameras:
         camera = result.camera(spec.name)
         focal = float(camera.model.k[0])
-        if not FOCAL_RANGE[0] <= focal / spec.nominal_focal_mm <= FOCAL_RANGE[1]:
+        estimated = not spec.holds_intrinsics  # given intrinsics were checked with the rig
+        if estimated and not FOCAL_RANGE[0] <= focal / spec.nominal_focal_mm <= FOCAL_RANGE[1]:
             raise PlausibilityError(
                 f"camera '{spec.name}': the calibration puts its focal at {focal:.3g} mm "
                 f"(fx {focal * float(camera.model.m[0]):.0f} px) against the nominal {spec.nominal_focal_mm:g} mm: "
