@@ -138,3 +138,44 @@ def test_a_last_row_without_its_line_end_is_read_with_a_warning(
     back = read_observations(path)
     assert back.uv[0, 0, 0].tolist() == [348.375807, 19.0]
     assert "the last row has no line end" in caplog.text and str(path) in caplog.text
+
+
+def _row_by_row(path: Path, known: list[str] | None, sizes: dict[str, tuple[int, int]]) -> WandObservations:
+    from wand_calib_ros.io.observations_csv import _parse
+
+    with path.open(newline="", encoding="utf-8-sig") as handle:
+        return _parse(handle, path, known, sizes)
+
+
+@pytest.mark.parametrize("stamps", [False, True])
+@pytest.mark.parametrize("variant", ["plain", "crlf", "bom", "spaces", "extra column", "unknown cameras"])
+def test_the_fast_reader_and_the_row_by_row_reader_agree(tmp_path: Path, stamps: bool, variant: str) -> None:
+    from wand_calib_ros.io.observations_csv import _parse_plain
+
+    rng = np.random.default_rng(5)
+    uv = rng.uniform(-5, 1020, (40, 3, 3, 2)) * rng.choice([1.0, np.nan], (40, 3, 3, 1), p=[0.8, 0.2])
+    times = np.cumsum(rng.uniform(0.01, 0.05, (40, 3)), axis=0) + 1.7e9 if stamps else None
+    observations = WandObservations(np.arange(40) * 3 + 7, ("left", "c2", "right_camera"), uv, times)
+    path = tmp_path / "observations.csv"
+    write_observations(observations, path)
+    text = path.read_text()
+    if variant == "crlf":
+        text = text.replace("\n", "\r\n")
+    elif variant == "bom":
+        text = "\ufeff" + text
+    elif variant == "spaces":
+        text = text.replace(",", ", ")
+    elif variant == "extra column":
+        text = "\n".join(f"{line},{'note' if i == 0 else i}" for i, line in enumerate(text.splitlines())) + "\n"
+    path.write_bytes(text.encode())
+    known = None if variant == "unknown cameras" else ["right_camera", "left", "c2"]
+    sizes = {"left": (1280, 1024), "c2": (1300, 1300)}
+    slow = _row_by_row(path, known, sizes)
+    read = read_observations(path, known, image_sizes=sizes)
+    assert read.camera_names == slow.camera_names and np.array_equal(read.frames, slow.frames)
+    assert np.array_equal(read.uv, slow.uv, equal_nan=True)
+    assert (read.stamps is None) == (slow.stamps is None)
+    if read.stamps is not None:
+        assert np.array_equal(read.stamps, slow.stamps, equal_nan=True)
+    fast = _parse_plain(path.read_bytes(), known, sizes)
+    assert (fast is not None) == (variant in ("plain", "crlf", "bom", "extra column", "unknown cameras"))

@@ -13,6 +13,7 @@ in time, and each image is placed at its own stamp.
 from __future__ import annotations
 
 import csv
+import io
 import logging
 import math
 from collections.abc import Iterable, Mapping
@@ -59,9 +60,16 @@ def read_observations(
     path = Path(path)
     known = list(camera_names) if camera_names is not None else None
     try:
-        handle = path.open(newline="", encoding="utf-8-sig")  # a byte-order mark some editors write is fine
+        raw = path.read_bytes()
     except OSError as error:
         raise FormatError(path, f"cannot read: {error.strerror}") from None
+    fast = _parse_plain(raw, known, dict(image_sizes or {}))
+    if fast is not None:
+        if not raw.endswith(b"\n"):
+            _warn_torn(path)
+        return fast
+    # Not the plain case (or something is wrong with it): row by row, naming the first bad row.
+    handle = path.open(newline="", encoding="utf-8-sig")  # a byte-order mark some editors write is fine
     with handle:
         try:
             observations = _parse(handle, path, known, dict(image_sizes or {}))
@@ -72,12 +80,114 @@ def read_observations(
         except csv.Error as error:
             raise FormatError(path, f"not a CSV: {error}") from None
     if not _ends_with_newline(path):
-        log.warning(
-            "%s: the last row has no line end: if its writer was stopped mid-row its last value may be cut "
-            "(a collector cuts a torn row off its buffer when it restarts)",
-            path,
-        )
+        _warn_torn(path)
     return observations
+
+
+def _warn_torn(path: Path) -> None:
+    log.warning(
+        "%s: the last row has no line end: if its writer was stopped mid-row its last value may be cut "
+        "(a collector cuts a torn row off its buffer when it restarts)",
+        path,
+    )
+
+
+def _cells_per_line_are(raw: bytes, cells: int) -> bool:
+    """Whether every line of ``raw`` (blank ones too, and a last one without line end) has ``cells``
+    comma-separated cells: numpy's reader would silently ignore a cell too many (a decimal comma)."""
+    data = np.frombuffer(raw, dtype=np.uint8)
+    ends = np.flatnonzero(data == ord("\n"))
+    if data.size and data[-1] != ord("\n"):
+        ends = np.append(ends, data.size)
+    commas = np.concatenate([[0], np.cumsum(data == ord(","))])
+    per_line = np.diff(commas[np.concatenate([[0], ends])])
+    return bool(np.all(per_line == cells - 1))
+
+
+def _index_of(values: NDArray[np.str_], names: tuple[str, ...]) -> NDArray[np.int64] | None:
+    """(N,) index of each value in ``names``; None when a value is not among them."""
+    table = np.array(names)
+    order = np.argsort(table)
+    found = np.minimum(np.searchsorted(table, values, sorter=order), len(names) - 1)
+    index = order[found]
+    return index if np.array_equal(table[index], values) else None
+
+
+def _parse_plain(raw: bytes, known: list[str] | None, sizes: dict[str, tuple[int, int]]) -> WandObservations | None:
+    """The observations of a valid file without quoting or padding, parsed by numpy's C reader (about
+    5x faster than row by row); None when the file is anything else or breaks a rule: the row-by-row
+    reader then reads it and names the first bad row. Both give identical observations."""
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        return None
+    if any(mark in text for mark in ('"', " ", "\t")) or "\r" in text.replace("\r\n", "\n"):
+        return None
+    header = text.split("\n", 1)[0].rstrip("\r").split(",")
+    if any(c not in header for c in COLUMNS) or not _cells_per_line_are(raw, len(header)):
+        return None
+    longest = 1 + (max(map(len, known)) if known else 64)  # a longer name shows as this long: not known
+    fields = [*COLUMNS, *([STAMP] if STAMP in header else [])]
+    kinds = {"frame": "i8", "camera": f"U{longest}", "point": "U2", "u": "f8", "v": "f8", STAMP: "f8"}
+    try:
+        table = np.loadtxt(
+            io.StringIO(text),
+            delimiter=",",
+            skiprows=1,
+            comments=None,
+            usecols=[header.index(name) for name in fields],
+            dtype=[(name, kinds[name]) for name in fields],
+            ndmin=1,
+        )
+    except ValueError:  # a cell that is not a number, rows of other lengths, ...
+        return None
+    if table.size == 0:
+        return None
+    frame = table["frame"]
+    uv_rows = np.stack([table["u"], table["v"]], axis=1)
+    stamp = table[STAMP] if STAMP in header else None
+    if not np.all(np.isfinite(uv_rows)):
+        return None
+    camera_text = table["camera"]
+    if known is not None:
+        names = tuple(known)
+    else:
+        found, first = np.unique(camera_text, return_index=True)
+        if max(map(len, found)) >= longest:
+            return None
+        names = tuple(str(n) for n in found[np.argsort(first)])  # in order of first appearance
+    camera = _index_of(camera_text, names)
+    point = _index_of(table["point"], POINT_LABELS)
+    if camera is None or point is None:  # a camera the rig lacks, a label other than A, B, C
+        return None
+    for c, name in enumerate(names):
+        size = sizes.get(name)
+        if size is None:
+            continue
+        mine = uv_rows[camera == c]
+        low, high = -0.5 - IMAGE_MARGIN_PX, np.array(size) - 0.5 + IMAGE_MARGIN_PX
+        if mine.size and not (np.all(mine >= low) and np.all(mine <= high)):
+            return None
+    frame_ids, frame_row = np.unique(frame, return_inverse=True)
+    n_cameras = len(names)
+    key = (frame_row * n_cameras + camera) * len(POINT_LABELS) + point
+    if np.unique(key).size != key.size:  # a point twice
+        return None
+    uv = np.full((frame_ids.size, n_cameras, len(POINT_LABELS), 2), np.nan)
+    uv[frame_row, camera, point] = uv_rows
+    stamps = None
+    if stamp is not None:
+        if not np.all(np.isfinite(stamp)) or np.any(np.abs(stamp) > MAX_STAMP_S):
+            return None
+        stamps = np.full((frame_ids.size, n_cameras), np.nan)
+        stamps[frame_row, camera] = stamp
+        if not np.array_equal(stamps[frame_row, camera], stamp):  # the points of one image share its stamp
+            return None
+        for c in range(n_cameras):
+            seen = stamps[:, c][np.isfinite(stamps[:, c])]
+            if np.any(np.diff(seen) <= 0):  # stamps must increase with the frame id
+                return None
+    return WandObservations(frame_ids.astype(np.int64), names, uv, stamps)
 
 
 def _ends_with_newline(path: Path) -> bool:
