@@ -309,3 +309,25 @@ def test_calibrate_with_the_intrinsics_given_in_cameras_yaml(simulated: Path, tm
         assert np.allclose(camera["opencv_equidistant"]["distortion"], given["distortion"], rtol=1e-9, atol=1e-15)
         assert not {"k1", "u0", "v0"} & set(camera["std"])
     assert np.allclose(result["cameras"]["cam1"]["translation"], truth["cameras"]["cam1"]["translation"], atol=10.0)
+
+
+def test_a_five_marker_wand_from_simulate_to_result(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    sim = tmp_path / "five"
+    assert main(["-q", "simulate", "paper3", "--seed", "2", "--wand-mm", "0,120,250,400,600", "--out", str(sim)]) == 0
+    assert yaml.safe_load((sim / "cameras.yaml").read_text())["wand"] == {"points_mm": [0, 120, 250, 400, 600]}
+    assert {row.split(",")[2] for row in (sim / "observations.csv").read_text().splitlines()[1:]} == set("ABCDE")
+    assert _calibrate(sim, tmp_path, "--truth", str(sim / "truth.yaml")) == 0
+    assert "wand |AE| " in capsys.readouterr().out
+    result = yaml.safe_load((tmp_path / "result.yaml").read_text())
+    assert result["wand"] == {"points_mm": [0, 120, 250, 400, 600]}
+    assert result["metrics"]["wand_length_rms_mm"] < 10.0
+
+
+def test_a_two_marker_wand_is_refused_with_the_reason(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    sim = tmp_path / "two"
+    assert main(["-q", "simulate", "paper", "--seed", "2", "--wand-mm", "0,600", "--out", str(sim)]) == 0
+    assert _calibrate(sim, tmp_path) == 2
+    err = capsys.readouterr().err.strip()
+    assert "needs a wand of at least three markers" in err and "\n" not in err and "Traceback" not in err
+    assert main(["-q", "simulate", "paper", "--wand-mm", "0,600,500", "--out", str(sim)]) == 2
+    assert "marker positions must start at 0 mm and increase" in capsys.readouterr().err

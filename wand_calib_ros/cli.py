@@ -7,6 +7,7 @@ stderr naming the problem; progress goes to stderr, results to files.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import logging
 import sys
 import time
@@ -20,6 +21,7 @@ from wand_calib_ros.collection.floor import read_floor_frames
 from wand_calib_ros.core.pairwise import PairOptions
 from wand_calib_ros.core.pipeline import CalibrationOptions, calibrate
 from wand_calib_ros.core.result import CalibrationResult, CameraCalibration
+from wand_calib_ros.core.rig import WandSpec
 from wand_calib_ros.core.timing import TIMING_MODES
 from wand_calib_ros.errors import WandCalibError
 from wand_calib_ros.io.export import FORMATS as EXPORT_FORMATS
@@ -186,6 +188,11 @@ def _parser() -> argparse.ArgumentParser:
         default=0.0,
         help="fraction of complete camera views to corrupt (A/C swap, spurious blob, 20 px error)",
     )
+    sim.add_argument(
+        "--wand-mm",
+        metavar="POSITIONS",
+        help="another wand: its markers' positions along it in mm, comma-separated from 0 (e.g. 0,120,250,400,600)",
+    )
     sim.add_argument("--true-focal", type=float, help="paper scenario: true focal length in mm (default 2.0)")
     sim.add_argument(
         "--principal-point",
@@ -256,8 +263,9 @@ def _print_summary(result: CalibrationResult, output: Path) -> None:
             + (f"; {', '.join(camera.fixed_coefficients)} fixed at 0" if camera.fixed_coefficients else "")
             + _timing_summary(result, camera)
         )
+    ends = f"|{result.wand.labels[0]}{result.wand.labels[-1]}|"  # |AC| of the three-LED wand
     print(
-        f"  wand |AC| {result.wand_length_mean_mm:.2f} +- {result.wand_length_std_mm:.2f} mm "
+        f"  wand {ends} {result.wand_length_mean_mm:.2f} +- {result.wand_length_std_mm:.2f} mm "
         f"(nominal {result.wand.L:.1f}), RMS error {result.wand_length_rms_mm:.3f} mm; "
         f"{result.placements_used} placements used, {result.placements_rejected} rejected"
     )
@@ -292,7 +300,9 @@ def _timing_summary(result: CalibrationResult, camera: CameraCalibration) -> str
 def _calibrate(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     rig = load_rig(args.cameras)
-    observations = read_observations(args.observations, rig.camera_names, image_sizes=rig.image_sizes)
+    observations = read_observations(
+        args.observations, rig.camera_names, image_sizes=rig.image_sizes, labels=rig.wand.labels
+    )
     log.info("read %d frames of %d cameras from %s", observations.uv.shape[0], len(rig.cameras), args.observations)
     if args.max_placements is not None and args.max_placements < 2:
         raise WandCalibError("--max-placements must be at least 2")
@@ -319,6 +329,14 @@ def _calibrate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _wand_positions(text: str) -> WandSpec:
+    """The wand of ``--wand-mm 0,120,250,400,600``."""
+    try:
+        return WandSpec(tuple(float(v) for v in text.split(",")))
+    except ValueError:
+        raise WandCalibError(f"--wand-mm must be comma-separated numbers in mm, got {text!r}") from None
+
+
 def _simulate(args: argparse.Namespace) -> int:
     factory = SCENARIOS[args.scenario]
     kwargs: dict[str, object] = {}
@@ -338,6 +356,8 @@ def _simulate(args: argparse.Namespace) -> int:
     if not (0 <= args.outliers < 1):
         raise WandCalibError("--outliers must be a fraction in [0, 1)")
     scenario = factory(**kwargs)
+    if args.wand_mm is not None:
+        scenario = dataclasses.replace(scenario, wand=_wand_positions(args.wand_mm))
     rng = np.random.default_rng(args.seed)
     timing: dict[str, dict[str, float]] = {}
     if args.take is not None:
@@ -505,7 +525,9 @@ def _report(args: argparse.Namespace) -> int:
     from wand_calib_ros.report.html import write_report  # matplotlib only when a report is asked for
 
     rig = load_rig(args.cameras)
-    observations = read_observations(args.observations, rig.camera_names, image_sizes=rig.image_sizes)
+    observations = read_observations(
+        args.observations, rig.camera_names, image_sizes=rig.image_sizes, labels=rig.wand.labels
+    )
     path = write_report(rig, observations, args.result, args.out)
     print(f"report: {path}")
     return 0

@@ -16,7 +16,7 @@ from wand_calib_ros.sim.scenarios import SCENARIOS
 
 
 def _with_wand(rig: RigSpec, l1: float, l2: float) -> RigSpec:
-    return replace(rig, wand=WandSpec(l1, l2))
+    return replace(rig, wand=WandSpec.from_lengths(l1, l2))
 
 
 @pytest.mark.parametrize("name", sorted(SCENARIOS))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from rigs import true_views
 
 from wand_calib_ros.detection.blobs import Blobs
@@ -165,3 +166,12 @@ def test_a_wand_with_an_led_cut_by_the_border_is_not_written() -> None:
     assert identify_wand(whole).points is not None
     detection = identify_wand(cut)
     assert detection.points is None and detection.reason == "at_border"
+
+
+def test_the_detector_refuses_a_wand_of_other_than_three_leds_by_its_marker_count() -> None:
+    from wand_calib_ros.core.rig import WandSpec
+    from wand_calib_ros.detection.errors import UnsupportedWandError
+
+    assert WandOptions.for_wand(WandSpec.from_lengths(400, 200)).ratio == 2.0
+    with pytest.raises(UnsupportedWandError, match="this rig's wand has 5 markers"):
+        WandOptions.for_wand(WandSpec((0.0, 120.0, 250.0, 400.0, 600.0)))

@@ -90,7 +90,9 @@ class ObservationBuffer:
                 raise FormatError(buffer.path, f"cannot repair the buffer: {error.strerror}") from None
         if buffer.path.exists() and has_rows(buffer.path):
             try:
-                existing = read_observations(buffer.path, rig.camera_names, image_sizes=rig.image_sizes)
+                existing = read_observations(
+                    buffer.path, rig.camera_names, image_sizes=rig.image_sizes, labels=rig.wand.labels
+                )
             except FormatError as error:
                 if buffer.repaired is not None:  # not a buffer a tear explains: put the file back as found
                     os.replace(buffer.repaired.original, buffer.path)

@@ -129,7 +129,7 @@ class CoverageTracker:
             width, height = self.rig.cameras[c].image_size
             cells = np.clip((uv[c] / [width, height] * GRID).astype(np.int64), 0, GRID - 1)
             np.add.at(self.cells[c], (cells[:, 1], cells[:, 0]), 1)
-            du, dv = uv[c, 2] - uv[c, 0]
+            du, dv = uv[c, -1] - uv[c, 0]
             self.directions[c, int(np.arctan2(dv, du) % np.pi / np.pi * DIRECTIONS) % DIRECTIONS] += 1
             octave = np.log2(max(float(np.hypot(du, dv)), 1.0)) / LENGTH_OCTAVES
             self.lengths[c, min(int(octave * LENGTH_BINS), LENGTH_BINS - 1)] += 1

@@ -106,8 +106,9 @@ class PlacementTiming:
         if self.heights.shape != (n_cameras,):
             raise ValueError(f"heights must have shape ({n_cameras},), got {self.heights.shape}")
         for name in ("velocity", "acceleration", "jerk"):
-            if getattr(self, name).shape != (n_placements, 3, 3):
-                raise ValueError(f"{name} must have shape ({n_placements}, 3, 3), got {getattr(self, name).shape}")
+            shape = getattr(self, name).shape
+            if len(shape) != 3 or shape[0] != n_placements or shape[2] != 3:
+                raise ValueError(f"{name} must have shape ({n_placements}, K, 3), got {shape}")
 
     def subset(self, index: IntArray | NDArray[np.bool_]) -> PlacementTiming:
         """The timing of some placements (an index or mask over axis 0)."""

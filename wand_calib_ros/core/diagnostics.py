@@ -52,15 +52,15 @@ def clock_offsets(result: CalibrationResult, observations: WandObservations) -> 
     rows = rows[spread_subset(rows.size, MAX_FRAMES)]
     uv = obs.uv[rows]
     velocity = (obs.uv[rows + 1] - obs.uv[rows - 1]) / 2.0
-    bearings = np.stack([unproject(models[c], uv[:, c]) for c in range(len(names))], axis=2)  # (F, 3, C, 3)
+    bearings = np.stack([unproject(models[c], uv[:, c]) for c in range(len(names))], axis=2)  # (F, K, C, 3)
     rotations = np.stack([p.rotation for p in poses])
     translations = np.stack([p.translation for p in poses])
     out = []
     for c, name in enumerate(names):
         others = bearings.copy()
         others[:, :, c] = np.nan
-        points = triangulate(others.reshape(-1, len(names), 3), rotations, translations).reshape(-1, 3, 3)
-        residual = project(models[c], poses[c].apply(points)) - uv[:, c]  # (F, 3, 2)
+        points = triangulate(others.reshape(-1, len(names), 3), rotations, translations).reshape(uv.shape[0], -1, 3)
+        residual = project(models[c], poses[c].apply(points)) - uv[:, c]  # (F, K, 2)
         ok = np.all(np.isfinite(residual), axis=-1) & np.all(np.isfinite(velocity[:, c]), axis=-1)
         r, v = residual[ok], velocity[:, c][ok]
         if r.shape[0] < 10 or not np.any(v):

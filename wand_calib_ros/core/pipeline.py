@@ -10,14 +10,14 @@ from numpy.typing import NDArray
 
 from wand_calib_ros.core.diagnostics import clock_offsets, clock_warnings
 from wand_calib_ros.core.errors import InsufficientDataError
-from wand_calib_ros.core.multi_camera import initialise_rig
+from wand_calib_ros.core.multi_camera import RigInitialisation, initialise_rig
 from wand_calib_ros.core.pairwise import PairOptions
 from wand_calib_ros.core.plausibility import check_result, check_rig, check_views
 from wand_calib_ros.core.refine import refine_calibration
 from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.core.rig import RigSpec, WandObservations, spread_subset
 from wand_calib_ros.core.timing import align_views, offset_warnings, rate_warnings, timing_input
-from wand_calib_ros.core.vision_graph import build_vision_graph
+from wand_calib_ros.core.vision_graph import VisionGraph, build_vision_graph
 from wand_calib_ros.core.world_frame import floor_of
 
 log = logging.getLogger(__name__)
@@ -74,6 +74,10 @@ def calibrate(
         if name not in observations.camera_names:
             raise InsufficientDataError(f"camera '{name}' has no observations")
     obs = observations.select_cameras(names)
+    if obs.uv.shape[2] != rig.wand.n_points:
+        raise InsufficientDataError(
+            f"the observations have {obs.uv.shape[2]} points per view, the rig's wand {rig.wand.n_points} markers"
+        )
     obs, floor = _split_floor(obs, options.floor_frames)
     check_rig(rig)
     check_views(rig, obs)
@@ -96,7 +100,7 @@ def calibrate(
     )
     line = timing.line.subset(usable)
     aligned = align_views(uv, line)  # free-running views moved to their placement's time, for the starts
-    init = initialise_rig(rig, aligned, graph, options.pair)
+    init = _initialise(rig, aligned, graph, options.pair)
     given = [spec.intrinsics is not None for spec in rig.cameras]
     if any(given):
         log.info("intrinsics given for %s", ", ".join(n for n, g in zip(names, given, strict=True) if g))
@@ -121,6 +125,16 @@ def calibrate(
         return replace(result, warnings=tuple(warnings))
     offsets = clock_offsets(result, obs)  # not modelled: say when the residuals show them
     return replace(result, clock_offsets=offsets, warnings=(*warnings, *clock_warnings(offsets)))
+
+
+def _initialise(rig: RigSpec, uv: NDArray[np.float64], graph: VisionGraph, options: PairOptions) -> RigInitialisation:
+    """Steps 1-3 and the chaining of Section III-B, which need a three-marker wand: on a longer wand,
+    the first, the middle and the last marker (:meth:`WandSpec.three_points`); the bundle adjustment
+    then uses every marker."""
+    if rig.wand.n_points == 3:
+        return initialise_rig(rig, uv, graph, options)
+    three = replace(rig, wand=rig.wand.three_point_wand())
+    return initialise_rig(three, uv[:, :, list(rig.wand.three_points())], graph, options)
 
 
 def _require_whole_views(names: tuple[str, ...], complete: NDArray[np.bool_]) -> None:

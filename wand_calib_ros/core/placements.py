@@ -1,6 +1,6 @@
 """The wand's placements with the cameras known: linear triangulation and a fit of each placement.
 
-Both work on dense (P, C, 3, 2) pixels (NaN where a camera did not see a point) and
+Both work on dense (P, C, K, 2) pixels (NaN where a camera did not see a point) and
 return the wand in the reference frame (mm).
 """
 
@@ -29,16 +29,17 @@ def triangulate_placements(models: tuple[CameraModel, ...], poses: tuple[Pose, .
 
     Args:
         models, poses: per camera intrinsics and pose (reference frame).
-        uv: (P, C, 3, 2) pixels of A, B, C, NaN where not seen.
+        uv: (P, C, K, 2) pixels of the K markers, NaN where not seen.
 
     Returns:
-        (P, 3, 3) A, B, C in the reference frame (NaN where fewer than two views).
+        (P, K, 3) the markers in the reference frame (NaN where fewer than two views).
     """
     n_placements, n_cameras = uv.shape[:2]
-    bearings = np.stack([unproject(models[c], uv[:, c]) for c in range(n_cameras)], axis=2)  # (P, 3, C, 3)
+    bearings = np.stack([unproject(models[c], uv[:, c]) for c in range(n_cameras)], axis=2)  # (P, K, C, 3)
     rotations = np.stack([p.rotation for p in poses])
     translations = np.stack([p.translation for p in poses])
-    return triangulate(bearings.reshape(-1, n_cameras, 3), rotations, translations).reshape(n_placements, 3, 3)
+    points = triangulate(bearings.reshape(-1, n_cameras, 3), rotations, translations)
+    return points.reshape(n_placements, uv.shape[2], 3)
 
 
 def fit_placements(
@@ -69,11 +70,11 @@ def fit_placements(
     """
     models, poses = cameras.models, cameras.poses
     points = triangulate_placements(models, poses, uv)
-    usable = np.all(np.isfinite(points), axis=(1, 2)) & (np.linalg.norm(points[:, 2] - points[:, 0], axis=1) > 0)
+    usable = np.all(np.isfinite(points), axis=(1, 2)) & (np.linalg.norm(points[:, -1] - points[:, 0], axis=1) > 0)
     usable &= np.all(np.isfinite(uv), axis=(2, 3)).sum(axis=1) >= 2
     index = np.flatnonzero(usable)
     start = BundleState(
-        models, poses, points[index, 0], wand_directions(points[index, 0], points[index, 2]), cameras.timing
+        models, poses, points[index, 0], wand_directions(points[index, 0], points[index, -1]), cameras.timing
     )
     problem = BundleProblem.from_dense(wand, uv[index], None if timing is None else timing.subset(index))
     if index.size == 0:

@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 
 from wand_calib_ros.core.errors import PlausibilityError
 from wand_calib_ros.core.result import CalibrationResult
-from wand_calib_ros.core.rig import CameraSpec, RigSpec, WandObservations
+from wand_calib_ros.core.rig import CameraSpec, RigSpec, WandObservations, WandSpec
 
 FloatArray = NDArray[np.float64]
 
@@ -92,11 +92,39 @@ def check_views(rig: RigSpec, observations: WandObservations) -> None:
             farther than any calibration volume (micrometres?).
     """
     wand = rig.wand
-    ab, bc = image_lengths(observations.uv)  # (F, C)
+    if wand.n_points == 3:
+        _check_segment_ratio(wand, observations.uv)
+    ends = np.linalg.norm(observations.uv[:, :, -1] - observations.uv[:, :, 0], axis=-1)  # (F, C) px
+    names = "L1 and L2" if wand.n_points == 3 else "the marker positions"
+    lengths = (wand.L1, wand.L2) if wand.n_points == 3 else wand.positions_mm
+    metres = " and ".join(f"{1000 * v:g}" for v in lengths)
+    for c, spec in enumerate(rig.cameras):
+        length = ends[:, c]
+        length = length[np.isfinite(length) & (length > 0)]
+        if length.size == 0:
+            continue
+        focal_px = spec.nominal_focal_mm * float(np.mean(spec.m))
+        distance = float(np.median(focal_px * wand.L / length))  # mm, for a wand seen side-on
+        if distance < MIN_DISTANCE_FOCALS * spec.nominal_focal_mm:
+            raise PlausibilityError(
+                f"camera '{spec.name}': with |AC| = {wand.L:g} mm the wand would be about {distance:.3g} mm from "
+                f"the lens (its nominal focal is {spec.nominal_focal_mm:g} mm): no lens images that; are {names} "
+                f"in metres or cm? write them in mm (e.g. {metres} for metres)"
+            )
+        if distance > MAX_DISTANCE_MM:
+            raise PlausibilityError(
+                f"camera '{spec.name}': with |AC| = {wand.L:g} mm the wand would be about {distance / 1e6:.3g} km "
+                f"from the lens: are {names} in micrometres? write them in mm"
+            )
+
+
+def _check_segment_ratio(wand: WandSpec, uv: FloatArray) -> None:
+    """The three-LED wand's L1/L2 against the median image ratio |AB|/|BC| of (F, C, 3, 2) views."""
+    ab, bc = image_lengths(uv)  # (F, C)
     measured = np.isfinite(ab) & np.isfinite(bc) & (bc > 0)
     ratios = (ab / bc)[measured]
     declared = wand.L1 / wand.L2
-    if _distinct_views(observations.uv, measured) >= WAND_RATIO_VIEWS:  # a wand held still is one view
+    if _distinct_views(uv, measured) >= WAND_RATIO_VIEWS:  # a wand held still is one view
         seen = float(np.median(ratios))
         if not 1.0 / WAND_RATIO_TOLERANCE <= seen / declared <= WAND_RATIO_TOLERANCE:
             swapped = 1.0 / WAND_RATIO_TOLERANCE <= seen * declared <= WAND_RATIO_TOLERANCE
@@ -109,24 +137,6 @@ def check_views(rig: RigSpec, observations: WandObservations) -> None:
             raise PlausibilityError(
                 f"wand: the views' median image ratio |AB|/|BC| is {seen:.2f} ({ratios.size} views) but "
                 f"L1/L2 = {wand.L1:g}/{wand.L2:g} = {declared:.2f}: {hint}"
-            )
-    for c, spec in enumerate(rig.cameras):
-        length = (ab + bc)[:, c]
-        length = length[np.isfinite(length) & (length > 0)]
-        if length.size == 0:
-            continue
-        focal_px = spec.nominal_focal_mm * float(np.mean(spec.m))
-        distance = float(np.median(focal_px * wand.L / length))  # mm, for a wand seen side-on
-        if distance < MIN_DISTANCE_FOCALS * spec.nominal_focal_mm:
-            raise PlausibilityError(
-                f"camera '{spec.name}': with |AC| = {wand.L:g} mm the wand would be about {distance:.3g} mm from "
-                f"the lens (its nominal focal is {spec.nominal_focal_mm:g} mm): no lens images that; are L1 and L2 "
-                f"in metres or cm? write them in mm (e.g. {wand.L1 * 1000:g} and {wand.L2 * 1000:g} for metres)"
-            )
-        if distance > MAX_DISTANCE_MM:
-            raise PlausibilityError(
-                f"camera '{spec.name}': with |AC| = {wand.L:g} mm the wand would be about {distance / 1e6:.3g} km "
-                "from the lens: are L1 and L2 in micrometres? write them in mm"
             )
 
 

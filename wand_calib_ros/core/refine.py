@@ -85,8 +85,8 @@ COVERAGE_FRACTION = 0.8
 
 
 def ac_length_errors(points: FloatArray, wand: WandSpec) -> FloatArray:
-    """(P,) L - |A^r C^r| in mm."""
-    return wand.L - np.linalg.norm(points[:, 2] - points[:, 0], axis=-1)
+    """(P,) L - |A^r C^r| in mm (first marker to last)."""
+    return wand.L - np.linalg.norm(points[:, -1] - points[:, 0], axis=-1)
 
 
 def gate_threshold(errors: FloatArray, wand: WandSpec) -> float:
@@ -286,7 +286,9 @@ def _robust_pass(
     """
 
     def start(index: NDArray[np.int64], timing: FloatArray | None) -> BundleState:
-        return BundleState(models, poses, points[index, 0], wand_directions(points[index, 0], points[index, 2]), timing)
+        return BundleState(
+            models, poses, points[index, 0], wand_directions(points[index, 0], points[index, -1]), timing
+        )
 
     if clocks.tentative:
         robust, sigma = robust_adjustment(start(keep, None), BundleProblem.from_dense(wand, uv[keep]), free)
@@ -329,7 +331,7 @@ def _final_adjustment(
     parameter by more than MOTION_SETTLED of its standard deviation (at most MOTION_ROUNDS rounds)."""
     for _ in range(MOTION_ROUNDS if clocks.modelled else 1):
         if clocks.modelled:
-            points = np.full((len(uv), 3, 3), np.nan)
+            points = np.full((len(uv), uv.shape[2], 3), np.nan)
             rest = np.setdiff1d(np.arange(len(uv)), used)
             rest = rest[_enough_views(uv[rest])]  # the others it can place
             if rest.size:
@@ -354,7 +356,7 @@ def _fitted_points(
 ) -> FloatArray:
     """(P, 3, 3) every placement where the cameras put it: ``adjusted`` from ``cameras``' state (an
     adjustment of those), the others fitted (Huber ``scale`` px) with the cameras and timing held fixed."""
-    points = np.full((uv.shape[0], 3, 3), np.nan)
+    points = np.full((uv.shape[0], uv.shape[2], 3), np.nan)
     points[adjusted] = cameras.points(wand)
     others = np.setdiff1d(np.arange(uv.shape[0]), adjusted)
     index, fitted = fit_placements(
@@ -708,7 +710,7 @@ def _assemble(
             )
         )
     points = triangulate_placements(state.models, state.poses, synchronised_pixels(state, problem, uv))
-    lengths = np.linalg.norm(points[:, 2] - points[:, 0], axis=-1)
+    lengths = np.linalg.norm(points[:, -1] - points[:, 0], axis=-1)
     lengths = lengths[np.isfinite(lengths)]
     order = [reference] + [c for c in range(len(cameras)) if c != reference]
     return CalibrationResult(

@@ -12,8 +12,11 @@ from wand_calib_ros.core.errors import InsufficientDataError, ModelError
 
 FloatArray = NDArray[np.float64]
 
-#: Wand point labels in the order used everywhere (A-B-C collinear, |AB| = L1, |BC| = L2).
-POINT_LABELS = ("A", "B", "C")
+#: Wand point labels in the order used everywhere: A first, then along the wand (A-B-C of the paper's
+#: three-LED wand, |AB| = L1, |BC| = L2; wands with more markers go on with D, E, ...).
+ALL_POINT_LABELS = ("A", "B", "C", "D", "E", "F", "G", "H")
+#: The labels of the paper's three-LED wand.
+POINT_LABELS = ALL_POINT_LABELS[:3]
 
 #: Lens hints accepted by ``CameraSpec.lens`` besides the projection names.
 LENS_CLASSES = ("fisheye", "conventional")
@@ -21,24 +24,75 @@ LENS_CLASSES = ("fisheye", "conventional")
 
 @dataclass(frozen=True)
 class WandSpec:
-    """The wand: three collinear points with |AB| = L1 and |BC| = L2 (mm)."""
+    """The wand: K >= 2 collinear markers at known positions along it.
 
-    L1: float
-    L2: float
+    Attributes:
+        positions_mm: (K,) position of each marker along the wand, mm: 0 (marker A) first, then
+            increasing (the paper's wand: (0, L1, L1 + L2)).
+    """
+
+    positions_mm: tuple[float, ...]
 
     def __post_init__(self) -> None:
-        if not (np.isfinite(self.L1) and np.isfinite(self.L2) and self.L1 > 0 and self.L2 > 0):
-            raise ModelError(f"wand lengths must be positive, got L1={self.L1}, L2={self.L2}")
+        positions = tuple(float(p) for p in self.positions_mm)
+        object.__setattr__(self, "positions_mm", positions)
+        if not 2 <= len(positions) <= len(ALL_POINT_LABELS):
+            raise ModelError(f"a wand has 2 to {len(ALL_POINT_LABELS)} markers, got {len(positions)}")
+        if not all(np.isfinite(positions)) or positions[0] != 0.0 or np.any(np.diff(positions) <= 0):
+            raise ModelError(f"marker positions must start at 0 mm and increase, got {list(positions)}")
+
+    @classmethod
+    def from_lengths(cls, L1: float, L2: float) -> WandSpec:
+        """The paper's three-LED wand: |AB| = L1, |BC| = L2 (mm)."""
+        if not (np.isfinite(L1) and np.isfinite(L2) and L1 > 0 and L2 > 0):
+            raise ModelError(f"wand lengths must be positive, got L1={L1}, L2={L2}")
+        return cls((0.0, float(L1), float(L1) + float(L2)))
+
+    @property
+    def n_points(self) -> int:
+        """K, the number of markers."""
+        return len(self.positions_mm)
+
+    @property
+    def labels(self) -> tuple[str, ...]:
+        """The markers' labels in order (A, B, C, ...)."""
+        return ALL_POINT_LABELS[: self.n_points]
 
     @property
     def L(self) -> float:
-        """|AC| = L1 + L2 in mm."""
-        return self.L1 + self.L2
+        """Distance from the first marker to the last (|AC| of the paper's wand), mm."""
+        return self.positions_mm[-1]
+
+    @property
+    def L1(self) -> float:
+        """|AB| in mm (the first segment)."""
+        return self.positions_mm[1]
+
+    @property
+    def L2(self) -> float:
+        """|BC| in mm (the second segment; a two-marker wand has none)."""
+        if self.n_points < 3:
+            raise ModelError("a two-marker wand has one segment only")
+        return self.positions_mm[2] - self.positions_mm[1]
 
     @property
     def offsets(self) -> FloatArray:
-        """(3,) distances of A, B, C from A along the wand, mm."""
-        return np.array([0.0, self.L1, self.L])
+        """(K,) distances of the markers from A along the wand, mm."""
+        return np.array(self.positions_mm)
+
+    def three_points(self) -> tuple[int, int, int]:
+        """Indices of the three markers the initialisation works with (the paper's method needs three): the
+        first, the one nearest the middle and the last (K >= 3)."""
+        if self.n_points < 3:
+            raise ModelError("the initialisation needs a wand of at least three markers")
+        inner = self.offsets[1:-1]
+        middle = 1 + int(np.argmin(np.abs(inner - 0.5 * self.L)))
+        return 0, middle, self.n_points - 1
+
+    def three_point_wand(self) -> WandSpec:
+        """The wand of :meth:`three_points`' markers (the paper's A, B, C)."""
+        _, middle, last = self.three_points()
+        return WandSpec((0.0, self.positions_mm[middle], self.positions_mm[last]))
 
 
 @dataclass(frozen=True)
@@ -122,7 +176,7 @@ class WandObservations:
             consecutive frames of one recording at a constant rate and a frame's views are
             simultaneous; with stamps, a frame is a grouping of views close in time.
         camera_names: (C,) names; the order of axis 1 of ``uv``.
-        uv: (F, C, 3, 2) pixels of A, B, C; NaN where a camera did not see a point.
+        uv: (F, C, K, 2) pixels of the wand's K markers (A, B, C, ...); NaN where a camera did not see one.
         stamps: (F, C) capture stamp of each camera's image, seconds (NaN where the camera has no
             view in that frame), or None when the observations carry no stamps.
     """
@@ -135,9 +189,9 @@ class WandObservations:
     def __post_init__(self) -> None:
         frames = np.asarray(self.frames, dtype=np.int64)
         uv = np.asarray(self.uv, dtype=np.float64)
-        if uv.shape != (frames.size, len(self.camera_names), 3, 2):
+        if uv.ndim != 4 or uv.shape[:2] != (frames.size, len(self.camera_names)) or uv.shape[3] != 2:
             raise ValueError(
-                f"uv must have shape (F, C, 3, 2) = ({frames.size}, {len(self.camera_names)}, 3, 2), got {uv.shape}"
+                f"uv must have shape (F, C, K, 2) = ({frames.size}, {len(self.camera_names)}, K, 2), got {uv.shape}"
             )
         frames.setflags(write=False)
         uv.setflags(write=False)
@@ -152,7 +206,7 @@ class WandObservations:
 
     @property
     def complete(self) -> NDArray[np.bool_]:
-        """(F, C) True where a camera sees all three wand points."""
+        """(F, C) True where a camera sees every wand marker."""
         return np.all(np.isfinite(self.uv), axis=(2, 3))
 
     def camera_index(self, name: str) -> int:
@@ -173,7 +227,7 @@ class WandObservations:
         return WandObservations(self.frames, names, self.uv[:, index], stamps)
 
     def with_uv(self, uv: FloatArray) -> WandObservations:
-        """The same frames, cameras and stamps with other pixels (F, C, 3, 2)."""
+        """The same frames, cameras and stamps with other pixels (F, C, K, 2)."""
         return WandObservations(self.frames, self.camera_names, uv, self.stamps)
 
 

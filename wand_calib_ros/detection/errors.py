@@ -11,3 +11,7 @@ class DetectionError(WandCalibError):
 
 class ImageError(DetectionError):
     """An image that cannot be used (unknown encoding, wrong size, empty)."""
+
+
+class UnsupportedWandError(DetectionError):
+    """A wand the LED detector cannot find (it finds the paper's three collinear LEDs)."""

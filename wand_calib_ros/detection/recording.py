@@ -190,7 +190,7 @@ def detect_recording(
         inspect: called for every image with its blobs, detection and rejection reason
             (progress reports, debug overlays).
     """
-    wand_options = WandOptions(ratio=rig.wand.L1 / rig.wand.L2)
+    wand_options = WandOptions.for_wand(rig.wand)
     streams = {c.name: CameraStream(c, wand_options, blob_options, max_hold_ns=None) for c in rig.cameras}
     outcomes: list[tuple[str, Labelled]] = []
     for frame in sorted(frames, key=lambda f: f.stamp_ns):

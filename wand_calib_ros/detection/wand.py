@@ -19,7 +19,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wand_calib_ros.core.camera_model import CameraModel, monotonic_limit, radius, unproject
+from wand_calib_ros.core.rig import WandSpec
 from wand_calib_ros.detection.blobs import Blobs
+from wand_calib_ros.detection.errors import UnsupportedWandError
 
 FloatArray = NDArray[np.float64]
 
@@ -44,6 +46,21 @@ class WandOptions:
     min_length_px: float = 6.0
     ambiguous_ratio: float = 1.25
     competing_margin: float = 2.0
+
+    @classmethod
+    def for_wand(cls, wand: WandSpec) -> WandOptions:
+        """The settings of a rig's wand.
+
+        Raises:
+            UnsupportedWandError: a wand of other than three markers (calibrate it from an observations
+                CSV of its markers instead).
+        """
+        if wand.n_points != 3:
+            raise UnsupportedWandError(
+                f"the LED detector finds the three-LED wand; this rig's wand has {wand.n_points} markers: "
+                "detect them with your own tool and calibrate from an observations CSV (wand-calib calibrate)"
+            )
+        return cls(ratio=wand.L1 / wand.L2)
 
 
 @dataclass(frozen=True, eq=False)

@@ -23,7 +23,7 @@ from typing import TextIO
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.rig import POINT_LABELS, WandObservations
+from wand_calib_ros.core.rig import ALL_POINT_LABELS, POINT_LABELS, WandObservations
 from wand_calib_ros.io.errors import FormatError
 
 COLUMNS = ("frame", "camera", "point", "u", "v")
@@ -44,6 +44,7 @@ def read_observations(
     camera_names: Iterable[str] | None = None,
     *,
     image_sizes: Mapping[str, tuple[int, int]] | None = None,
+    labels: tuple[str, ...] = POINT_LABELS,
 ) -> WandObservations:
     """Read an observations CSV.
 
@@ -53,6 +54,7 @@ def read_observations(
             an error, and the result's cameras follow this order.
         image_sizes: if given, each camera's (width, height) in px: a point more than
             IMAGE_MARGIN_PX outside its image is an error.
+        labels: the wand's marker labels (``WandSpec.labels``; default the three-LED wand's A, B, C).
 
     Raises:
         FormatError: naming the file, the row (1 = header) and the problem.
@@ -63,7 +65,7 @@ def read_observations(
         raw = path.read_bytes()
     except OSError as error:
         raise FormatError(path, f"cannot read: {error.strerror}") from None
-    fast = _parse_plain(raw, known, dict(image_sizes or {}))
+    fast = _parse_plain(raw, known, dict(image_sizes or {}), labels)
     if fast is not None:
         if not raw.endswith(b"\n"):
             _warn_torn(path)
@@ -72,7 +74,7 @@ def read_observations(
     handle = path.open(newline="", encoding="utf-8-sig")  # a byte-order mark some editors write is fine
     with handle:
         try:
-            observations = _parse(handle, path, known, dict(image_sizes or {}))
+            observations = _parse(handle, path, known, dict(image_sizes or {}), labels)
         except UnicodeDecodeError as error:
             raise FormatError(
                 path, f"not UTF-8 text (it holds the byte 0x{error.object[error.start]:02x}): not an observations CSV?"
@@ -113,7 +115,9 @@ def _index_of(values: NDArray[np.str_], names: tuple[str, ...]) -> NDArray[np.in
     return index if np.array_equal(table[index], values) else None
 
 
-def _parse_plain(raw: bytes, known: list[str] | None, sizes: dict[str, tuple[int, int]]) -> WandObservations | None:
+def _parse_plain(
+    raw: bytes, known: list[str] | None, sizes: dict[str, tuple[int, int]], labels: tuple[str, ...] = POINT_LABELS
+) -> WandObservations | None:
     """The observations of a valid file without quoting or padding, parsed by numpy's C reader (about
     5x faster than row by row); None when the file is anything else or breaks a rule: the row-by-row
     reader then reads it and names the first bad row. Both give identical observations."""
@@ -157,7 +161,7 @@ def _parse_plain(raw: bytes, known: list[str] | None, sizes: dict[str, tuple[int
             return None
         names = tuple(str(n) for n in found[np.argsort(first)])  # in order of first appearance
     camera = _index_of(camera_text, names)
-    point = _index_of(table["point"], POINT_LABELS)
+    point = _index_of(table["point"], labels)
     if camera is None or point is None:  # a camera the rig lacks, a label other than A, B, C
         return None
     for c, name in enumerate(names):
@@ -170,10 +174,10 @@ def _parse_plain(raw: bytes, known: list[str] | None, sizes: dict[str, tuple[int
             return None
     frame_ids, frame_row = np.unique(frame, return_inverse=True)
     n_cameras = len(names)
-    key = (frame_row * n_cameras + camera) * len(POINT_LABELS) + point
+    key = (frame_row * n_cameras + camera) * len(labels) + point
     if np.unique(key).size != key.size:  # a point twice
         return None
-    uv = np.full((frame_ids.size, n_cameras, len(POINT_LABELS), 2), np.nan)
+    uv = np.full((frame_ids.size, n_cameras, len(labels), 2), np.nan)
     uv[frame_row, camera, point] = uv_rows
     stamps = None
     if stamp is not None:
@@ -199,7 +203,13 @@ def _ends_with_newline(path: Path) -> bool:
         return handle.read(1) == b"\n"
 
 
-def _parse(handle: TextIO, path: Path, known: list[str] | None, sizes: dict[str, tuple[int, int]]) -> WandObservations:
+def _parse(
+    handle: TextIO,
+    path: Path,
+    known: list[str] | None,
+    sizes: dict[str, tuple[int, int]],
+    labels: tuple[str, ...] = POINT_LABELS,
+) -> WandObservations:
     reader = csv.reader(handle)
     header = next(reader, None)
     if header is None:
@@ -213,7 +223,7 @@ def _parse(handle: TextIO, path: Path, known: list[str] | None, sizes: dict[str,
     index = [header.index(c) for c in COLUMNS]
     stamp_index = header.index(STAMP) if STAMP in header else None
     width = max(index + ([stamp_index] if stamp_index is not None else [])) + 1
-    label_index = {label: i for i, label in enumerate(POINT_LABELS)}
+    label_index = {label: i for i, label in enumerate(labels)}
     frames: dict[int, int] = {}
     cameras: dict[str, int] = {name: i for i, name in enumerate(known)} if known is not None else {}
     entries: list[tuple[int, int, int, float, float]] = []
@@ -236,7 +246,8 @@ def _parse(handle: TextIO, path: Path, known: list[str] | None, sizes: dict[str,
         except ValueError:
             raise FormatError(path, f"frame must be an integer, got {frame_text!r}", row=row_number) from None
         if point not in label_index:
-            raise FormatError(path, f"point must be A, B or C, got {point!r}", row=row_number)
+            named = f"{', '.join(labels[:-1])} or {labels[-1]}"
+            raise FormatError(path, f"point must be {named} (the wand's markers), got {point!r}", row=row_number)
         try:
             u, v = float(u_text), float(v_text)
         except ValueError:
@@ -280,7 +291,7 @@ def _parse(handle: TextIO, path: Path, known: list[str] | None, sizes: dict[str,
     if not entries:
         raise FormatError(path, "no observations after the header")
     frame_ids = np.array(sorted(frames, key=frames.__getitem__), dtype=np.int64)
-    uv = np.full((len(frames), len(cameras), 3, 2), np.nan)
+    uv = np.full((len(frames), len(cameras), len(labels), 2), np.nan)
     table = np.array(entries)
     f, c, p = (table[:, i].astype(np.int64) for i in range(3))
     uv[f, c, p] = table[:, 3:]
@@ -342,10 +353,10 @@ def _check_stamp_order(
 def observation_rows(
     frame: int, camera_names: tuple[str, ...], uv: NDArray[np.float64], stamps: NDArray[np.float64] | None
 ) -> list[list[object]]:
-    """The CSV rows of one frame: (C, 3, 2) pixels (NaN: not seen) and (C,) stamps in s (or None)."""
+    """The CSV rows of one frame: (C, K, 2) pixels (NaN: not seen) and (C,) stamps in s (or None)."""
     rows: list[list[object]] = []
     for c, name in enumerate(camera_names):
-        for p, label in enumerate(POINT_LABELS):
+        for p, label in enumerate(ALL_POINT_LABELS[: uv.shape[1]]):
             u, v = uv[c, p]
             if np.isfinite(u) and np.isfinite(v):
                 row: list[object] = [frame, name, label, f"{u:.6f}", f"{v:.6f}"]

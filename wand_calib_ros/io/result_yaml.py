@@ -38,6 +38,7 @@ from wand_calib_ros.core.geometry import Pose
 from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.io.errors import FormatError
 from wand_calib_ros.io.outputs import write_together
+from wand_calib_ros.io.rig_yaml import wand_dict
 from wand_calib_ros.io.text import read_yaml
 
 CONVENTIONS = {
@@ -129,7 +130,7 @@ def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
     return {
         "reference_camera": result.reference_camera,
         "conventions": dict(CONVENTIONS),
-        "wand": {"L1": float(result.wand.L1), "L2": float(result.wand.L2)},
+        "wand": wand_dict(result.wand),
         "cameras": cameras,
         "metrics": {
             "wand_length_rms_mm": float(result.wand_length_rms_mm),

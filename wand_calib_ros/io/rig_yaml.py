@@ -120,6 +120,33 @@ def _intrinsics(
     return model, fixed
 
 
+def _wand(path: Path, wand_data: Any) -> WandSpec:
+    """The ``wand`` entry: {L1, L2} (the three-LED wand) or {points_mm: [0, ...]} (any 2 to 8 markers)."""
+    usage = "'wand' must be a mapping with L1 and L2 in mm, e.g. {L1: 400.0, L2: 200.0}, or points_mm: [0, 400, 600]"
+    if not isinstance(wand_data, dict):
+        raise FormatError(path, usage)
+    try:
+        if "points_mm" in wand_data:
+            points = wand_data["points_mm"]
+            if not isinstance(points, list):
+                raise FormatError(path, f"wand points_mm must be a list of positions in mm, got {points!r}")
+            return WandSpec(tuple(_number(path, "wand points_mm", p, positive=False) for p in points))
+        if "L1" not in wand_data or "L2" not in wand_data:
+            raise FormatError(path, usage)
+        l1 = _number(path, "wand L1", wand_data["L1"], positive=False)
+        l2 = _number(path, "wand L2", wand_data["L2"], positive=False)
+        return WandSpec.from_lengths(l1, l2)
+    except ModelError as error:
+        raise FormatError(path, str(error)) from None
+
+
+def wand_dict(wand: WandSpec) -> dict[str, Any]:
+    """The ``wand`` entry of a rig or result file: L1 and L2 for the three-LED wand, else points_mm."""
+    if wand.n_points == 3:
+        return {"L1": float(wand.L1), "L2": float(wand.L2)}
+    return {"points_mm": [float(p) for p in wand.positions_mm]}
+
+
 def parse_rig(data: Any, path: str | Path = "<rig>") -> RigSpec:
     """Validate a parsed ``cameras.yaml`` document.
 
@@ -129,15 +156,7 @@ def parse_rig(data: Any, path: str | Path = "<rig>") -> RigSpec:
     path = Path(path)
     if not isinstance(data, dict):
         raise FormatError(path, "expected a mapping with keys 'wand' and 'cameras'")
-    wand_data = data.get("wand")
-    if not isinstance(wand_data, dict) or "L1" not in wand_data or "L2" not in wand_data:
-        raise FormatError(path, "'wand' must be a mapping with L1 and L2 in mm, e.g. {L1: 400.0, L2: 200.0}")
-    l1 = _number(path, "wand L1", wand_data["L1"], positive=False)
-    l2 = _number(path, "wand L2", wand_data["L2"], positive=False)
-    try:
-        wand = WandSpec(l1, l2)
-    except ModelError as error:
-        raise FormatError(path, str(error)) from None
+    wand = _wand(path, data.get("wand"))
     cameras_data = data.get("cameras")
     if not isinstance(cameras_data, list) or not cameras_data:
         raise FormatError(path, "'cameras' must be a non-empty list")
@@ -220,7 +239,7 @@ def rig_to_dict(rig: RigSpec) -> dict[str, Any]:
                 "fixed": bool(spec.intrinsics_fixed),
             }
         cameras.append(item)
-    return {"wand": {"L1": float(rig.wand.L1), "L2": float(rig.wand.L2)}, "cameras": cameras}
+    return {"wand": wand_dict(rig.wand), "cameras": cameras}
 
 
 def save_rig(rig: RigSpec, path: str | Path) -> None:

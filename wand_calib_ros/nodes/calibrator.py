@@ -215,7 +215,9 @@ class CalibratorNode(Node):
         if not path.exists() or not has_rows(path):
             return False, f"nothing collected yet in {path}: is the collector running and the wand in view?"
         try:
-            observations = read_observations(path, self.rig.camera_names, image_sizes=self.rig.image_sizes)
+            observations = read_observations(
+                path, self.rig.camera_names, image_sizes=self.rig.image_sizes, labels=self.rig.wand.labels
+            )
             self.get_logger().info(f"/calibrate: calibrating {observations.uv.shape[0]} frames of {path}")
             floor = read_floor_frames(self.output_dir / FLOOR_FILE)  # from the collector's /set_floor
             result, files = run_calibration(

@@ -120,7 +120,7 @@ class CollectorNode(Node):
             max_delay_ns=hold_ns + 500_000_000,
         )
         self.timing: CalibrationResult | None = None  # the last /calibrate's result (its time offsets)
-        wand = WandOptions(ratio=self.rig.wand.L1 / self.rig.wand.L2)
+        wand = WandOptions.for_wand(self.rig.wand)
         self.streams = {c.name: CameraStream(c, wand, max_hold_ns=hold_ns) for c in self.rig.cameras}
         self.received = dict.fromkeys(self.rig.camera_names, 0)
         self.malformed = dict.fromkeys(self.rig.camera_names, 0)

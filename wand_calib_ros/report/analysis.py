@@ -122,7 +122,7 @@ def prepare(rig: RigSpec, observations: WandObservations, result_path: Path) -> 
     uv = obs.uv[rows]
     line = timeline(obs).subset(rows)
     points = triangulate_placements(models, poses, align_views(uv, line))
-    lengths = np.linalg.norm(points[:, 2] - points[:, 0], axis=-1)
+    lengths = np.linalg.norm(points[:, -1] - points[:, 0], axis=-1)
     ok = np.all(np.isfinite(points), axis=(1, 2)) & (lengths > 0)
     camera_timing = np.array([[geometry[n].time_offset, geometry[n].readout] for n in names])
     timing = None
@@ -133,7 +133,7 @@ def prepare(rig: RigSpec, observations: WandObservations, result_path: Path) -> 
             heights = np.array([spec.image_size[1] for spec in rig.cameras], dtype=np.float64)
             timing = PlacementTiming(line.view_times, heights, motion.velocity, motion.acceleration, motion.jerk)
     uv, points, lengths, line = uv[ok], points[ok], lengths[ok], line.subset(ok)
-    state = BundleState(models, poses, points[:, 0], wand_directions(points[:, 0], points[:, 2]), camera_timing)
+    state = BundleState(models, poses, points[:, 0], wand_directions(points[:, 0], points[:, -1]), camera_timing)
     problem = BundleProblem.from_dense(rig.wand, uv, None if timing is None else timing.subset(ok))
     timed = _fit(state, problem)
     wand_points, res = timed.state.points(rig.wand), timed.residuals

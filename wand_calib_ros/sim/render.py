@@ -53,7 +53,7 @@ def true_pixels(scenario: Scenario, motion: WandMotion) -> FloatArray:
     """(F, C, 3, 2) exact projections of A, B, C (NaN where a camera cannot see the LED)."""
     points = motion.points(scenario.wand)
     seen = visibility(scenario, motion.wand_a, motion.direction, motion.facing)
-    uv = np.full((points.shape[0], len(scenario.cameras), 3, 2), np.nan)
+    uv = np.full((points.shape[0], len(scenario.cameras), scenario.wand.n_points, 2), np.nan)
     for c, camera in enumerate(scenario.cameras):
         uv[:, c] = np.where(seen[:, c, :, None], project(camera.model, camera.pose.apply(points)), np.nan)
     return uv

@@ -132,7 +132,7 @@ def paper_fisheye_scenario(
         model = CameraModel(equisolid_taylor(true_focal_mm), spec.m, principal_point, spec.image_size)
         cameras.append(TrueCamera(spec, model, poses[i], np.radians(92.5)))
     volume = np.array([[-350.0, -350.0, 700.0], [350.0, 350.0, 1000.0]])
-    return Scenario("paper", WandSpec(400.0, 200.0), tuple(cameras), volume, n_placements)
+    return Scenario("paper", WandSpec.from_lengths(400.0, 200.0), tuple(cameras), volume, n_placements)
 
 
 def _barrel_perspective(theta: FloatArray) -> FloatArray:
@@ -166,7 +166,7 @@ def conventional_pair_scenario(*, n_placements: int = 300) -> Scenario:
         _conventional_camera("cam1", _REAL_PAIR_POSE, (322.0, 251.0)),
     )
     volume = _REAL_PAIR_VOLUME
-    return Scenario("conventional", WandSpec(400.0, 200.0), cameras, volume, n_placements)
+    return Scenario("conventional", WandSpec.from_lengths(400.0, 200.0), cameras, volume, n_placements)
 
 
 def mixed_pair_scenario(*, n_placements: int = 300) -> Scenario:
@@ -176,7 +176,7 @@ def mixed_pair_scenario(*, n_placements: int = 300) -> Scenario:
         _conventional_camera("cam1", _REAL_PAIR_POSE, (322.0, 251.0)),
     )
     volume = _REAL_PAIR_VOLUME
-    return Scenario("mixed", WandSpec(400.0, 200.0), cameras, volume, n_placements)
+    return Scenario("mixed", WandSpec.from_lengths(400.0, 200.0), cameras, volume, n_placements)
 
 
 #: The real pair's conventional camera mirrored to the other side of the fisheye (x -> -x).
@@ -191,7 +191,7 @@ def mixed_three_camera_scenario(*, n_placements: int = 300) -> Scenario:
         _conventional_camera("cam2", _MIRRORED_PAIR_POSE, (331.0, 244.0)),
     )
     volume = np.array([[-1500.0, -1000.0, 800.0], [1500.0, 1000.0, 3000.0]])
-    return Scenario("mixed3", WandSpec(400.0, 200.0), cameras, volume, n_placements, min_views=2)
+    return Scenario("mixed3", WandSpec.from_lengths(400.0, 200.0), cameras, volume, n_placements, min_views=2)
 
 
 def paper_three_camera_scenario(**kwargs: float | tuple[float, float]) -> Scenario:
@@ -238,7 +238,7 @@ def ring_scenario(*, n_placements: int = 600, radius_mm: float = 2500.0, cone_de
     # The 2 m cube around the ring centre, in camera 0's frame (camera 0 looks at the centre along +z).
     centre = world_poses[0].apply(np.zeros(3))
     volume = np.stack([centre - 1000.0, centre + 1000.0])
-    return Scenario("ring6", WandSpec(400.0, 200.0), tuple(cameras), volume, n_placements, 2, cone_deg)
+    return Scenario("ring6", WandSpec.from_lengths(400.0, 200.0), tuple(cameras), volume, n_placements, 2, cone_deg)
 
 
 def mocap_scenario(*, n_cameras: int = 16, n_placements: int = 10_000, cone_deg: float = 75.0) -> Scenario:
@@ -260,7 +260,7 @@ def mocap_scenario(*, n_cameras: int = 16, n_placements: int = 10_000, cone_deg:
     corners = np.array([[x, y, z] for x in (-2000.0, 2000.0) for y in (-2000.0, 0.0) for z in (-2000.0, 2000.0)])
     in_first = first.apply(corners)
     volume = np.stack([in_first.min(axis=0), in_first.max(axis=0)])
-    return Scenario("mocap16", WandSpec(400.0, 200.0), tuple(cameras), volume, n_placements, 2, cone_deg)
+    return Scenario("mocap16", WandSpec.from_lengths(400.0, 200.0), tuple(cameras), volume, n_placements, 2, cone_deg)
 
 
 SCENARIOS: dict[str, Callable[..., Scenario]] = {
@@ -345,7 +345,7 @@ def image_placements(
     """Project placements into every camera and add Gaussian noise (NaN where not visible)."""
     points = _wand_points(scenario, wand_a, direction)
     seen = visibility(scenario, wand_a, direction, facing)
-    uv = np.full((wand_a.shape[0], len(scenario.cameras), 3, 2), np.nan)
+    uv = np.full((wand_a.shape[0], len(scenario.cameras), scenario.wand.n_points, 2), np.nan)
     for i, camera in enumerate(scenario.cameras):
         projected = project(camera.model, camera.pose.apply(points))
         uv[:, i] = np.where(seen[:, i, :, None], projected, np.nan)

@@ -44,7 +44,7 @@ def compare_with_truth(
     heldout = truth_path.parent / "heldout.csv"
     if heldout.exists():
         names = tuple(cameras)
-        obs = read_observations(heldout, names)
+        obs = read_observations(heldout, names, labels=wand.labels)
         rms = heldout_wand_rms(
             tuple(cameras[n].model for n in names), tuple(cameras[n].pose for n in names), obs.uv, wand
         )
