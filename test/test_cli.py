@@ -323,11 +323,12 @@ def test_a_five_marker_wand_from_simulate_to_result(tmp_path: Path, capsys) -> N
     assert result["metrics"]["wand_length_rms_mm"] < 10.0
 
 
-def test_a_two_marker_wand_is_refused_with_the_reason(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+def test_a_two_marker_wand_from_simulate_to_result(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
     sim = tmp_path / "two"
     assert main(["-q", "simulate", "paper", "--seed", "2", "--wand-mm", "0,600", "--out", str(sim)]) == 0
-    assert _calibrate(sim, tmp_path) == 2
-    err = capsys.readouterr().err.strip()
-    assert "needs a wand of at least three markers" in err and "\n" not in err and "Traceback" not in err
+    assert _calibrate(sim, tmp_path) == 0
+    assert "wand |AB| " in capsys.readouterr().out
+    result = yaml.safe_load((tmp_path / "result.yaml").read_text())
+    assert result["wand"] == {"points_mm": [0, 600]} and result["metrics"]["wand_length_rms_mm"] < 10.0
     assert main(["-q", "simulate", "paper", "--wand-mm", "0,600,500", "--out", str(sim)]) == 2
     assert "marker positions must start at 0 mm and increase" in capsys.readouterr().err

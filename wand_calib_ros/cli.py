@@ -166,9 +166,22 @@ def _parser() -> argparse.ArgumentParser:
         required=True,
         choices=EXPORT_FORMATS,
         help="opencv: FileStorage YAML per camera (cv2.fisheye); anipose: calibration.toml (aniposelib, "
-        "caliscope, freemocap); kalibr: camchain.yaml; camera_info: ROS camera_info YAML per camera",
+        "caliscope, freemocap); kalibr: camchain.yaml; camera_info: ROS camera_info YAML per camera; dlt: "
+        "easyWand/Argus/DLTdv coefficients (pinhole cameras, a calibration with a floor)",
     )
     exp.add_argument("--out", required=True, type=Path, help="directory for the file(s)")
+
+    imp = commands.add_parser("import", help="read another tool's wand points into an observations CSV")
+    imp.add_argument("--format", required=True, choices=("xypts",), help="xypts: easyWand/Argus/DLTdv *xypts.csv")
+    imp.add_argument("--points", required=True, type=Path, help="the other tool's point file")
+    imp.add_argument("--cameras", required=True, type=Path, help="rig description (camera C = its C-th camera)")
+    imp.add_argument("--out", required=True, type=Path, help="observations CSV to write")
+    imp.add_argument(
+        "--origin",
+        choices=("bottom-left", "top-left"),
+        default="bottom-left",
+        help="the file's pixel origin: bottom-left, y up (Argus, DLTdv; default) or top-left (OpenCV)",
+    )
 
     sweep = commands.add_parser("sweep", help="reproduce the paper's Figs. 4-6 (CSV and PNG)")
     sweep.add_argument("--out", required=True, type=Path, help="directory for fig4-6 CSV and PNG files")
@@ -547,6 +560,18 @@ def _export(args: argparse.Namespace) -> int:
     return 0
 
 
+def _import(args: argparse.Namespace) -> int:
+    from wand_calib_ros.io.imports.xypts import read_xypts
+
+    rig = load_rig(args.cameras)
+    observations = read_xypts(args.points, rig, origin=args.origin)
+    check_writable([args.out])
+    write_observations(observations, args.out)
+    views = int(np.any(np.isfinite(observations.uv), axis=(2, 3)).sum())
+    print(f"imported {observations.uv.shape[0]} frames, {views} camera views -> {args.out}")
+    return 0
+
+
 def _sweep(args: argparse.Namespace) -> int:
     if args.runs < 1:
         raise WandCalibError("--runs must be positive")
@@ -567,6 +592,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             "sweep": _sweep,
             "report": _report,
             "export": _export,
+            "import": _import,
             "detect": _detect,
             "render": _render,
         }

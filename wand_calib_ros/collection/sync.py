@@ -47,7 +47,7 @@ class SyncedFrame:
 
     Attributes:
         stamp_ns: the frame's stamp (its anchor image's, or the anchor's predicted stamp).
-        uv: (C, 3, 2) A, B, C per camera (NaN where a camera saw no wand or did not report).
+        uv: (C, K, 2) the wand's markers per camera (NaN where a camera saw no wand or did not report).
         reported: (C,) which cameras have an image in the frame.
         stamps_ns: (C,) each reported image's own stamp (0 where not reported).
     """
@@ -100,11 +100,13 @@ class FrameSynchroniser:
         tolerance_ns: images further than this from a frame's anchor stamp never join it
             (0: half the anchor's frame period).
         max_delay_ns: how long (in stamp time) a frame waits for a camera that does not report.
+        n_points: the wand's markers per view (3: the paper's wand).
     """
 
     cameras: tuple[str, ...]
     tolerance_ns: int = 0
     max_delay_ns: int = 200_000_000
+    n_points: int = 3
     stats: SyncStats = field(default_factory=SyncStats)
     anchor: int | None = None
     _streams: list[_Stream] = field(default_factory=list)
@@ -217,7 +219,9 @@ class FrameSynchroniser:
 
     def _new_slot(self, stamp_ns: int) -> _Slot:
         n = len(self.cameras)
-        slot = _Slot(stamp_ns, np.full((n, 3, 2), np.nan), np.zeros(n, dtype=bool), np.zeros(n, dtype=np.int64))
+        slot = _Slot(
+            stamp_ns, np.full((n, self.n_points, 2), np.nan), np.zeros(n, dtype=bool), np.zeros(n, dtype=np.int64)
+        )
         self._slots.append(slot)
         self._last_slot_ns = stamp_ns
         return slot
@@ -264,7 +268,7 @@ class FrameSynchroniser:
 
     def _single(self, c: int, stamp: int, points: FloatArray | None) -> SyncedFrame:
         n = len(self.cameras)
-        uv = np.full((n, 3, 2), np.nan)
+        uv = np.full((n, self.n_points, 2), np.nan)
         if points is not None:
             uv[c] = points
         reported = np.zeros(n, dtype=bool)
@@ -315,11 +319,14 @@ class FrameSynchroniser:
 
 
 def group_by_stamps(
-    cameras: tuple[str, ...], detections: Iterable[tuple[str, int, FloatArray | None]], tolerance_ns: int = 0
+    cameras: tuple[str, ...],
+    detections: Iterable[tuple[str, int, FloatArray | None]],
+    tolerance_ns: int = 0,
+    n_points: int = 3,
 ) -> list[SyncedFrame]:
     """The frames of a whole recording: its (camera, stamp_ns, points) detections through a
     :class:`FrameSynchroniser` in stamp order, sorted by frame stamp."""
-    sync = FrameSynchroniser(cameras, tolerance_ns=tolerance_ns, max_delay_ns=10**18)
+    sync = FrameSynchroniser(cameras, tolerance_ns=tolerance_ns, max_delay_ns=10**18, n_points=n_points)
     frames: list[SyncedFrame] = []
     for camera, stamp, points in sorted(detections, key=lambda d: d[1]):
         frames += sync.add(camera, stamp, points)
@@ -327,11 +334,11 @@ def group_by_stamps(
     return sorted(frames, key=lambda f: f.stamp_ns)
 
 
-def frames_to_observations(frames: list[SyncedFrame], cameras: tuple[str, ...]) -> WandObservations:
+def frames_to_observations(frames: list[SyncedFrame], cameras: tuple[str, ...], n_points: int = 3) -> WandObservations:
     """Observations of grouped frames: frame ids are their indices, each view with its image's stamp (s);
     frames in which no camera saw the wand are left out."""
     if not frames:
-        return WandObservations(np.zeros(0, dtype=np.int64), cameras, np.zeros((0, len(cameras), 3, 2)))
+        return WandObservations(np.zeros(0, dtype=np.int64), cameras, np.zeros((0, len(cameras), n_points, 2)))
     uv = np.stack([f.uv for f in frames])
     seen = np.stack([f.reported for f in frames]) & np.any(np.isfinite(uv), axis=(2, 3))
     stamps = np.where(seen, np.stack([f.stamps_ns for f in frames]) / 1e9, np.nan)

@@ -183,7 +183,7 @@ def wand_scale(pose: Pose, bearings0: FloatArray, bearings1: FloatArray, wand_le
 
     Args:
         pose: relative pose with unit translation.
-        bearings0, bearings1: (N, 3, 3) bearings of A, B, C per placement in each camera.
+        bearings0, bearings1: (N, K, 3) bearings of the markers per placement in each camera.
         wand_length: L = |AC| in mm.
 
     Returns:
@@ -191,7 +191,7 @@ def wand_scale(pose: Pose, bearings0: FloatArray, bearings1: FloatArray, wand_le
         (the paper's mean, made robust) and the relative median absolute deviation.
     """
     n = bearings0.shape[0]
-    pair = np.stack([bearings0[:, [0, 2]].reshape(-1, 3), bearings1[:, [0, 2]].reshape(-1, 3)], axis=1)
+    pair = np.stack([bearings0[:, [0, -1]].reshape(-1, 3), bearings1[:, [0, -1]].reshape(-1, 3)], axis=1)
     points = triangulate(pair, np.stack([np.eye(3), pose.rotation]), np.stack([np.zeros(3), pose.translation])).reshape(
         n, 2, 3
     )
@@ -214,7 +214,7 @@ def relative_pose(
     """Step 2 on placements both cameras see completely.
 
     Args:
-        bearings0, bearings1: (N, 3, 3) unit bearings of A, B, C per placement.
+        bearings0, bearings1: (N, K, 3) unit bearings of the markers per placement.
         wand_length: L = |AC|, mm.
         threshold_rad: RANSAC inlier threshold (angle to the epipolar plane).
         rng: seeded generator.
@@ -229,7 +229,7 @@ def relative_pose(
     inliers = np.zeros(m0.shape[0], dtype=bool)
     inliers[np.flatnonzero(usable)[inliers_u]] = True
     unit_pose, _ = decompose_essential(essential, m0[inliers], m1[inliers])
-    placement_ok = inliers.reshape(-1, 3).all(axis=1)
+    placement_ok = inliers.reshape(-1, bearings0.shape[1]).all(axis=1)
     if placement_ok.sum() < 3:
         raise DegenerateDataError("fewer than 3 placements agree with the epipolar geometry")
     scale, spread = wand_scale(unit_pose, bearings0[placement_ok], bearings1[placement_ok], wand_length)

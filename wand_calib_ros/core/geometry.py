@@ -64,6 +64,10 @@ class Pose:
         """The transform ``self after first`` (paper eq. 'transfer': R_ik = R_jk R_ij, T_ik = R_jk T_ij + T_jk)."""
         return Pose(self.rotation @ first.rotation, self.rotation @ first.translation + self.translation)
 
+    def inverse(self) -> Pose:
+        """The transform back: X_ref = R^T X - R^T T."""
+        return Pose(self.rotation.T, -self.rotation.T @ self.translation)
+
 
 def rotation_from_rotvec(rotvec: FloatArray) -> FloatArray:
     """(3, 3) rotation matrix of a Rodrigues vector, R = exp([r]x)."""

@@ -78,9 +78,5 @@ def heldout_wand_rms(models: tuple[CameraModel, ...], poses: tuple[Pose, ...], u
 
 def rereference(poses: dict[str, Pose], reference: str) -> dict[str, Pose]:
     """Express poses relative to another camera: X_c = R_c' X_ref' + T_c'."""
-    inverse = _invert(poses[reference])
+    inverse = poses[reference].inverse()
     return {name: pose.compose(inverse) for name, pose in poses.items()}
-
-
-def _invert(pose: Pose) -> Pose:
-    return Pose(pose.rotation.T, -pose.rotation.T @ pose.translation)

@@ -30,6 +30,7 @@ from wand_calib_ros.core.placements import triangulate_placements
 from wand_calib_ros.core.refine import robust_adjustment
 from wand_calib_ros.core.result import LensTrial
 from wand_calib_ros.core.rig import CameraSpec, WandSpec, spread_subset
+from wand_calib_ros.core.two_markers import match_pair
 from wand_calib_ros.core.wand_lm import WandFit, optimise_wand_lengths
 
 FloatArray = NDArray[np.float64]
@@ -88,7 +89,7 @@ def check_motion(spec: CameraSpec, uv: FloatArray) -> None:
 
     Args:
         spec: the camera.
-        uv: (N, 3, 2) pixels of complete placements.
+        uv: (N, K, 2) pixels of complete placements.
 
     Raises:
         DegenerateDataError: with what the user should change.
@@ -108,7 +109,7 @@ def check_motion(spec: CameraSpec, uv: FloatArray) -> None:
             f"{spread_2d[1]:.1f} px): the wand moved only along its own axis or in a plane seen edge-on; "
             "move and turn it through the whole volume"
         )
-    image_length = np.linalg.norm(uv[:, 2] - uv[:, 0], axis=-1)
+    image_length = np.linalg.norm(uv[:, -1] - uv[:, 0], axis=-1)
     if np.median(image_length) < 3.0:
         raise DegenerateDataError(
             f"camera '{spec.name}': the wand images as a dot (median |ac| {np.median(image_length):.1f} px); "
@@ -153,7 +154,8 @@ def initialise_pair(
 
     Args:
         specs: the two cameras' descriptions.
-        uv0, uv1: (N, 3, 2) pixels of A, B, C in each camera.
+        uv0, uv1: (N, K, 2) pixels of the markers in each camera (a two-marker wand's labels need not
+            agree: camera 1's are matched to camera 0's first, :func:`~wand_calib_ros.core.two_markers.match_pair`).
         wand: wand lengths.
         options: settings.
         known: per camera, a (projection name, intrinsics) start from an earlier pair that
@@ -171,6 +173,16 @@ def initialise_pair(
         )
     for spec, uv in zip(specs, (uv0, uv1), strict=True):
         check_motion(spec, uv)
+    starts0, starts1 = camera_starts(specs[0], known[0]), camera_starts(specs[1], known[1])
+    if wand.n_points == 2:
+        focal_px = min(float(np.min(start[1].focal_px)) for start in (starts0[0], starts1[0]))
+        uv1 = match_pair(
+            (starts0[0][1], starts1[0][1]),
+            uv0,
+            uv1,
+            threshold_rad=options.ransac_threshold_px / focal_px,
+            rng=np.random.default_rng(options.seed),
+        )
     screening = spread_subset(n, options.screening_placements)
     s0, s1 = uv0[screening], uv1[screening]
     trials: list[LensTrial] = []
@@ -183,7 +195,7 @@ def initialise_pair(
             models = (start0[1], start1[1])
             try:
                 step2 = _step2(models, s0, s1, wand, options)
-                agree = step2.inliers.reshape(-1, 3).all(axis=1)
+                agree = step2.inliers.reshape(-1, wand.n_points).all(axis=1)
                 fit = optimise_wand_lengths(
                     models,
                     step2.pose,
@@ -211,7 +223,6 @@ def initialise_pair(
     # Each camera's candidates are tried with the other camera at its best start so far
     # (first camera 1's, then camera 0's): every plausible projection of each camera goes
     # through Steps 2-3, in |C0| + |C1| - 1 runs instead of |C0| x |C1|.
-    starts0, starts1 = camera_starts(specs[0], known[0]), camera_starts(specs[1], known[1])
     best1 = min(starts1, key=lambda start: attempt(starts0[0], start))
     best0 = min(starts0, key=lambda start: attempt(start, best1))
     names = (best0[0], best1[0])
@@ -244,7 +255,7 @@ def _pair_bundle(
     if ok.sum() < 3:
         return fit.models, fit.pose
     state = BundleState(
-        fit.models, (Pose.identity(), fit.pose), points[ok, 0], wand_directions(points[ok, 0], points[ok, 2])
+        fit.models, (Pose.identity(), fit.pose), points[ok, 0], wand_directions(points[ok, 0], points[ok, -1])
     )
     problem = BundleProblem.from_dense(wand, uv[ok])
     free = default_free_mask(2)
@@ -264,9 +275,9 @@ def _epipolar_agreement(
     uv1: FloatArray,
     options: PairOptions,
 ) -> NDArray[np.bool_]:
-    """(N,) placements whose three points all pass Step 2's RANSAC test under ``essential``."""
+    """(N,) placements whose markers all pass Step 2's RANSAC test under ``essential``."""
     angles = epipolar_angles(
         essential, unproject(models[0], uv0).reshape(-1, 3), unproject(models[1], uv1).reshape(-1, 3)
     )
     focal_px = min(float(np.min(m.focal_px)) for m in models)
-    return np.asarray((angles < options.ransac_threshold_px / focal_px).reshape(-1, 3).all(axis=1))
+    return np.asarray((angles < options.ransac_threshold_px / focal_px).reshape(-1, uv0.shape[1]).all(axis=1))

@@ -17,6 +17,7 @@ from wand_calib_ros.core.refine import refine_calibration
 from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.core.rig import RigSpec, WandObservations, spread_subset
 from wand_calib_ros.core.timing import align_views, offset_warnings, rate_warnings, timing_input
+from wand_calib_ros.core.two_markers import consistent_labels, continuous_in_image
 from wand_calib_ros.core.vision_graph import VisionGraph, build_vision_graph
 from wand_calib_ros.core.world_frame import floor_of
 
@@ -99,8 +100,13 @@ def calibrate(
         ", ".join(f"{names[a]}-{names[b]}" for a, b in graph.edges),
     )
     line = timing.line.subset(usable)
+    if rig.wand.n_points == 2:  # a two-marker wand's labels are the detector's: per camera, follow the marker
+        uv = continuous_in_image(uv)
     aligned = align_views(uv, line)  # free-running views moved to their placement's time, for the starts
     init = _initialise(rig, aligned, graph, options.pair)
+    if rig.wand.n_points == 2:  # one label per marker in every view and over time, from the started cameras
+        uv = consistent_labels(init.models, init.poses, uv)
+        aligned = align_views(uv, line)
     given = [spec.intrinsics is not None for spec in rig.cameras]
     if any(given):
         log.info("intrinsics given for %s", ", ".join(n for n, g in zip(names, given, strict=True) if g))
@@ -128,10 +134,10 @@ def calibrate(
 
 
 def _initialise(rig: RigSpec, uv: NDArray[np.float64], graph: VisionGraph, options: PairOptions) -> RigInitialisation:
-    """Steps 1-3 and the chaining of Section III-B, which need a three-marker wand: on a longer wand,
-    the first, the middle and the last marker (:meth:`WandSpec.three_points`); the bundle adjustment
-    then uses every marker."""
-    if rig.wand.n_points == 3:
+    """Steps 1-3 and the chaining of Section III-B, made for the three-marker wand: on a longer wand
+    they use the first, the middle and the last marker (:meth:`WandSpec.three_points`; the bundle
+    adjustment then uses every marker), on a two-marker wand both (Step 3 matches their distance)."""
+    if rig.wand.n_points <= 3:  # two markers: Steps 2-3 on both (their labels matched per pair)
         return initialise_rig(rig, uv, graph, options)
     three = replace(rig, wand=rig.wand.three_point_wand())
     return initialise_rig(three, uv[:, :, list(rig.wand.three_points())], graph, options)

@@ -3,8 +3,8 @@
 With the current intrinsics (k1, k2, u0, v0 of both cameras; m fixed) and the
 relative pose (Rodrigues vector, T), every placement is triangulated linearly
 and compared with the wand: g1 = L1 - |AB|, g2 = L2 - |BC|, g3 = L - |AC|
-(paper eqs. object1-object3). The 14 unknowns are found with MINPACK's
-Levenberg-Marquardt.
+(paper eqs. object1-object3; a two-marker wand has g = L - |AB| only). The 14
+unknowns are found with MINPACK's Levenberg-Marquardt.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ class WandFit:
     Attributes:
         models: the two cameras' intrinsics.
         pose: camera 1 relative to camera 0.
-        length_errors: (N, 3) g1, g2, g3 per placement at the solution, mm.
+        length_errors: (N, G) the wand-length errors (g1, g2, g3) per placement at the solution, mm.
     """
 
     models: tuple[CameraModel, CameraModel]
@@ -57,24 +57,35 @@ def reconstruct_wands(
     Args:
         models: intrinsics of cameras 0 and 1.
         pose: camera 1 relative to camera 0.
-        uv0, uv1: (N, 3, 2) pixels of A, B, C.
+        uv0, uv1: (N, K, 2) pixels of the markers.
 
     Returns:
-        (N, 3, 3) points, mm (NaN where a point cannot be unprojected).
+        (N, K, 3) points, mm (NaN where a point cannot be unprojected).
     """
-    n = uv0.shape[0]
+    n, k = uv0.shape[:2]
     bearings = np.stack([unproject(models[0], uv0).reshape(-1, 3), unproject(models[1], uv1).reshape(-1, 3)], 1)
     rotations = np.stack([np.eye(3), pose.rotation])
     translations = np.stack([np.zeros(3), pose.translation])
-    return triangulate(bearings, rotations, translations).reshape(n, 3, 3)
+    return triangulate(bearings, rotations, translations).reshape(n, k, 3)
+
+
+def wand_pairs(n_points: int) -> tuple[tuple[int, int], ...]:
+    """The marker pairs whose distances Step 3 matches: AB, BC, AC for the paper's wand; every
+    consecutive pair and the ends for longer wands; AB for a two-marker wand."""
+    consecutive = tuple((i, i + 1) for i in range(n_points - 1))
+    return consecutive if n_points == 2 else (*consecutive, (0, n_points - 1))
 
 
 def wand_length_errors(points: FloatArray, wand: WandSpec) -> FloatArray:
-    """(N, 3) g1, g2, g3 = nominal minus reconstructed |AB|, |BC|, |AC| in mm."""
-    ab = np.linalg.norm(points[:, 1] - points[:, 0], axis=-1)
-    bc = np.linalg.norm(points[:, 2] - points[:, 1], axis=-1)
-    ac = np.linalg.norm(points[:, 2] - points[:, 0], axis=-1)
-    return np.stack([wand.L1 - ab, wand.L2 - bc, wand.L - ac], axis=-1)
+    """(N, G) nominal minus reconstructed distances of :func:`wand_pairs` (g1, g2, g3 = |AB|, |BC|, |AC|), mm."""
+    offsets = wand.offsets
+    return np.stack(
+        [
+            offsets[q] - offsets[p] - np.linalg.norm(points[:, q] - points[:, p], axis=-1)
+            for p, q in wand_pairs(wand.n_points)
+        ],
+        axis=-1,
+    )
 
 
 def _unpack(x: FloatArray, models: tuple[CameraModel, CameraModel]) -> tuple[tuple[CameraModel, CameraModel], Pose]:
@@ -98,20 +109,20 @@ def _rotation_derivatives(rotvec: FloatArray, step: float = 1e-7) -> FloatArray:
 class _WandProblem:
     """Residuals g and their exact Jacobian for Step 3 (x = 4 + 4 intrinsics, rotvec, T)."""
 
-    _PAIRS = ((0, 1), (1, 2), (0, 2))  # AB, BC, AC
-
     def __init__(self, models: tuple[CameraModel, CameraModel], uv0: FloatArray, uv1: FloatArray, wand: WandSpec):
         self.models, self.uv0, self.uv1, self.wand = models, uv0.reshape(-1, 2), uv1.reshape(-1, 2), wand
-        self.lengths = np.array([wand.L1, wand.L2, wand.L])
+        self.pairs = wand_pairs(wand.n_points)
+        self.lengths = np.array([wand.offsets[q] - wand.offsets[p] for p, q in self.pairs])
         self._cache_x: FloatArray | None = None
         self._cache: tuple[FloatArray, FloatArray] | None = None
 
     def _evaluate(self, x: FloatArray) -> tuple[FloatArray, FloatArray]:
         if self._cache_x is not None and np.array_equal(x, self._cache_x) and self._cache is not None:
             return self._cache
-        n = self.uv0.shape[0] // 3
+        k, g = self.wand.n_points, len(self.pairs)
+        n = self.uv0.shape[0] // k
         if x[0] <= 0 or x[4] <= 0:
-            return np.full(3 * n, self.wand.L), np.zeros((3 * n, 14))
+            return np.full(g * n, self.wand.L), np.zeros((g * n, 14))
         models, pose = _unpack(x, self.models)
         m0, dm0 = unproject_with_jacobian(models[0], self.uv0)
         m1, dm1 = unproject_with_jacobian(models[1], self.uv1)
@@ -127,11 +138,11 @@ class _WandProblem:
         d_rays[:, 1, :, 8:11] = (m1 @ d_rotation).transpose(1, 2, 0)  # (dR_k^T m1)_i = (m1 @ dR_k)_i
         d_centres[1, :, 8:11] = -(translation @ d_rotation).T
         d_centres[1, :, 11:14] = -rotation.T
-        d_points = triangulation_jacobian(points, rays, centres, d_rays, d_centres).reshape(n, 3, 3, 14)
-        points = points.reshape(n, 3, 3)
-        residuals = np.empty((n, 3))
-        jacobian = np.empty((n, 3, 14))
-        for column, (p, q) in enumerate(self._PAIRS):
+        d_points = triangulation_jacobian(points, rays, centres, d_rays, d_centres).reshape(n, k, 3, 14)
+        points = points.reshape(n, k, 3)
+        residuals = np.empty((n, g))
+        jacobian = np.empty((n, g, 14))
+        for column, (p, q) in enumerate(self.pairs):
             delta = points[:, q] - points[:, p]
             distance = np.linalg.norm(delta, axis=-1)
             residuals[:, column] = self.lengths[column] - distance
@@ -161,12 +172,12 @@ def optimise_wand_lengths(
     max_evaluations: int = 200,
     tolerance: float = 1e-8,
 ) -> WandFit:
-    """Step 3: minimise sum(g1^2 + g2^2 + g3^2) over 12 intrinsics and 6 extrinsics (m fixed).
+    """Step 3: minimise sum(g1^2 + g2^2 + g3^2) over 8 intrinsics and 6 extrinsics (m fixed).
 
     Args:
         models: Step 1 intrinsics of cameras 0 and 1 (k3..k5 are kept as they are).
         pose: Step 2 pose of camera 1 relative to camera 0.
-        uv0, uv1: (N, 3, 2) pixels of A, B, C of placements both cameras see.
+        uv0, uv1: (N, K, 2) pixels of the markers of placements both cameras see.
         wand: the wand lengths.
         max_evaluations: cap on residual evaluations.
         tolerance: relative tolerance on the cost and the parameters (MINPACK ftol, xtol).

@@ -53,9 +53,7 @@ class WorldFrame:
 
     def camera_in_world(self, camera: Pose) -> Pose:
         """A camera's pose X_cam = R X_world + T from its pose relative to the reference camera."""
-        world = self.world_from_reference
-        reference_from_world = Pose(world.rotation.T, -world.rotation.T @ world.translation)
-        return camera.compose(reference_from_world)
+        return camera.compose(self.world_from_reference.inverse())
 
 
 def fit_floor(points: FloatArray, camera_centres: FloatArray, *, origin: str = "A") -> WorldFrame:

@@ -88,8 +88,8 @@ class CameraTake:
     Attributes:
         exposures: (N,) exposure instants of its images (first row), s.
         stamps: (N,) the images' stamps, s.
-        uv: (N, 3, 2) exact pixels of A, B, C (NaN where it cannot see the LED).
-        point_times: (N, 3) the instant each LED was seen (exposure + readout x v / H), s.
+        uv: (N, K, 2) exact pixels of the markers (NaN where it cannot see the LED).
+        point_times: (N, K) the instant each LED was seen (exposure + readout x v / H), s.
     """
 
     exposures: FloatArray
@@ -117,7 +117,7 @@ def film(
     takes = []
     for c, (camera, clock) in enumerate(zip(scenario.cameras, clocks, strict=True)):
         exposures = clock.exposures(duration_s)
-        times = np.repeat(exposures[:, None], 3, axis=1)
+        times = np.repeat(exposures[:, None], scenario.wand.n_points, axis=1)
         height = camera.spec.image_size[1]
         for _ in range(ROLLING_ITERATIONS if clock.readout_s else 1):
             uv, seen = _seen_at(scenario, trajectory, c, times)
@@ -133,11 +133,11 @@ def film(
 def _seen_at(
     scenario: Scenario, trajectory: WavedWand, camera: int, times: FloatArray
 ) -> tuple[FloatArray, NDArray[np.bool_]]:
-    """(N, 3, 2) pixels and (N, 3) visibility of each LED in one camera, LED p at ``times[:, p]``."""
+    """(N, K, 2) pixels and (N, K) visibility of each LED in one camera, LED p at ``times[:, p]``."""
     uv = np.empty((*times.shape, 2))
     seen = np.empty(times.shape, dtype=bool)
     model, pose = scenario.cameras[camera].model, scenario.cameras[camera].pose
-    for p in range(3):
+    for p in range(times.shape[1]):
         motion = trajectory.at(times[:, p])
         points = motion.points(scenario.wand)[:, p]
         uv[:, p] = project(model, pose.apply(points))
@@ -166,7 +166,8 @@ def observe(
         noisy = take.uv + rng.normal(scale=noise_px, size=take.uv.shape) if noise_px > 0 else take.uv
         for stamp, points in zip(stamp_ns(take.stamps), noisy, strict=True):
             detections.append((name, int(stamp), points if np.isfinite(points).any() else None))
-    return frames_to_observations(group_by_stamps(names, detections), names)
+    n_points = takes[0].uv.shape[1]
+    return frames_to_observations(group_by_stamps(names, detections, n_points=n_points), names, n_points)
 
 
 @dataclass(frozen=True)

@@ -212,7 +212,7 @@ def _look_at(centre: FloatArray, target: FloatArray, down: FloatArray) -> Pose:
 def _relative_to_first(poses: list[Pose]) -> list[Pose]:
     """Re-express world poses so the first camera is the reference (X_cam = R X_ref + T)."""
     first = poses[0]
-    inverse = Pose(first.rotation.T, -first.rotation.T @ first.translation)
+    inverse = first.inverse()
     return [pose.compose(inverse) for pose in poses]
 
 

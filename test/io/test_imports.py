@@ -1,0 +1,74 @@
+"""Other tools' wand point files: an easyWand / Argus / DLTdv ``xypts.csv`` of a two-marker wand."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from wand_calib_ros.cli import main
+from wand_calib_ros.core.rig import WandSpec
+from wand_calib_ros.io.errors import FormatError
+from wand_calib_ros.io.imports.xypts import read_xypts
+from wand_calib_ros.io.observations_csv import read_observations
+from wand_calib_ros.io.rig_yaml import save_rig
+from wand_calib_ros.sim.scenarios import paper_three_camera_scenario, simulate
+
+TWO = WandSpec((0.0, 600.0))
+
+
+def _write_xypts(path: Path, uv: np.ndarray, heights: list[int]) -> None:
+    """A point file as Argus writes its paired points: pt1 of every camera, then pt2; y up from the bottom."""
+    _, n_cameras, n_points, _ = uv.shape
+    header = [f"pt{p + 1}_cam{c + 1}_{axis}" for p in range(n_points) for c in range(n_cameras) for axis in "xy"]
+    lines = [",".join(header)]
+    for frame in uv:
+        cells = []
+        for p in range(n_points):
+            for c in range(n_cameras):
+                x, y = frame[c, p]
+                cells += ["NaN", "NaN"] if not np.isfinite(x) else [f"{x:.6f}", f"{heights[c] - y:.6f}"]
+        lines.append(",".join(cells))
+    path.write_text("\n".join(lines) + "\n")
+
+
+def test_an_argus_point_file_imports_exactly_and_calibrates(tmp_path: Path) -> None:
+    scenario = replace(paper_three_camera_scenario(), wand=TWO)
+    data = simulate(scenario, 0.5, np.random.default_rng(3))
+    save_rig(scenario.rig, tmp_path / "cameras.yaml")
+    heights = [spec.image_size[1] for spec in scenario.rig.cameras]
+    _write_xypts(tmp_path / "wand-xypts.csv", data.observations.uv, heights)
+    out = tmp_path / "observations.csv"
+    argv = ["--points", str(tmp_path / "wand-xypts.csv"), "--cameras", str(tmp_path / "cameras.yaml")]
+    assert main(["-q", "import", "--format", "xypts", *argv, "--out", str(out)]) == 0
+    read = read_observations(out, scenario.rig.camera_names, labels=TWO.labels)
+    seen = np.any(np.isfinite(data.observations.uv), axis=(1, 2, 3))
+    assert np.allclose(read.uv, data.observations.uv[seen], atol=2e-6, equal_nan=True)
+    assert main(["-q", "calibrate", "--cameras", str(tmp_path / "cameras.yaml"), "--observations", str(out),
+                 "--output", str(tmp_path / "result.yaml")]) == 0  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("pt1_cam1_x,pt1_cam1_y\n1,2\n", "1 cameras in the file, 3 in the rig description"),
+        ("frame,pt1_cam1_x\n", "column 1 is 'frame', not pt<P>_cam<C>_x or _y"),
+        (None, "'high' is not a number (write NaN where a marker was not seen)"),
+        (None, "pt2_cam3 has x or y only"),
+    ],
+)
+def test_a_point_file_that_cannot_be_read_names_the_problem(tmp_path: Path, text: str | None, message: str) -> None:
+    scenario = replace(paper_three_camera_scenario(), wand=TWO)
+    path = tmp_path / "wand-xypts.csv"
+    if text is None:
+        header = [f"pt{p}_cam{c}_{a}" for p in (1, 2) for c in (1, 2, 3) for a in "XY"]  # DLTdv's capitals
+        row = ["10"] * 12
+        row[header.index("pt1_cam2_X")] = "high" if "high" in message else "10"
+        if "only" in message:
+            row[header.index("pt2_cam3_Y")] = "NaN"
+        text = ",".join(header) + "\n" + ",".join(row) + "\n"
+    path.write_text(text)
+    with pytest.raises(FormatError, match=message.replace("(", r"\(").replace(")", r"\)")):
+        read_xypts(path, scenario.rig)

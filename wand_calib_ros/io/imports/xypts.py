@@ -1,0 +1,91 @@
+"""easyWand / Argus / DLTdv point files (``*xypts.csv``): the wand's markers per frame and camera.
+
+One header row names the columns ``pt<P>_cam<C>_x`` and ``pt<P>_cam<C>_y`` (P = marker, C = camera,
+1-based; DLTdv writes ``X``/``Y``); every further row is one frame (frame id = row index from 0),
+NaN (or an empty cell) where a camera did not see a marker. Pixels have the origin at the image's
+bottom left with y up (Argus flips y from top-left tools as y = height - y; DLTdv likewise):
+v = height - y in the OpenCV convention this package uses; ``origin="top-left"`` takes them as they
+are. Camera C is the rig description's C-th camera.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+
+from wand_calib_ros.core.rig import RigSpec, WandObservations
+from wand_calib_ros.io.errors import FormatError
+
+_COLUMN = re.compile(r"^pt(\d+)_cam(\d+)_([xy])$", re.IGNORECASE)
+#: Pixel origins the files may use.
+ORIGINS = ("bottom-left", "top-left")
+
+
+def read_xypts(path: str | Path, rig: RigSpec, *, origin: str = "bottom-left") -> WandObservations:
+    """The observations of a point file, cameras and markers as the rig describes them.
+
+    Raises:
+        FormatError: naming the file, the row or column and the problem.
+    """
+    path = Path(path)
+    if origin not in ORIGINS:
+        raise ValueError(f"origin must be one of {ORIGINS}")
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except OSError as error:
+        raise FormatError(path, f"cannot read: {error.strerror}") from None
+    except UnicodeDecodeError:
+        raise FormatError(path, "not UTF-8 text: not a point file?") from None
+    rows = [row for row in csv.reader(text.splitlines()) if any(cell.strip() for cell in row)]
+    if not rows:
+        raise FormatError(path, "empty file; expected a header pt1_cam1_x,pt1_cam1_y,...")
+    columns = []
+    for index, name in enumerate(rows[0]):
+        found = _COLUMN.match(name.strip())
+        if found is None:
+            raise FormatError(path, f"column {index + 1} is {name!r}, not pt<P>_cam<C>_x or _y", row=1)
+        columns.append((int(found[1]) - 1, int(found[2]) - 1, found[3].lower() == "y"))
+    n_points = max(p for p, _, _ in columns) + 1
+    n_cameras = max(c for _, c, _ in columns) + 1
+    if n_cameras != len(rig.cameras):
+        raise FormatError(
+            path, f"{n_cameras} cameras in the file, {len(rig.cameras)} in the rig description (camera C = its C-th)"
+        )
+    if n_points != rig.wand.n_points:
+        raise FormatError(path, f"{n_points} markers per frame, the rig's wand has {rig.wand.n_points}")
+    if len(set(columns)) != len(columns) or len(columns) != 2 * n_points * n_cameras:
+        raise FormatError(path, "every pt<P>_cam<C> needs one _x and one _y column", row=1)
+    uv = np.full((len(rows) - 1, n_cameras, n_points, 2), np.nan)
+    for number, row in enumerate(rows[1:], start=2):
+        if len(row) != len(columns):
+            raise FormatError(path, f"{len(row)} cells where the header has {len(columns)}", row=number)
+        for cell, (p, c, is_y) in zip(row, columns, strict=True):
+            uv[number - 2, c, p, int(is_y)] = _value(path, number, cell)
+    if origin == "bottom-left":
+        heights = np.array([spec.image_size[1] for spec in rig.cameras], dtype=np.float64)
+        uv[..., 1] = heights[None, :, None] - uv[..., 1]
+    seen_partly = np.isfinite(uv[..., 0]) != np.isfinite(uv[..., 1])
+    if seen_partly.any():
+        f, c, p = (int(i[0]) for i in np.nonzero(seen_partly))
+        raise FormatError(path, f"pt{p + 1}_cam{c + 1} has x or y only", row=f + 2)
+    seen = np.any(np.isfinite(uv), axis=(1, 2, 3))
+    if not seen.any():
+        raise FormatError(path, "no marker is seen in any frame")
+    return WandObservations(np.flatnonzero(seen), rig.camera_names, uv[seen])
+
+
+def _value(path: Path, row: int, cell: str) -> float:
+    text = cell.strip()
+    if text == "" or text.lower() == "nan":
+        return math.nan
+    try:
+        value = float(text)
+    except ValueError:
+        raise FormatError(path, f"{text!r} is not a number (write NaN where a marker was not seen)", row=row) from None
+    if not math.isfinite(value):
+        raise FormatError(path, f"{text!r} is not a pixel coordinate", row=row)
+    return value
