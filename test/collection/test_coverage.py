@@ -55,5 +55,33 @@ def test_a_wand_always_level_and_equally_far_is_told_to_turn_and_move() -> None:
         points = start + np.array([[0.0, 0.0], [133.3, 0.0], [200.0, 0.0]])
         tracker.add(np.stack([points, points]))
     message = tracker.status().messages()[0]
-    assert "wand held in 1 of 6 directions in the image: turn it" in message
-    assert "always about as far (image length ratio 1.00)" in message
+    assert "wand held in 1 of 6 directions in the image (need 4): turn it" in message
+    assert "always about as far (image length ratio 1.00, need 1.2)" in message
+
+
+def test_a_minute_of_waving_meets_the_default_thresholds_on_every_simulated_rig() -> None:
+    from wand_calib_ros.sim.clocks import TakeOptions, film, observe, take_trajectory
+    from wand_calib_ros.sim.scenarios import SCENARIOS
+
+    for name, seconds in (("paper", 20.0), ("mixed", 20.0), ("paper3", 60.0), ("mixed3", 60.0), ("ring6", 60.0)):
+        scenario = SCENARIOS[name]()
+        rng = np.random.default_rng(7)
+        options = TakeOptions(duration_s=seconds, free_running=False)
+        clocks = options.clocks(len(scenario.cameras), rng)
+        takes = film(scenario, take_trajectory(scenario, options, rng), clocks, seconds, rng)
+        tracker = CoverageTracker(scenario.rig)
+        for uv in observe(scenario.rig.camera_names, takes, 0.3, rng).uv:
+            tracker.add(uv)
+        status = tracker.status()
+        assert status.ready, (name, status.messages())
+
+
+def test_what_is_missing_says_what_would_be_enough() -> None:
+    scenario = replace(paper_fisheye_scenario(), volume=np.array([[-150.0, -150.0, 1350.0], [150.0, 150.0, 1650.0]]))
+    tracker = CoverageTracker(scenario.rig, CoverageThresholds(min_image_fraction=0.5, min_theta_fraction=0.7))
+    for uv in simulate(scenario, 0.5, np.random.default_rng(1), n=60).observations.uv:
+        tracker.add(uv)
+    message = next(m for m in tracker.status().messages() if m.startswith("cam0:"))
+    assert "% of the image covered (need 50 %)" in message
+    reach = np.degrees(tracker.reach[0])
+    assert f"deg off-axis of {reach:.0f} (need {0.7 * reach:.0f}): move it towards the image border" in message

@@ -174,8 +174,8 @@ RIG = (
 COVERAGE = (
     Param("min_placements", 100, "complete wand views each camera needs", 1, 10**7),
     Param("min_pair_placements", 15, "placements two cameras must share to link them", 1, 10**7),
-    Param("min_image_fraction", 0.5, "share of each image (8 x 8 grid) the wand must reach", 0.0, 1.0),
-    Param("min_theta_fraction", 0.7, "widest off-axis angle reached over what the image offers", 0.0, 1.0),
+    Param("min_image_fraction", 0.25, "share of each image (8 x 8 grid) the wand must reach", 0.0, 1.0),
+    Param("min_theta_fraction", 0.4, "widest off-axis angle reached over what the image offers", 0.0, 1.0),
     Param("min_directions", 4, "of 6 30-degree sectors, how many the wand's image direction must reach", 0, 6),
     Param("min_depth_ratio", 1.2, "90th/10th percentile of the wand's image length (near and far)", 1.0, 100.0),
 )
