@@ -60,3 +60,47 @@ def test_report_on_a_result_of_another_rig_is_a_clear_error(tmp_path: Path, caps
     code = main(["-q", "report", "--result", str(sim / "truth.yaml"), *files, "--out", str(tmp_path / "r")])
     assert code == 2
     assert "no result for camera(s) cam3" in capsys.readouterr().err
+
+
+def test_the_figures_stay_readable_with_outliers_and_wide_lenses(tmp_path: Path) -> None:
+    """Looked at as a user would: reference curves clipped to the image, outliers marked instead of
+    drawn as huge arrows, histograms of the points used with the rejected ones counted, colour scales
+    labelled, rotations in degrees."""
+    import numpy as np
+    import yaml
+
+    from wand_calib_ros.io.observations_csv import read_observations
+    from wand_calib_ros.io.rig_yaml import load_rig
+    from wand_calib_ros.report import figures
+    from wand_calib_ros.report.analysis import prepare
+    from wand_calib_ros.report.html import write_report
+
+    sim = tmp_path / "sim"
+    assert main(["-q", "simulate", "paper", "--seed", "1", "--outliers", "0.03", "--out", str(sim)]) == 0
+    files = ["--cameras", str(sim / "cameras.yaml"), "--observations", str(sim / "observations.csv")]
+    assert main(["-q", "calibrate", *files, "--output", str(tmp_path / "result.yaml")]) == 0
+    rig = load_rig(sim / "cameras.yaml")
+    data = prepare(rig, read_observations(sim / "observations.csv", rig.camera_names), tmp_path / "result.yaml")
+    assert all(camera.rejected.any() and camera.rejected.mean() < 0.2 for camera in data.cameras)
+
+    curves = figures.distortion_curves(data)
+    for axis, spec in zip(curves.axes[: len(rig.cameras)], rig.cameras, strict=True):
+        corner = 0.5 * np.hypot(*spec.image_size)
+        assert axis.get_ylim()[0] >= 0 and axis.get_ylim()[1] <= 1.2 * 1.5 * corner  # not -100,000 px
+    vectors = figures.residual_vectors(data)
+    for axis, camera in zip(vectors.axes, data.cameras, strict=False):
+        (arrows,) = axis.collections
+        assert len(arrows.get_offsets()) == int((~camera.rejected).sum())  # rejected views: marks, not arrows
+        (marks,) = axis.get_lines()
+        assert len(marks.get_xdata()) == int(camera.rejected.sum())
+    histograms = figures.residual_histograms(data)
+    assert all("points of rejected views not shown" in axis.get_title() for axis in histograms.axes[:2])
+    heat = figures.coverage(data)
+    assert sum(axis.get_label() == "<colorbar>" for axis in heat.axes) == len(rig.cameras)
+
+    page = write_report(rig, read_observations(sim / "observations.csv", rig.camera_names), tmp_path / "result.yaml",
+                        tmp_path / "r").read_text()  # fmt: skip
+    assert "<th>rx (deg)</th>" in page and "<th>RMS per coordinate (px)</th>" in page
+    rotvec = np.degrees(data.poses[1].rotvec)
+    result = yaml.safe_load((tmp_path / "result.yaml").read_text())
+    assert f"{rotvec[0]:.5g}" in page and result["cameras"]["cam1"]["std"]["rx"] > 0

@@ -29,6 +29,7 @@ from wand_calib_ros.core.camera_model import CameraModel
 from wand_calib_ros.core.errors import CoreError
 from wand_calib_ros.core.geometry import Pose, wand_directions
 from wand_calib_ros.core.placements import triangulate_placements
+from wand_calib_ros.core.refine import VIEW_GATE_SIGMAS, gate_views
 from wand_calib_ros.core.rig import RigSpec, WandObservations
 from wand_calib_ros.core.timing import Timeline, align_views, smooth_motion, timeline
 from wand_calib_ros.core.vision_graph import VisionGraph, build_vision_graph, covisibility
@@ -47,11 +48,14 @@ class CameraResiduals:
         uv: (N, 2) observed pixels.
         residuals: (N, 2) projected minus observed, px.
         theta: (N,) off-axis angle of each observed point, rad.
+        rejected: (N,) points of views the calibration's view gate rejects (a point beyond
+            VIEW_GATE_SIGMAS times the result's pixel noise): outliers the result does not use.
     """
 
     uv: FloatArray
     residuals: FloatArray
     theta: FloatArray
+    rejected: NDArray[np.bool_]
 
 
 @dataclass(frozen=True, eq=False)
@@ -138,12 +142,15 @@ def prepare(rig: RigSpec, observations: WandObservations, result_path: Path) -> 
     timed = _fit(state, problem)
     wand_points, res = timed.state.points(rig.wand), timed.residuals
     world = wand_points[problem.placement, problem.point]
+    sigma = float(document.get("metrics", {}).get("sigma_px", np.nan))
+    _, rejected_views = gate_views(uv, np.nan_to_num(res, nan=np.inf), VIEW_GATE_SIGMAS * sigma)
+    rejected = rejected_views[problem.placement, problem.camera] if np.isfinite(sigma) else np.zeros(len(res), bool)
     cameras = []
     for c, pose in enumerate(poses):
         mine = problem.camera == c
         in_cam = pose.apply(world[mine])
         theta = np.arctan2(np.hypot(in_cam[:, 0], in_cam[:, 1]), in_cam[:, 2])
-        cameras.append(CameraResiduals(problem.uv[mine], res[mine], theta))
+        cameras.append(CameraResiduals(problem.uv[mine], res[mine], theta, rejected[mine]))
     against = None
     if problem.timing is not None:
         static = _fit(replace(state, timing=None), replace(problem, timing=None)).residuals

@@ -28,28 +28,43 @@ def _grid(n: int, size: float = 3.6) -> tuple[Figure, np.ndarray]:
 
 
 def residual_histograms(data: ReportData) -> Figure:
-    """Per camera histogram of the 2D residual norms."""
-    figure, axes = _grid(len(data.names))
+    """Per camera histogram of the 2D residual norms of the points the calibration uses; the points of
+    rejected views (outliers) are counted, not drawn, so the histogram shows the noise."""
+    figure, axes = _grid(len(data.names), size=4.0)
     for axis, name, camera in zip(axes, data.names, data.cameras, strict=False):
         norms = np.linalg.norm(camera.residuals, axis=1)
-        norms = norms[np.isfinite(norms)]
-        axis.hist(norms, bins=40, color="tab:blue")
-        rms = float(np.sqrt(np.mean(norms**2))) if norms.size else float("nan")
-        axis.set_title(f"{name}: |residual|, RMS {rms:.2f} px")
+        finite = np.isfinite(norms)
+        used = norms[finite & ~camera.rejected]
+        axis.hist(used, bins=40, color="tab:blue")
+        rms = float(np.sqrt(np.mean(used**2))) if used.size else float("nan")
+        per_coordinate = rms / np.sqrt(2.0)
+        outliers = int(np.sum(finite & camera.rejected))
+        axis.set_title(
+            f"{name}: |residual| (2D) of {used.size} points\nRMS 2D {rms:.2f} px, per coordinate "
+            f"{per_coordinate:.2f} px\n{outliers} points of rejected views not shown",
+            fontsize=8,
+        )
         axis.set_xlabel("px")
+        axis.set_ylabel("points")
     figure.tight_layout()
     return figure
 
 
 def residual_vectors(data: ReportData) -> Figure:
-    """Per camera residual vectors drawn at their image positions (magnified)."""
+    """Per camera residual vectors of the points the calibration uses, drawn at their image positions
+    (magnified so the 95th percentile is 5 % of the width); points of rejected views are marked x."""
     figure, axes = _grid(len(data.names), size=4.2)
     for axis, name, camera, spec in zip(axes, data.names, data.cameras, data.rig.cameras, strict=False):
         width, height = spec.image_size
-        norms = np.linalg.norm(camera.residuals, axis=1)
-        scale = 0.05 * width / max(float(np.nanpercentile(norms, 95)) if norms.size else 1.0, 1e-6)
-        step = max(1, camera.uv.shape[0] // 1500)
-        uv, r = camera.uv[::step], camera.residuals[::step]
+        used = ~camera.rejected & np.all(np.isfinite(camera.residuals), axis=1)
+        norms = np.linalg.norm(camera.residuals[used], axis=1)
+        scale = 0.05 * width / max(float(np.percentile(norms, 95)) if norms.size else 1.0, 1e-6)
+        step = max(1, int(used.sum()) // 1500)
+        uv, r = camera.uv[used][::step], camera.residuals[used][::step]
+        outliers = camera.uv[camera.rejected]
+        if outliers.size:
+            axis.plot(outliers[:, 0], outliers[:, 1], "x", color="0.4", markersize=4, label="rejected views")
+            axis.legend(fontsize=7, loc="lower right")
         axis.quiver(
             uv[:, 0],
             uv[:, 1],
@@ -64,7 +79,7 @@ def residual_vectors(data: ReportData) -> Figure:
         axis.set_xlim(0, width)
         axis.set_ylim(height, 0)
         axis.set_aspect("equal")
-        axis.set_title(f"{name}: residuals x{scale:.0f}")
+        axis.set_title(f"{name}: residuals x{scale:.0f} (px)", fontsize=9)
     figure.tight_layout()
     return figure
 
@@ -76,19 +91,21 @@ def coverage(data: ReportData) -> Figure:
     for c, (name, camera, spec) in enumerate(zip(data.names, data.cameras, data.rig.cameras, strict=True)):
         width, height = spec.image_size
         axis = axes[0, c]
-        axis.hist2d(
+        *_, cells = axis.hist2d(
             camera.uv[:, 0],
             camera.uv[:, 1],
             bins=[16, max(4, round(16 * height / width))],
             range=[[0, width], [0, height]],
             cmap="viridis",
         )
+        figure.colorbar(cells, ax=axis, shrink=0.8, label="points per cell")
         axis.set_ylim(height, 0)
         axis.set_aspect("equal")
         axis.set_title(f"{name}: image coverage")
         axis = axes[1, c]
         axis.hist(np.degrees(camera.theta), bins=30, range=(0, spec.max_view_angle_deg), color="tab:green")
         axis.set_xlabel("theta (deg)")
+        axis.set_ylabel("points")
         axis.set_title(f"{name}: view-angle coverage")
     figure.tight_layout()
     return figure
@@ -104,6 +121,8 @@ def distortion_curves(data: ReportData) -> Figure:
         theta = np.linspace(0.0, spec.max_view_angle, 200)
         scale = float(np.max(model.m))
         fitted = scale * radius(model.k, theta)
+        corner_px = 0.5 * float(np.hypot(*spec.image_size))  # the image's reach from its centre
+        top_px = 1.2 * max(corner_px, float(np.nanmax(np.abs(fitted))))
         entry = data.document["cameras"][name]
         covariance = np.array(
             entry.get("radial_covariance", np.diag([entry["std"].get(f"k{i + 1}", 0.0) ** 2 for i in range(5)]))
@@ -114,12 +133,15 @@ def distortion_curves(data: ReportData) -> Figure:
         for label, function in PROJECTIONS.items():
             with np.errstate(over="ignore", invalid="ignore"):
                 curve = scale * function(spec.nominal_focal_mm, theta)
-            curve = np.where(curve < 3 * fitted.max(), curve, np.nan)
+            curve = np.where((curve >= 0) & (curve <= top_px), curve, np.nan)  # beyond the image: not drawn
             top.plot(np.degrees(theta), curve, "--", linewidth=1, label=f"{label} (nominal f)")
         top.plot(np.degrees(theta), fitted, "k", linewidth=2, label="fitted")
         top.fill_between(np.degrees(theta), fitted - band, fitted + band, color="k", alpha=0.2)
+        top.axhline(corner_px, color="0.5", linewidth=0.8, linestyle=":", label="image corner")
+        top.set_ylim(0, top_px)
+        top.set_xlim(0, spec.max_view_angle_deg)
         top.set_title(f"{name}: r(theta)")
-        top.set_ylabel("px")
+        top.set_ylabel("image radius (px)")
         top.legend(fontsize=6)
         seen = float(np.degrees(np.nanmax(camera.theta))) if camera.theta.size else 0.0
         bottom.plot(np.degrees(theta), band / 2, "k")

@@ -9,6 +9,7 @@ import logging
 from pathlib import Path
 
 import matplotlib.pyplot as plt
+import numpy as np
 
 from wand_calib_ros.core.rig import RigSpec, WandObservations
 from wand_calib_ros.report.analysis import ReportData, prepare
@@ -17,12 +18,16 @@ from wand_calib_ros.report.figures import FIGURES
 log = logging.getLogger(__name__)
 
 _CAPTIONS = {
-    "residual_histograms": "Reprojection residuals per camera (2D norm).",
+    "residual_histograms": "Reprojection residuals per camera (2D norm) of the points the calibration uses; "
+    "the points of views beyond its outlier gate (5 sigma), which it does not use, are counted above each "
+    "histogram, not drawn. The parameter table's RMS is per image coordinate (the 2D RMS over the square "
+    "root of 2).",
     "residual_vectors": "Residual vectors over each image, magnified: a pattern (not noise) means a model or "
-    "timing error.",
+    "timing error. Points of views beyond the outlier gate are marked x.",
     "coverage": "Where the wand was seen: image area and off-axis angle. The distortion is only known where data are.",
     "distortion": "Fitted r(theta) with its 2-sigma band against the five classic projections at the nominal focal "
-    "length; below, the 1-sigma uncertainty of the image radius (shaded: angles never observed).",
+    "length, drawn up to the image's reach (dotted: its corner); below, the 1-sigma uncertainty of the image "
+    "radius (shaded: angles never observed).",
     "wand_lengths": "Wand length |AC| of every placement triangulated linearly with the calibration.",
     "rig_3d": "Camera frustums and wand placements in the reference camera's frame.",
     "vision_graph": "Placements shared by camera pairs (M_ij) and the pairs used to chain the initial poses.",
@@ -41,18 +46,32 @@ img { max-width: 100%; }
 """
 
 
+#: Parameter table columns: result key, header (unit), factor from the result's unit.
+_COLUMNS = (
+    *((f"k{i}", f"k{i} (mm)", 1.0) for i in range(1, 6)),
+    ("u0", "u0 (px)", 1.0),
+    ("v0", "v0 (px)", 1.0),
+    *((f"r{a}", f"r{a} (deg)", float(np.degrees(1.0))) for a in "xyz"),
+    *((f"t{a}", f"t{a} (mm)", 1.0) for a in "xyz"),
+)
+
+
 def _parameter_table(data: ReportData) -> str:
-    columns = ("k1", "k2", "k3", "k4", "k5", "u0", "v0", "rx", "ry", "rz", "tx", "ty", "tz")
-    head = "".join(f"<th>{c}</th>" for c in ("camera", *columns, "RMS (px)", "views", "rejected"))
+    """Per camera every parameter with its standard deviation; rotations as rotation vectors in degrees
+    (the camera's rotation from the reference camera's frame), RMS per image coordinate of the points
+    the calibration used (the histograms show the 2D norm)."""
+    heads = ("camera", *(h for _, h, _ in _COLUMNS), "RMS per coordinate (px)", "views", "rejected views")
+    head = "".join(f"<th>{h}</th>" for h in heads)
     rows = []
     for name, model, pose in zip(data.names, data.models, data.poses, strict=True):
         entry = data.document["cameras"][name]
         std = entry.get("std", {})
         values = [*model.k, *model.principal_point, *pose.rotvec, *pose.translation]
         cells = []
-        for column, value in zip(columns, values, strict=True):
-            sigma = f" &plusmn; {std[column]:.3g}" if column in std else (" (fixed)" if column.startswith("k") else "")
-            cells.append(f"<td>{value:.5g}{sigma}</td>")
+        for (key, _, factor), value in zip(_COLUMNS, values, strict=True):
+            fixed = " (fixed)" if key.startswith("k") or entry.get("intrinsics") == "given" else ""
+            sigma = f" &plusmn; {factor * std[key]:.3g}" if key in std else fixed
+            cells.append(f"<td>{factor * value:.5g}{sigma}</td>")
         rows.append(
             f"<tr><td>{html.escape(name)}</td>{''.join(cells)}<td>{entry.get('rms_reprojection_px', float('nan')):.3f}"
             f"</td><td>{entry.get('n_views', '')}</td><td>{entry.get('rejected_views', '')}</td></tr>"
