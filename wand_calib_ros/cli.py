@@ -171,6 +171,16 @@ def _parser() -> argparse.ArgumentParser:
     )
     exp.add_argument("--out", required=True, type=Path, help="directory for the file(s)")
 
+    ref = commands.add_parser("refine", help="re-estimate cameras that moved since a calibration, from new views")
+    ref.add_argument("--cameras", required=True, type=Path, help="rig description (cameras.yaml)")
+    ref.add_argument("--result", required=True, type=Path, help="the calibration's result YAML")
+    ref.add_argument("--observations", required=True, type=Path, help="observations CSV of new wand views")
+    ref.add_argument("--output", required=True, type=Path, help="result YAML to write")
+    ref.add_argument(
+        "--moved", help="cameras to re-estimate, comma-separated (default: those the new views show moved)"
+    )
+    ref.add_argument("--with-intrinsics", action="store_true", help="re-estimate their k1, k2, u0, v0 too")
+
     imp = commands.add_parser("import", help="read another tool's wand points into an observations CSV")
     imp.add_argument("--format", required=True, choices=("xypts",), help="xypts: easyWand/Argus/DLTdv *xypts.csv")
     imp.add_argument("--points", required=True, type=Path, help="the other tool's point file")
@@ -560,6 +570,61 @@ def _export(args: argparse.Namespace) -> int:
     return 0
 
 
+def _refine(args: argparse.Namespace) -> int:
+    from wand_calib_ros.core.bumps import BumpMonitor, noise_levels
+    from wand_calib_ros.core.bundle_adjustment import CAMERA_PARAM_NAMES
+    from wand_calib_ros.core.repair import repair
+    from wand_calib_ros.io.result_yaml import with_cameras_replaced, write_yaml
+    from wand_calib_ros.io.text import read_yaml
+
+    rig = load_rig(args.cameras)
+    _, geometry = read_result(args.result)
+    missing = [n for n in rig.camera_names if n not in geometry]
+    if missing:
+        raise WandCalibError(f"{args.result}: no result for camera(s) {', '.join(missing)} of the rig")
+    observations = read_observations(
+        args.observations, rig.camera_names, image_sizes=rig.image_sizes, labels=rig.wand.labels
+    )
+    names = rig.camera_names
+    models = tuple(geometry[n].model for n in names)
+    poses = tuple(geometry[n].pose for n in names)
+    document = read_yaml(args.result)
+    if args.moved is None:
+        sigma = float(document.get("metrics", {}).get("sigma_px", float("nan")))
+        monitor = BumpMonitor(names, models, poses, rig.wand, noise_levels(sigma, len(names)))
+        monitor.add(observations.uv)
+        moved = monitor.moved()
+        for line in monitor.messages():
+            print(line)
+        if not moved:
+            print(f"no camera moved: every camera pair of {args.observations} agrees with {args.result}")
+            return 0
+    else:
+        unknown = [n for n in args.moved.split(",") if n.strip() not in names]
+        if unknown:
+            raise WandCalibError(f"--moved: {', '.join(unknown)} not in the rig ({', '.join(names)})")
+        moved = tuple(names.index(n.strip()) for n in args.moved.split(","))
+    check_writable([args.output])
+    fixed = repair(models, poses, rig.wand, observations.uv, moved, intrinsics=args.with_intrinsics, names=names)
+    updates = {
+        names[c]: (
+            fixed.models[c],
+            fixed.poses[c],
+            float(fixed.rms_px[c]),
+            {k: float(fixed.camera_std[c, i]) for i, k in enumerate(CAMERA_PARAM_NAMES) if fixed.camera_std[c, i] > 0},
+        )
+        for c in moved
+    }
+    note = (
+        f"{', '.join(names[c] for c in moved)} re-estimated by refine from {args.observations} "
+        f"({fixed.placements} placements; every other camera as calibrated)"
+    )
+    write_yaml(with_cameras_replaced(document, updates, note), args.output)
+    for c in moved:
+        print(f"{names[c]}: re-estimated, RMS {fixed.rms_px[c]:.3f} px on the new views -> {args.output}")
+    return 0
+
+
 def _import(args: argparse.Namespace) -> int:
     from wand_calib_ros.io.imports.xypts import read_xypts
 
@@ -593,6 +658,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             "report": _report,
             "export": _export,
             "import": _import,
+            "refine": _refine,
             "detect": _detect,
             "render": _render,
         }

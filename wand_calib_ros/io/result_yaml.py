@@ -260,6 +260,35 @@ def read_result(path: str | Path) -> tuple[str, dict[str, CameraGeometry]]:
         raise FormatError(path, f"not a wand_calib_ros result file: {where}: {error}") from None
 
 
+def with_cameras_replaced(
+    document: dict[str, Any], cameras: dict[str, tuple[CameraModel, Pose, float, dict[str, float]]], note: str
+) -> dict[str, Any]:
+    """A result document with some cameras re-estimated (``wand-calib refine``): per name (model, pose,
+    per-coordinate RMS px, standard deviations of the re-estimated parameters); their poses in the
+    world block follow, and ``note`` joins the warnings. Every other entry stays as it was."""
+    out = dict(document)
+    out["cameras"] = {name: dict(entry) for name, entry in document["cameras"].items()}
+    world = document.get("world") or {}
+    floor = world.get("frame") == "floor"
+    if floor:
+        out["world"] = {**world, "cameras": dict(world["cameras"])}
+        world_from_reference = Pose(world["rotation"], world["translation"])
+    for name, (model, pose, rms, std) in cameras.items():
+        entry = out["cameras"][name]
+        entry.update(camera_entry(model, pose))
+        entry["rms_reprojection_px"] = float(rms)
+        entry["rms_reprojection_2d_px"] = float(np.sqrt(2.0) * rms)
+        entry["std"] = {**entry.get("std", {}), **{k: float(v) for k, v in std.items()}}
+        if floor:
+            in_world = pose.compose(world_from_reference.inverse())
+            out["world"]["cameras"][name] = {
+                "rotation": _floats(in_world.rotation),
+                "translation": _floats(in_world.translation),
+            }
+    out["warnings"] = [*document.get("warnings", []), note]
+    return out
+
+
 def read_world_poses(path: str | Path) -> dict[str, Pose] | None:
     """Each camera's pose in the world (X_cam = R X_world + T, mm) from a result YAML's ``world`` block,
     or None when the calibration had no floor."""
