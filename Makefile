@@ -15,6 +15,7 @@ $(BIN)/activate:
 
 $(VENV)/.installed: $(BIN)/activate requirements.txt requirements-dev.txt setup.py
 	$(BIN)/pip install --quiet -r requirements-dev.txt
+	$(BIN)/pip install --quiet --no-deps aniposelib==0.8.0
 	$(BIN)/pip install --quiet --no-deps -e .
 	touch $@
 

@@ -217,3 +217,32 @@ def test_dlt_refuses_a_fisheye_by_name(tmp_path: Path) -> None:
     with pytest.raises(ExportError, match=r"camera cam0: .*differs from any pinhole by \d+\.\d px"):
         export(_cameras("conventional"), "dlt", tmp_path / "conventional")
     assert not (tmp_path / "mixed").exists() and not (tmp_path / "conventional").exists()
+
+
+@pytest.mark.parametrize("rig", RIGS)
+def test_aniposelib_itself_loads_our_toml_projects_and_triangulates_the_wand_as_we_do(tmp_path: Path, rig: str) -> None:
+    aniposelib = pytest.importorskip("aniposelib")  # installed by make setup (without its GUI/jax extras)
+
+    cameras = _cameras(rig)
+    (path,) = export(cameras, "anipose", tmp_path)
+    group = aniposelib.cameras.CameraGroup.load(str(path))
+    assert group.get_names() == [c.name for c in cameras]
+    rng = np.random.default_rng(4)
+    for index, camera in enumerate(cameras):
+        points = _points_seen_by(camera, rng)
+        theirs = group.cameras[index].project(points).reshape(-1, 2)
+        assert np.max(np.abs(theirs - _ours(camera, points))) < 1e-6
+    # A held-out 600 mm wand seen by the first two cameras: aniposelib's own triangulation.
+    middle = _points_seen_by(cameras[0], rng, 200)
+    direction = rng.normal(size=(200, 3))
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    ends = [middle - 300 * direction, middle + 300 * direction]
+    seen = np.all([_in_image(cameras[c], end) for end in ends for c in (0, 1)], axis=0)
+    triangulated = []
+    for end in ends:
+        pixels = np.full((len(cameras), int(seen.sum()), 2), np.nan)
+        for c in (0, 1):
+            pixels[c] = _ours(cameras[c], end[seen])
+        triangulated.append(group.triangulate(pixels, undistort=True, progress=False))
+    lengths = np.linalg.norm(triangulated[1] - triangulated[0], axis=1)
+    assert seen.sum() > 20 and np.max(np.abs(lengths - 600.0)) < 0.1
