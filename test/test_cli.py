@@ -332,3 +332,28 @@ def test_a_two_marker_wand_from_simulate_to_result(tmp_path: Path, capsys) -> No
     assert result["wand"] == {"points_mm": [0, 600]} and result["metrics"]["wand_length_rms_mm"] < 10.0
     assert main(["-q", "simulate", "paper", "--wand-mm", "0,600,500", "--out", str(sim)]) == 2
     assert "marker positions must start at 0 mm and increase" in capsys.readouterr().err
+
+
+def test_a_two_led_wand_from_a_rendered_bag_to_the_calibration(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    out = tmp_path / "rec"
+    render = ["-q", "render", "paper3", "--frames", "200", "--seed", "2", "--wand-mm", "0,600", "--out", str(out)]
+    assert main(render) == 0
+    cameras = ["--cameras", str(out / "cameras.yaml")]
+    assert main(["-q", "detect", str(out / "bag"), *cameras, "--output", str(out / "obs.csv")]) == 0
+    names = ("cam0", "cam1", "cam2")
+    detected = read_observations(out / "obs.csv", names, labels=("A", "B"))
+    drawn = read_observations(out / "drawn.csv", names, labels=("A", "B"))
+    rows = np.searchsorted(drawn.frames, detected.frames)
+    both = detected.complete & drawn.complete[rows]
+    # the two LEDs as found: each view matches the drawn ones in one order or the other
+    straight = np.linalg.norm(detected.uv - drawn.uv[rows], axis=-1).max(axis=-1)
+    crossed = np.linalg.norm(detected.uv[:, :, ::-1] - drawn.uv[rows], axis=-1).max(axis=-1)
+    assert both.sum() > 400 and np.all(np.minimum(straight, crossed)[both] < 0.5)
+    argv = [*cameras, "--observations", str(out / "obs.csv"), "--output", str(tmp_path / "result.yaml")]
+    assert main(["-q", "calibrate", *argv]) == 0
+    result = yaml.safe_load((tmp_path / "result.yaml").read_text())
+    truth = yaml.safe_load((out / "truth.yaml").read_text())
+    for name in names:
+        pp = np.array(result["cameras"][name]["principal_point"])
+        assert np.linalg.norm(pp - truth["cameras"][name]["principal_point"]) < 1.0
+    assert result["metrics"]["wand_length_rms_mm"] < 1.0

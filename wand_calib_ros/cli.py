@@ -125,6 +125,7 @@ def _parser() -> argparse.ArgumentParser:
         "--out", required=True, type=Path, help="directory: bag/ (or bag.bag), cameras.yaml, truth.yaml, drawn.csv"
     )
     ren.add_argument("--frames", type=int, default=300, help="frames per camera (default 300)")
+    ren.add_argument("--wand-mm", metavar="POSITIONS", help="another wand (as simulate --wand-mm), e.g. 0,600")
     ren.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     ren.add_argument("--reflections", type=float, default=0.0, help="probability of a spurious spot per image")
     ren.add_argument("--occlusions", type=float, default=0.0, help="probability that an LED is hidden")
@@ -429,6 +430,8 @@ def _render(args: argparse.Namespace) -> int:
     if args.frames < 1:
         raise WandCalibError("--frames must be positive")
     scenario = SCENARIOS[args.scenario]()
+    if args.wand_mm is not None:
+        scenario = dataclasses.replace(scenario, wand=_wand_positions(args.wand_mm))
     rng = np.random.default_rng(args.seed)
     options = RenderOptions(reflection_rate=args.reflections, occlusion_rate=args.occlusions)
     names = scenario.rig.camera_names

@@ -175,3 +175,16 @@ def test_the_detector_refuses_a_wand_of_other_than_three_leds_by_its_marker_coun
     assert WandOptions.for_wand(WandSpec.from_lengths(400, 200)).ratio == 2.0
     with pytest.raises(UnsupportedWandError, match="this rig's wand has 5 markers"):
         WandOptions.for_wand(WandSpec((0.0, 120.0, 250.0, 400.0, 600.0)))
+
+
+def test_a_two_led_wand_is_the_images_two_blobs_and_a_third_blob_rejects_the_view() -> None:
+    from wand_calib_ros.core.rig import WandSpec
+
+    options = WandOptions.for_wand(WandSpec((0.0, 600.0)))
+    two = _blobs([[100.0, 200.0], [300.0, 250.0]])
+    found = identify_wand(two, options)
+    assert found.reason is None and found.points is not None and np.array_equal(found.points, two.centres)
+    three = _blobs([[100.0, 200.0], [300.0, 250.0], [500.0, 20.0]])
+    assert identify_wand(three, options).reason == "competing_triples"
+    close = _blobs([[100.0, 200.0], [101.0, 201.0]])
+    assert identify_wand(close, options).reason == "not_collinear"

@@ -141,7 +141,7 @@ class ObservationBuffer:
     def observations(self) -> WandObservations:
         """Everything stored, in the core's observation type."""
         n = len(self.rig.cameras)
-        uv = np.array(self.uv) if self.uv else np.zeros((0, n, 3, 2))
+        uv = np.array(self.uv) if self.uv else np.zeros((0, n, self.rig.wand.n_points, 2))
         stamps = (np.array(self.stamps) if self.stamps else np.zeros((0, n))) if self.with_stamps else None
         return WandObservations(np.array(self.frames, dtype=np.int64), self.rig.camera_names, uv, stamps)
 

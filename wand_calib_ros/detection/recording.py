@@ -143,6 +143,9 @@ class CameraStream:
         if reason is not None or detection is None:
             self.stats.rejected[reason or "no_wand"] += 1
             return [Labelled(stamp_ns, None)]
+        if self.wand_options.n_points == 2:  # no ends to tell apart: the calibration matches the labels up
+            self.stats.detected += 1
+            return [*self.flush(), Labelled(stamp_ns, detection.points)]
         self._pending.append(detection)
         return self._released(self.labeller.push(stamp_ns, detection))
 
@@ -200,8 +203,9 @@ def detect_recording(
             inspect(frame, blobs, detection, reason)
         outcomes += [(frame.camera, out) for out in stream.label(frame.stamp_ns, detection, reason)]
     outcomes += [(name, out) for name, stream in streams.items() for out in stream.flush()]
-    grouped = group_by_stamps(rig.camera_names, [(c, out.stamp_ns, out.points) for c, out in outcomes], tolerance_ns)
-    observations = frames_to_observations(grouped, rig.camera_names)
+    detections = [(c, out.stamp_ns, out.points) for c, out in outcomes]
+    grouped = group_by_stamps(rig.camera_names, detections, tolerance_ns, n_points=rig.wand.n_points)
+    observations = frames_to_observations(grouped, rig.camera_names, rig.wand.n_points)
     frame_of = {
         (int(c), int(f.stamps_ns[c])): k for k, f in enumerate(grouped) for c in np.flatnonzero(f.reported)
     }  # fmt: skip

@@ -39,6 +39,8 @@ class WandOptions:
         min_length_px: smallest |AC| in the image.
         ambiguous_ratio: image ratios within [1/x, x] of 1 leave A and C ambiguous.
         competing_margin: a second triple scoring within this factor of the best makes the frame ambiguous.
+        n_points: the wand's markers: 3 (the paper's wand) or 2 (a two-marker wand: the image's two
+            blobs, labelled as found; the calibration matches them up).
     """
 
     ratio: float = 2.0
@@ -46,6 +48,7 @@ class WandOptions:
     min_length_px: float = 6.0
     ambiguous_ratio: float = 1.25
     competing_margin: float = 2.0
+    n_points: int = 3
 
     @classmethod
     def for_wand(cls, wand: WandSpec) -> WandOptions:
@@ -55,9 +58,11 @@ class WandOptions:
             UnsupportedWandError: a wand of other than three markers (calibrate it from an observations
                 CSV of its markers instead).
         """
+        if wand.n_points == 2:
+            return cls(n_points=2)
         if wand.n_points != 3:
             raise UnsupportedWandError(
-                f"the LED detector finds the three-LED wand; this rig's wand has {wand.n_points} markers: "
+                f"the LED detector finds wands of two or three LEDs; this rig's wand has {wand.n_points} markers: "
                 "detect them with your own tool and calibrate from an observations CSV (wand-calib calibrate)"
             )
         return cls(ratio=wand.L1 / wand.L2)
@@ -152,6 +157,8 @@ def identify_wand(
     n = blobs.centres.shape[0]
     if n == 0:
         return WandDetection(None, 0.0, "no_blobs")
+    if options.n_points == 2:
+        return _two_markers(blobs, options)
     if n < 3:
         return WandDetection(None, 0.0, "too_few_blobs")
     scored = []
@@ -177,6 +184,19 @@ def identify_wand(
         return WandDetection(None, 0.0, "at_border")
     ambiguous = 1 / options.ambiguous_ratio <= ratio <= options.ambiguous_ratio
     return WandDetection(points, float(1.0 / (1.0 + score)), None, bool(ambiguous), float(ratio))
+
+
+def _two_markers(blobs: Blobs, options: WandOptions) -> WandDetection:
+    """A two-marker wand: the image's two blobs, as found (nothing tells its ends apart). A third blob
+    (a reflection, another light) makes the image ambiguous: the view is rejected rather than guessed."""
+    n = blobs.centres.shape[0]
+    if n != 2:
+        return WandDetection(None, 0.0, "too_few_blobs" if n < 2 else "competing_triples")
+    if float(np.linalg.norm(blobs.centres[1] - blobs.centres[0])) < options.min_length_px:
+        return WandDetection(None, 0.0, "not_collinear")
+    if blobs.cut([0, 1]):
+        return WandDetection(None, 0.0, "at_border")
+    return WandDetection(blobs.centres.copy(), 1.0, None)
 
 
 #: Continuity settles a labelling only when one order is this much closer to the previous frame than the other.

@@ -118,6 +118,7 @@ class CollectorNode(Node):
             self.rig.camera_names,
             tolerance_ns=int(values["sync_tolerance_ms"] * 1e6),
             max_delay_ns=hold_ns + 500_000_000,
+            n_points=self.rig.wand.n_points,
         )
         self.timing: CalibrationResult | None = None  # the last /calibrate's result (its time offsets)
         wand = WandOptions.for_wand(self.rig.wand)
@@ -163,7 +164,7 @@ class CollectorNode(Node):
 
     def _on_points(self, camera: str, message: PolygonStamped) -> None:
         try:
-            points = messages.message_points(message)
+            points = messages.message_points(message, self.rig.wand.n_points)
         except ValueError as error:
             self.get_logger().warning(f"{camera}: ignoring wand points: {error}", throttle_duration_sec=5.0)
             with self.lock:

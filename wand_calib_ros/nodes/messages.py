@@ -57,17 +57,18 @@ def points_message(points: NDArray[np.float64] | None, header: Header) -> Polygo
     return message
 
 
-def message_points(message: PolygonStamped) -> NDArray[np.float64] | None:
-    """A, B, C ((3, 2) pixels) of a PolygonStamped, None for an empty polygon.
+def message_points(message: PolygonStamped, n_points: int = 3) -> NDArray[np.float64] | None:
+    """The wand's markers ((K, 2) pixels: A, B, C of the paper's wand) of a PolygonStamped, None for an
+    empty polygon.
 
     Raises:
-        ValueError: neither 0 nor 3 points, or coordinates that are not finite.
+        ValueError: neither 0 nor ``n_points`` points, or coordinates that are not finite.
     """
     if not message.polygon.points:
         return None
     points = np.array([[p.x, p.y] for p in message.polygon.points], dtype=np.float64)
-    if points.shape != (3, 2) or not np.all(np.isfinite(points)):
-        raise ValueError(f"expected the 3 finite points A, B, C, got {points.tolist()}")
+    if points.shape != (n_points, 2) or not np.all(np.isfinite(points)):
+        raise ValueError(f"expected the {n_points} finite points of the wand, got {points.tolist()}")
     return points
 
 

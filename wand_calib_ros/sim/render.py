@@ -91,7 +91,7 @@ def render_frame(
         The image and the (3, 2) true pixels of the LEDs drawn (NaN where occluded or not visible).
     """
     drawn = uv.copy()
-    hidden = rng.random(3) < options.occlusion_rate
+    hidden = rng.random(uv.shape[0]) < options.occlusion_rate
     drawn[hidden] = np.nan
     spots = (
         drawn + rng.normal(scale=options.centre_scatter_px, size=drawn.shape) if options.centre_scatter_px else drawn
