@@ -149,3 +149,41 @@ def test_calibrate_answers_clearly_when_busy_short_of_data_or_reset(ros: Ros, tm
     assert reset.call(Trigger.Request(), timeout_sec=10).success
     assert len(read_observations(next((tmp_path / "out").glob("observations.*.bak.csv"))).frames) == 30
     assert not collector.buffer.frames
+
+
+def test_a_two_led_wand_live_from_images_to_the_calibration(ros: Ros, tmp_path: Path) -> None:
+    from dataclasses import replace
+
+    from wand_calib_ros.core.rig import WandSpec
+    from wand_calib_ros.sim.scenarios import paper_three_camera_scenario
+
+    scenario = replace(paper_three_camera_scenario(), wand=WandSpec((0.0, 600.0)))
+    recording = render_recording(scenario, 150, 30.0, RenderOptions(), np.random.default_rng(3))
+    save_rig(scenario.rig, tmp_path / "cameras.yaml")
+    overrides = [
+        Parameter("cameras_file", value=str(tmp_path / "cameras.yaml")),
+        Parameter("output_dir", value=str(tmp_path / "out")),
+        Parameter("require_coverage", value=False),
+        Parameter("write_report", value=False),
+    ]
+    collector = ros.add(
+        CollectorNode(context=ros.context, parameter_overrides=[*overrides, Parameter("image_qos", value="reliable")])
+    )
+    ros.add(CalibratorNode(context=ros.context, parameter_overrides=overrides, before_calibrate=collector.flush))
+    publishers = {
+        name: ros.helper.create_publisher(Image, f"/{name}/image_raw", 50) for name in scenario.rig.camera_names
+    }
+    assert wait_until(lambda: all(p.get_subscription_count() for p in publishers.values()), 10)
+    for camera, stamp, pixels in recording.frames:
+        publishers[camera].publish(array_to_image(pixels, stamp, camera))
+        time.sleep(0.005)
+    assert wait_until(lambda: sum(collector.received.values()) == len(recording.frames), 20)
+    response = ros.helper.create_client(Trigger, "calibrate").call(Trigger.Request(), timeout_sec=120)
+    assert response.success, response.message
+    buffer = (tmp_path / "out" / "observations.csv").read_text().splitlines()
+    assert {row.split(",")[2] for row in buffer[1:]} == {"A", "B"}
+    result = yaml.safe_load((tmp_path / "out" / "result.yaml").read_text())
+    assert result["wand"] == {"points_mm": [0.0, 600.0]} and result["metrics"]["wand_length_rms_mm"] < 1.0
+    for camera in scenario.cameras:
+        pp = np.array(result["cameras"][camera.spec.name]["principal_point"])
+        assert np.linalg.norm(pp - camera.model.principal_point) < 1.0
