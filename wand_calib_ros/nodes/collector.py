@@ -38,6 +38,7 @@ from wand_calib_ros.collection.coverage import CoverageTracker
 from wand_calib_ros.collection.floor import FLOOR_FILE, FloorWindow, append_floor_frame
 from wand_calib_ros.collection.recovery import backup_path
 from wand_calib_ros.collection.sync import FrameSynchroniser, SyncedFrame
+from wand_calib_ros.collection.watch import BumpWatch
 from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.detection.recording import CameraStream, Labelled
 from wand_calib_ros.detection.wand import WandOptions
@@ -121,6 +122,8 @@ class CollectorNode(Node):
             n_points=self.rig.wand.n_points,
         )
         self.timing: CalibrationResult | None = None  # the last /calibrate's result (its time offsets)
+        self.watch: BumpWatch | None = None  # after a /calibrate: is a camera moving away from it?
+        self._moved_logged: dict[str, str] = {}
         wand = WandOptions.for_wand(self.rig.wand)
         self.streams = {c.name: CameraStream(c, wand, max_hold_ns=hold_ns) for c in self.rig.cameras}
         self.received = dict.fromkeys(self.rig.camera_names, 0)
@@ -187,6 +190,8 @@ class CollectorNode(Node):
     def _store(self, frames: list[SyncedFrame]) -> None:
         for frame in frames:
             on_floor = self.floor.is_open(time.monotonic())
+            if self.watch is not None:
+                self.watch.offer(frame.uv)
             if self.buffer.offer(frame.uv, messages.frame_stamps(frame), keep=on_floor):
                 self.coverage.add(frame.uv)
                 if on_floor:
@@ -204,11 +209,18 @@ class CollectorNode(Node):
         self.flush()
         with self.lock:
             self.buffer.sync()
+            if self.watch is not None:
+                self.watch.close()
 
     def after_calibrate(self, result: CalibrationResult) -> None:
-        """Keep a calibration's result: /diagnostics then shows its time offsets."""
+        """Keep a calibration's result: /diagnostics then shows its time offsets, and the frames that
+        follow are watched for a camera that moved."""
         with self.lock:
             self.timing = result
+            if self.watch is not None:
+                self.watch.close()
+            self.watch = BumpWatch(self.rig, result)
+            self._moved_logged = {}
 
     def _counts(self) -> dict[str, dict[str, int | str]]:
         counts: dict[str, dict[str, int | str]] = {}
@@ -238,9 +250,19 @@ class CollectorNode(Node):
                 "without_wand": stored.empty,
             }
             cells = {name: self.coverage.cells[c].copy() for c, name in enumerate(self.rig.camera_names)}
+            watch = self.watch
+        moved = {}
+        if watch is not None:
+            watch.step()
+            moved = watch.moved()
+            for line in sorted(set(moved.values()) - set(self._moved_logged.values())):
+                self.get_logger().warning(
+                    f"{line}: /reset, wave and /calibrate again, or repair it with wand-calib refine"
+                )
+            self._moved_logged = moved
         stamp = self.get_clock().now().to_msg()
         source = self.get_fully_qualified_name().lstrip("/")  # e.g. rig1/wand_calib_collector
-        self.diagnostics.publish(messages.diagnostics_message(status, counts, rig_values, stamp, source))
+        self.diagnostics.publish(messages.diagnostics_message(status, counts, rig_values, stamp, source, moved))
         for spec in self.rig.cameras:
             self.heat_maps[spec.name].publish(
                 messages.heat_map_message(cells[spec.name], spec.image_size, stamp, spec.name)

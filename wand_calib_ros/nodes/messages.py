@@ -164,6 +164,7 @@ def diagnostics_message(
     rig_values: dict[str, int | str],
     stamp: Time,
     source: str = "wand_calib_collector",
+    moved: Mapping[str, str] | None = None,
 ) -> DiagnosticArray:
     """/diagnostics: one OK/WARN entry per camera (what is missing) and one for the rig, named
     ``<source>: <camera>`` and ``<source>: rig`` (``source`` the collector's namespaced name, so an
@@ -174,6 +175,7 @@ def diagnostics_message(
         counts: per camera counters (images, wands, rejections) shown as key/values.
         rig_values: rig-wide counters (frames stored, late or out-of-order messages, ...).
         stamp: the array's stamp.
+        moved: cameras judged to have moved since the calibration, with their message (ERROR entries).
     """
     array = DiagnosticArray()
     array.header.stamp = stamp
@@ -181,6 +183,8 @@ def diagnostics_message(
         entry = DiagnosticStatus(name=f"{source}: {camera.name}", hardware_id=camera.name)
         entry.level = DiagnosticStatus.OK if camera.ok else DiagnosticStatus.WARN
         entry.message = "ready" if camera.ok else "; ".join(camera.missing)
+        if moved and camera.name in moved:
+            entry.level, entry.message = DiagnosticStatus.ERROR, moved[camera.name]
         values = {
             "placements": camera.placements,
             "image_coverage_percent": f"{100 * camera.image_fraction:.0f}",
