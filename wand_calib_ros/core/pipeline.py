@@ -56,7 +56,7 @@ def calibrate(
 
     Two cameras follow Section III-A of the paper; more cameras are initialised
     through the vision graph (Section III-B) and refined by one global bundle
-    adjustment. Placements must be seen completely (all three wand points) by at
+    adjustment. Placements must be seen completely (every marker of the wand) by at
     least two cameras; the initialisation uses complete views only, the bundle
     adjustment every point seen.
 
@@ -144,7 +144,7 @@ def _initialise(rig: RigSpec, uv: NDArray[np.float64], graph: VisionGraph, optio
 
 
 def _require_whole_views(names: tuple[str, ...], complete: NDArray[np.bool_]) -> None:
-    """Every camera must see the whole wand (all three points) in a frame another camera sees it in too.
+    """Every camera must see the whole wand (every marker) in a frame another camera sees it in too.
 
     Raises:
         InsufficientDataError: naming the cameras that never see the whole wand, or that see it

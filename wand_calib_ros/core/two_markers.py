@@ -1,9 +1,11 @@
-"""Which marker is which on a two-marker wand (easyWand's, Qualisys' L-less wand).
+"""Which marker is which on a two-marker wand (easyWand's and Argus's).
 
 A two-marker wand has no A/C asymmetry: each camera labels its two blobs as it likes, per image.
 The calibration needs the same label for the same marker in every view of a placement, and (for the
-motion models of free-running cameras) over time. Two steps settle it:
+motion models of free-running cameras) over time. Three steps settle it:
 
+- per camera through the take (:func:`continuous_in_image`): each marker moves the shorter way from
+  one view to the next;
 - for a camera pair before its initialisation (:func:`match_pair`): the midpoint of the two bearings
   does not depend on the labels and is close to the bearing of the wand's middle, so an essential
   matrix from the midpoints (RANSAC) tells, per placement, which of the two pairings the epipolar
