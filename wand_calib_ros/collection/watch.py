@@ -19,6 +19,11 @@ from wand_calib_ros.core.rig import RigSpec
 
 FloatArray = NDArray[np.float64]
 
+#: Frames kept waiting for the worker at most (the newest): a rig whose pairs take longer to judge
+#: than the frames take to arrive (16 cameras: about 1 s of one core per second of frames, measured)
+#: is judged on its latest frames instead of falling ever further behind.
+MAX_PENDING = 300
+
 
 class BumpWatch:
     """A calibrated rig watched frame by frame (see the module docstring)."""
@@ -42,6 +47,7 @@ class BumpWatch:
         if np.all(np.isfinite(uv), axis=(1, 2)).sum() >= 2:  # two whole views: some pair can judge it
             with self._lock:
                 self._pending.append(uv)
+                del self._pending[:-MAX_PENDING]
 
     def step(self) -> None:
         """Hand the queued frames to the worker unless it is still busy with the previous ones."""
