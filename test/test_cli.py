@@ -357,3 +357,26 @@ def test_a_two_led_wand_from_a_rendered_bag_to_the_calibration(tmp_path: Path, c
         pp = np.array(result["cameras"][name]["principal_point"])
         assert np.linalg.norm(pp - truth["cameras"][name]["principal_point"]) < 1.0
     assert result["metrics"]["wand_length_rms_mm"] < 1.0
+
+
+def test_a_five_led_wand_from_a_rendered_bag_to_the_calibration(tmp_path: Path) -> None:
+    out = tmp_path / "rec"
+    wand = "0,120,250,400,600"
+    assert main(["-q", "render", "paper3", "--frames", "200", "--seed", "2", "--wand-mm", wand, "--out", str(out)]) == 0
+    cameras = ["--cameras", str(out / "cameras.yaml")]
+    assert main(["-q", "detect", str(out / "bag"), *cameras, "--output", str(out / "obs.csv")]) == 0
+    names, labels = ("cam0", "cam1", "cam2"), ("A", "B", "C", "D", "E")
+    detected = read_observations(out / "obs.csv", names, labels=labels)
+    drawn = read_observations(out / "drawn.csv", names, labels=labels)
+    rows = np.searchsorted(drawn.frames, detected.frames)
+    both = detected.complete & drawn.complete[rows]
+    errors = np.linalg.norm(detected.uv - drawn.uv[rows], axis=-1).max(axis=-1)[both]  # labels in order
+    assert both.sum() > 300 and (errors > 0.5).mean() <= 0.005, np.sort(errors)[-5:]
+    argv = [*cameras, "--observations", str(out / "obs.csv"), "--output", str(tmp_path / "result.yaml")]
+    assert main(["-q", "calibrate", *argv]) == 0
+    result = yaml.safe_load((tmp_path / "result.yaml").read_text())
+    truth = yaml.safe_load((out / "truth.yaml").read_text())
+    for name in names:
+        pp = np.array(result["cameras"][name]["principal_point"])
+        assert np.linalg.norm(pp - truth["cameras"][name]["principal_point"]) < 1.0
+    assert result["metrics"]["wand_length_rms_mm"] < 1.0

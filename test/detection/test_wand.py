@@ -168,13 +168,15 @@ def test_a_wand_with_an_led_cut_by_the_border_is_not_written() -> None:
     assert detection.points is None and detection.reason == "at_border"
 
 
-def test_the_detector_refuses_a_wand_of_other_than_three_leds_by_its_marker_count() -> None:
+def test_a_wand_whose_ends_look_alike_is_refused_by_the_detector() -> None:
     from wand_calib_ros.core.rig import WandSpec
     from wand_calib_ros.detection.errors import UnsupportedWandError
 
     assert WandOptions.for_wand(WandSpec.from_lengths(400, 200)).ratio == 2.0
-    with pytest.raises(UnsupportedWandError, match="this rig's wand has 5 markers"):
-        WandOptions.for_wand(WandSpec((0.0, 120.0, 250.0, 400.0, 600.0)))
+    five = WandOptions.for_wand(WandSpec((0.0, 120.0, 250.0, 400.0, 600.0)))
+    assert five.n_points == 5 and five.positions[2] == pytest.approx(250 / 600)
+    with pytest.raises(UnsupportedWandError, match="spaced symmetrically"):
+        WandOptions.for_wand(WandSpec((0.0, 200.0, 400.0, 600.0)))
 
 
 def test_a_two_led_wand_is_the_images_two_blobs_and_a_third_blob_rejects_the_view() -> None:

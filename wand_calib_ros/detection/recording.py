@@ -143,7 +143,7 @@ class CameraStream:
         if reason is not None or detection is None:
             self.stats.rejected[reason or "no_wand"] += 1
             return [Labelled(stamp_ns, None)]
-        if self.wand_options.n_points == 2:  # no ends to tell apart: the calibration matches the labels up
+        if self.wand_options.n_points != 3:  # two: matched up by the calibration; more: ordered by their spacing
             self.stats.detected += 1
             return [*self.flush(), Labelled(stamp_ns, detection.points)]
         self._pending.append(detection)

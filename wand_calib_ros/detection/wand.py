@@ -39,8 +39,13 @@ class WandOptions:
         min_length_px: smallest |AC| in the image.
         ambiguous_ratio: image ratios within [1/x, x] of 1 leave A and C ambiguous.
         competing_margin: a second triple scoring within this factor of the best makes the frame ambiguous.
-        n_points: the wand's markers: 3 (the paper's wand) or 2 (a two-marker wand: the image's two
-            blobs, labelled as found; the calibration matches them up).
+        n_points: the wand's markers: 3 (the paper's wand), 2 (a two-marker wand: the image's two
+            blobs, labelled as found; the calibration matches them up) or more (collinear markers
+            whose spacing pattern tells their order).
+        positions: the markers' positions along the wand over its length (0 ... 1; wands of four or
+            more markers).
+        max_pattern_error: largest mean difference between the image's and the wand's normalised
+            marker positions once the perspective foreshortening is fitted (four or more markers).
     """
 
     ratio: float = 2.0
@@ -49,6 +54,8 @@ class WandOptions:
     ambiguous_ratio: float = 1.25
     competing_margin: float = 2.0
     n_points: int = 3
+    positions: tuple[float, ...] = ()
+    max_pattern_error: float = 0.02
 
     @classmethod
     def for_wand(cls, wand: WandSpec) -> WandOptions:
@@ -60,11 +67,14 @@ class WandOptions:
         """
         if wand.n_points == 2:
             return cls(n_points=2)
-        if wand.n_points != 3:
-            raise UnsupportedWandError(
-                f"the LED detector finds wands of two or three LEDs; this rig's wand has {wand.n_points} markers: "
-                "detect them with your own tool and calibrate from an observations CSV (wand-calib calibrate)"
-            )
+        if wand.n_points > 3:
+            normalised = tuple(float(p) / wand.L for p in wand.positions_mm)
+            if np.allclose(normalised, [1.0 - p for p in normalised[::-1]], atol=0.05):
+                raise UnsupportedWandError(
+                    f"the wand's markers {list(wand.positions_mm)} are spaced symmetrically: nothing in an image "
+                    "tells its ends apart; space them unevenly, or detect them with your own tool"
+                )
+            return cls(n_points=wand.n_points, positions=normalised)
         return cls(ratio=wand.L1 / wand.L2)
 
 
@@ -159,6 +169,8 @@ def identify_wand(
         return WandDetection(None, 0.0, "no_blobs")
     if options.n_points == 2:
         return _two_markers(blobs, options)
+    if options.n_points > 3:
+        return _marker_pattern(blobs, options, None if model is None else _bearings(model, blobs.centres))
     if n < 3:
         return WandDetection(None, 0.0, "too_few_blobs")
     scored = []
@@ -197,6 +209,87 @@ def _two_markers(blobs: Blobs, options: WandOptions) -> WandDetection:
     if blobs.cut([0, 1]):
         return WandDetection(None, 0.0, "at_border")
     return WandDetection(blobs.centres.copy(), 1.0, None)
+
+
+#: Most blobs an image may hold for a wand of four or more markers (the combinations grow fast).
+MAX_PATTERN_BLOBS = 10
+
+
+def _bearings(model: CameraModel | BearingTable, centres: FloatArray) -> FloatArray:
+    return model(centres) if isinstance(model, BearingTable) else unproject(model, centres)
+
+
+def _gnomonic(bearings: FloatArray) -> FloatArray:
+    """(K, 2) the bearings as a pinhole camera looking at their mean direction would image them: lines
+    stay lines (a fisheye's curved image of the wand is straightened), distances keep their ratios
+    up to the usual perspective."""
+    axis = bearings.mean(axis=0)
+    axis /= np.linalg.norm(axis)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    u = np.cross(axis, helper)
+    u /= np.linalg.norm(u)
+    v = np.cross(axis, u)
+    plane = bearings / (bearings @ axis)[:, None]
+    return np.column_stack([plane @ u, plane @ v])
+
+
+def _pattern_error(t: FloatArray, wanted: FloatArray) -> float:
+    """How far (mean, in wand lengths) normalised image positions ``t`` of the markers are from the wand's
+    ``wanted`` ones seen in perspective: a line's points map by t = (1 + c) w / (1 + c w) with the ends
+    fixed; c (the foreshortening) is fitted to the inner markers."""
+    w, inner = wanted[1:-1], t[1:-1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        c = float(np.nanmedian((inner - w) / (w * (1.0 - inner))))
+    if not np.isfinite(c) or c <= -0.9:  # no camera in front of the wand sees it so
+        return float("inf")
+    return float(np.mean(np.abs(inner - (1.0 + c) * w / (1.0 + c * w))))
+
+
+def _marker_pattern(blobs: Blobs, options: WandOptions, bearings: FloatArray | None = None) -> WandDetection:
+    """A wand of four or more collinear markers: the K blobs that lie on one line and whose spacing
+    matches the wand's (normalised positions along the line, in the order that fits better); an
+    image where two sets fit, or where both orders fit alike, is rejected. With the camera's
+    (nominal) model the test is made on the view a pinhole camera would have (fisheyes bend lines)."""
+    n, k = blobs.centres.shape[0], options.n_points
+    if n < k:
+        return WandDetection(None, 0.0, "too_few_blobs")
+    if n > MAX_PATTERN_BLOBS:
+        return WandDetection(None, 0.0, "competing_triples")
+    wanted = np.array(options.positions)
+    found = []
+    for index in itertools.combinations(range(n), k):
+        pixels = blobs.centres[list(index)]
+        if float(np.max(np.linalg.norm(pixels[:, None] - pixels[None], axis=-1))) < options.min_length_px:
+            continue
+        points = pixels if bearings is None else _gnomonic(bearings[list(index)])
+        if not np.all(np.isfinite(points)):
+            continue
+        distances = np.linalg.norm(points[:, None] - points[None], axis=-1)
+        i, j = np.unravel_index(int(np.argmax(distances)), distances.shape)
+        length = float(distances[i, j])
+        axis = (points[j] - points[i]) / length
+        along = (points - points[i]) @ axis / length
+        across = np.abs((points - points[i]) @ np.array([-axis[1], axis[0]])) / length
+        if across.max() > options.collinearity:
+            continue
+        order = np.argsort(along)
+        t = along[order]
+        forward, backward = _pattern_error(t, wanted), _pattern_error(1.0 - t[::-1], wanted)
+        error = min(forward, backward)
+        if error <= options.max_pattern_error:
+            ordered = pixels[order] if forward <= backward else pixels[order][::-1]
+            found.append((error + across.max() / options.collinearity * 0.01, ordered, abs(forward - backward), index))
+    if not found:
+        return WandDetection(None, 0.0, "not_collinear")
+    found.sort(key=lambda f: f[0])
+    if len(found) > 1 and found[1][0] < options.competing_margin * found[0][0]:
+        return WandDetection(None, 0.0, "competing_triples")
+    error, points, separation, index = found[0]
+    if separation < 2 * error:  # both orders fit about alike: the ends cannot be told apart here
+        return WandDetection(None, 0.0, "ambiguous")
+    if blobs.cut(list(index)):
+        return WandDetection(None, 0.0, "at_border")
+    return WandDetection(points, float(1.0 / (1.0 + error)), None)
 
 
 #: Continuity settles a labelling only when one order is this much closer to the previous frame than the other.
