@@ -334,49 +334,42 @@ def test_a_two_marker_wand_from_simulate_to_result(tmp_path: Path, capsys) -> No
     assert "marker positions must start at 0 mm and increase" in capsys.readouterr().err
 
 
-def test_a_two_led_wand_from_a_rendered_bag_to_the_calibration(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+def _rendered_wand_take(tmp_path: Path, wand: str, labels: tuple[str, ...]) -> tuple:  # type: ignore[type-arg]
+    """A 200-frame paper3 take of another wand rendered and detected: (detected, drawn rows of it, frames
+    both show whole, the calibrate command's arguments, the truth)."""
     out = tmp_path / "rec"
-    render = ["-q", "render", "paper3", "--frames", "200", "--seed", "2", "--wand-mm", "0,600", "--out", str(out)]
-    assert main(render) == 0
-    cameras = ["--cameras", str(out / "cameras.yaml")]
-    assert main(["-q", "detect", str(out / "bag"), *cameras, "--output", str(out / "obs.csv")]) == 0
-    names = ("cam0", "cam1", "cam2")
-    detected = read_observations(out / "obs.csv", names, labels=("A", "B"))
-    drawn = read_observations(out / "drawn.csv", names, labels=("A", "B"))
-    rows = np.searchsorted(drawn.frames, detected.frames)
-    both = detected.complete & drawn.complete[rows]
-    # the two LEDs as found: each view matches the drawn ones in one order or the other
-    straight = np.linalg.norm(detected.uv - drawn.uv[rows], axis=-1).max(axis=-1)
-    crossed = np.linalg.norm(detected.uv[:, :, ::-1] - drawn.uv[rows], axis=-1).max(axis=-1)
-    assert both.sum() > 400 and np.all(np.minimum(straight, crossed)[both] < 0.5)
-    argv = [*cameras, "--observations", str(out / "obs.csv"), "--output", str(tmp_path / "result.yaml")]
-    assert main(["-q", "calibrate", *argv]) == 0
-    result = yaml.safe_load((tmp_path / "result.yaml").read_text())
-    truth = yaml.safe_load((out / "truth.yaml").read_text())
-    for name in names:
-        pp = np.array(result["cameras"][name]["principal_point"])
-        assert np.linalg.norm(pp - truth["cameras"][name]["principal_point"]) < 1.0
-    assert result["metrics"]["wand_length_rms_mm"] < 1.0
-
-
-def test_a_five_led_wand_from_a_rendered_bag_to_the_calibration(tmp_path: Path) -> None:
-    out = tmp_path / "rec"
-    wand = "0,120,250,400,600"
     assert main(["-q", "render", "paper3", "--frames", "200", "--seed", "2", "--wand-mm", wand, "--out", str(out)]) == 0
     cameras = ["--cameras", str(out / "cameras.yaml")]
     assert main(["-q", "detect", str(out / "bag"), *cameras, "--output", str(out / "obs.csv")]) == 0
-    names, labels = ("cam0", "cam1", "cam2"), ("A", "B", "C", "D", "E")
+    names = ("cam0", "cam1", "cam2")
     detected = read_observations(out / "obs.csv", names, labels=labels)
     drawn = read_observations(out / "drawn.csv", names, labels=labels)
     rows = np.searchsorted(drawn.frames, detected.frames)
     both = detected.complete & drawn.complete[rows]
-    errors = np.linalg.norm(detected.uv - drawn.uv[rows], axis=-1).max(axis=-1)[both]  # labels in order
-    assert both.sum() > 300 and (errors > 0.5).mean() <= 0.005, np.sort(errors)[-5:]
     argv = [*cameras, "--observations", str(out / "obs.csv"), "--output", str(tmp_path / "result.yaml")]
+    return detected, drawn.uv[rows], both, argv, yaml.safe_load((out / "truth.yaml").read_text())
+
+
+def _calibrated_near_the_truth(tmp_path: Path, argv: list[str], truth: dict) -> None:  # type: ignore[type-arg]
     assert main(["-q", "calibrate", *argv]) == 0
     result = yaml.safe_load((tmp_path / "result.yaml").read_text())
-    truth = yaml.safe_load((out / "truth.yaml").read_text())
-    for name in names:
+    for name in ("cam0", "cam1", "cam2"):
         pp = np.array(result["cameras"][name]["principal_point"])
         assert np.linalg.norm(pp - truth["cameras"][name]["principal_point"]) < 1.0
     assert result["metrics"]["wand_length_rms_mm"] < 1.0
+
+
+def test_a_two_led_wand_from_a_rendered_bag_to_the_calibration(tmp_path: Path) -> None:
+    detected, drawn, both, argv, truth = _rendered_wand_take(tmp_path, "0,600", ("A", "B"))
+    # the two LEDs as found: each view matches the drawn ones in one order or the other
+    straight = np.linalg.norm(detected.uv - drawn, axis=-1).max(axis=-1)
+    crossed = np.linalg.norm(detected.uv[:, :, ::-1] - drawn, axis=-1).max(axis=-1)
+    assert both.sum() > 400 and np.all(np.minimum(straight, crossed)[both] < 0.5)
+    _calibrated_near_the_truth(tmp_path, argv, truth)
+
+
+def test_a_five_led_wand_from_a_rendered_bag_to_the_calibration(tmp_path: Path) -> None:
+    detected, drawn, both, argv, truth = _rendered_wand_take(tmp_path, "0,120,250,400,600", tuple("ABCDE"))
+    errors = np.linalg.norm(detected.uv - drawn, axis=-1).max(axis=-1)[both]  # labels in order
+    assert both.sum() > 300 and (errors > 0.5).mean() <= 0.005, np.sort(errors)[-5:]
+    _calibrated_near_the_truth(tmp_path, argv, truth)

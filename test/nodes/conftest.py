@@ -49,6 +49,91 @@ def wait_until(condition: Callable[[], bool], timeout_s: float, step_s: float = 
     return True
 
 
+@dataclass
+class PointsRig:
+    """A collector fed by detector points and its calibrator (:func:`points_rig`).
+
+    Attributes:
+        collector: the CollectorNode.
+        play: publishes (F, C, K, 2) pixels as consecutive 30 fps frames of points (NaN views: empty
+            polygons) and waits until the collector received them all.
+    """
+
+    collector: Any
+    play: Callable[[Any], None]
+
+
+def points_rig(
+    ros: Ros, scenario: Any, tmp_path: Any, collector_parameters: dict[str, Any], *, watch: bool = False
+) -> PointsRig:
+    """A collector with ``input: points`` (plus ``collector_parameters``) and a separate calibrator on
+    ``scenario``'s rig, output in ``tmp_path/out``, coverage not required; ``watch``: the calibrator
+    hands its results to the collector (the bump watch)."""
+    import numpy as np
+    from builtin_interfaces.msg import Time
+    from geometry_msgs.msg import PolygonStamped
+    from rclpy.parameter import Parameter
+    from std_msgs.msg import Header
+
+    from wand_calib_ros.io.rig_yaml import save_rig
+    from wand_calib_ros.nodes.calibrator import CalibratorNode
+    from wand_calib_ros.nodes.collector import POINTS_QOS, CollectorNode
+    from wand_calib_ros.nodes.messages import points_message
+
+    save_rig(scenario.rig, tmp_path / "cameras.yaml")
+    common = [
+        Parameter("cameras_file", value=str(tmp_path / "cameras.yaml")),
+        Parameter("output_dir", value=str(tmp_path / "out")),
+        Parameter("require_coverage", value=False),
+    ]
+    collected = {"input": "points", "with_calibrator": False, **collector_parameters}
+    collector = ros.add(
+        CollectorNode(
+            context=ros.context,
+            parameter_overrides=[*common, *(Parameter(k, value=v) for k, v in collected.items())],
+        )
+    )
+    ros.add(
+        CalibratorNode(
+            context=ros.context,
+            parameter_overrides=[*common, Parameter("write_report", value=False)],
+            before_calibrate=collector.flush,
+            after_calibrate=collector.after_calibrate if watch else None,
+        )
+    )
+    names = scenario.rig.camera_names
+    publishers = {n: ros.helper.create_publisher(PolygonStamped, f"/{n}/wand_points", POINTS_QOS) for n in names}
+    assert wait_until(lambda: all(p.get_subscription_count() for p in publishers.values()), 10)
+    sent = [0]
+
+    def play(uv: Any) -> None:
+        for frame in uv:
+            sent[0] += 1
+            stamp = Time(sec=1000 + sent[0] // 30, nanosec=int(sent[0] % 30 * 1e9 / 30))
+            for c, name in enumerate(names):
+                points = frame[c] if np.all(np.isfinite(frame[c])) else None
+                publishers[name].publish(points_message(points, Header(stamp=stamp, frame_id=name)))
+            time.sleep(0.002)
+        assert wait_until(lambda: min(collector.received.values()) == sent[0], 20)
+
+    return PointsRig(collector, play)
+
+
+def publish_images(ros: Ros, collector: Any, recording: Any, names: tuple[str, ...]) -> None:
+    """Publish a rendered recording's images on ``/<camera>/image_raw`` (once every camera's topic has
+    a subscriber) and wait until the collector received them all."""
+    from sensor_msgs.msg import Image
+
+    from wand_calib_ros.nodes.messages import array_to_image
+
+    publishers = {name: ros.helper.create_publisher(Image, f"/{name}/image_raw", 50) for name in names}
+    assert wait_until(lambda: all(p.get_subscription_count() for p in publishers.values()), 10)
+    for camera, stamp, pixels in recording.frames:
+        publishers[camera].publish(array_to_image(pixels, stamp, camera))
+        time.sleep(0.005)
+    assert wait_until(lambda: sum(collector.received.values()) == len(recording.frames), 20)
+
+
 @pytest.fixture
 def ros() -> Iterator[Ros]:
     context = Context()

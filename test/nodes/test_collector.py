@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from conftest import LATCHED, Ros, wait_until
+from conftest import LATCHED, Ros, publish_images, wait_until
 
 from wand_calib_ros import cli
 from wand_calib_ros.io.observations_csv import read_observations
@@ -28,7 +28,6 @@ from std_srvs.srv import Trigger  # noqa: E402
 
 from wand_calib_ros.nodes.calibrator import CalibratorNode  # noqa: E402
 from wand_calib_ros.nodes.collector import CollectorNode  # noqa: E402
-from wand_calib_ros.nodes.messages import array_to_image  # noqa: E402
 
 
 def test_collect_calibrate_and_publish(ros: Ros, tmp_path: Path) -> None:
@@ -50,18 +49,11 @@ def test_collect_calibrate_and_publish(ros: Ros, tmp_path: Path) -> None:
     ros.add(
         CalibratorNode(context=ros.context, parameter_overrides=[*overrides, exports], before_calibrate=collector.flush)
     )
-    publishers = {
-        name: ros.helper.create_publisher(Image, f"/{name}/image_raw", 50) for name in scenario.rig.camera_names
-    }
     infos = ros.collect(CameraInfo, "wand_calib/cam1/camera_info", LATCHED)
     transforms = ros.collect(TransformStamped, "wand_calib/cam1/extrinsics", LATCHED)
     diagnostics = ros.collect(DiagnosticArray, "/diagnostics")
     heat_maps = ros.collect(Image, "wand_calib/cam0/coverage", 1)
-    assert wait_until(lambda: all(p.get_subscription_count() for p in publishers.values()), 10)
-    for camera, stamp, pixels in recording.frames:
-        publishers[camera].publish(array_to_image(pixels, stamp, camera))
-        time.sleep(0.005)
-    assert wait_until(lambda: sum(collector.received.values()) == len(recording.frames), 20)
+    publish_images(ros, collector, recording, scenario.rig.camera_names)
 
     client = ros.helper.create_client(Trigger, "calibrate")
     assert client.wait_for_service(timeout_sec=5)
@@ -170,14 +162,7 @@ def test_a_two_led_wand_live_from_images_to_the_calibration(ros: Ros, tmp_path: 
         CollectorNode(context=ros.context, parameter_overrides=[*overrides, Parameter("image_qos", value="reliable")])
     )
     ros.add(CalibratorNode(context=ros.context, parameter_overrides=overrides, before_calibrate=collector.flush))
-    publishers = {
-        name: ros.helper.create_publisher(Image, f"/{name}/image_raw", 50) for name in scenario.rig.camera_names
-    }
-    assert wait_until(lambda: all(p.get_subscription_count() for p in publishers.values()), 10)
-    for camera, stamp, pixels in recording.frames:
-        publishers[camera].publish(array_to_image(pixels, stamp, camera))
-        time.sleep(0.005)
-    assert wait_until(lambda: sum(collector.received.values()) == len(recording.frames), 20)
+    publish_images(ros, collector, recording, scenario.rig.camera_names)
     response = ros.helper.create_client(Trigger, "calibrate").call(Trigger.Request(), timeout_sec=120)
     assert response.success, response.message
     buffer = (tmp_path / "out" / "observations.csv").read_text().splitlines()

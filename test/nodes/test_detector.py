@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import Ros, wait_until
+from conftest import Ros, publish_images
 
 from wand_calib_ros.detection.recording import detect_recording
 from wand_calib_ros.io.bags import ImageFrame
@@ -19,11 +18,9 @@ rclpy = pytest.importorskip("rclpy")
 
 from geometry_msgs.msg import PolygonStamped  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
-from sensor_msgs.msg import Image  # noqa: E402
 
 from wand_calib_ros.nodes.collector import POINTS_QOS, CollectorNode  # noqa: E402
 from wand_calib_ros.nodes.detector import DetectorNode  # noqa: E402
-from wand_calib_ros.nodes.messages import array_to_image  # noqa: E402
 
 
 def test_detectors_feed_a_points_collector(ros: Ros, tmp_path: Path) -> None:
@@ -55,14 +52,7 @@ def test_detectors_feed_a_points_collector(ros: Ros, tmp_path: Path) -> None:
         )
     )
     points = ros.collect(PolygonStamped, "/cam0/wand_points", POINTS_QOS)
-    publishers = {
-        name: ros.helper.create_publisher(Image, f"/{name}/image_raw", 50) for name in scenario.rig.camera_names
-    }
-    assert wait_until(lambda: all(p.get_subscription_count() for p in publishers.values()), 10)
-    for camera, stamp, pixels in recording.frames:
-        publishers[camera].publish(array_to_image(pixels, stamp, camera))
-        time.sleep(0.005)
-    assert wait_until(lambda: sum(collector.received.values()) == len(recording.frames), 20)
+    publish_images(ros, collector, recording, scenario.rig.camera_names)
     collector.flush()
 
     # One PolygonStamped per image, stamped like it: three points or empty.

@@ -134,9 +134,13 @@ class BumpMonitor:
             if len(r) == self.window and np.isfinite(self.levels[i, j]) and self.levels[i, j] > 0
         }
 
+    def standard_error(self) -> float:
+        """Standard error of a full window's F on a rig left alone (a chi-square mean)."""
+        return float(np.sqrt(2.0 / (self.window * pair_dof(self.wand))))
+
     def limit(self) -> float:
         """The F above which a pair disagrees."""
-        return 1.0 + MARGIN + Z * float(np.sqrt(2.0 / (self.window * pair_dof(self.wand))))
+        return 1.0 + MARGIN + Z * self.standard_error()
 
     def moved(self) -> tuple[int, ...]:
         """The cameras judged to have moved; () while every pair agrees."""
@@ -155,8 +159,7 @@ class BumpMonitor:
         if len(self.names) == 2 or len(least) < 2:
             return tuple(sorted(c for _, c in least))
         (best, camera), (second, other) = least[0], least[1]
-        standard_error = float(np.sqrt(2.0 / (self.window * pair_dof(self.wand))))
-        if best - 1.0 >= DISTINCT * max(second - 1.0, 0.0) and best - 1.0 >= 2.0 * standard_error:
+        if best - 1.0 >= DISTINCT * max(second - 1.0, 0.0) and best - 1.0 >= 2.0 * self.standard_error():
             return (camera,)
         return tuple(sorted((camera, other)))
 
