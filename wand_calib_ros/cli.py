@@ -574,9 +574,7 @@ def _export(args: argparse.Namespace) -> int:
 
 
 def _refine(args: argparse.Namespace) -> int:
-    from wand_calib_ros.core.bumps import BumpMonitor, noise_levels
-    from wand_calib_ros.core.bundle_adjustment import CAMERA_PARAM_NAMES
-    from wand_calib_ros.core.repair import repair
+    from wand_calib_ros.core.repair import judge_moved, repair, since_move
     from wand_calib_ros.io.result_yaml import with_cameras_replaced, write_yaml
     from wand_calib_ros.io.text import read_yaml
 
@@ -592,12 +590,10 @@ def _refine(args: argparse.Namespace) -> int:
     models = tuple(geometry[n].model for n in names)
     poses = tuple(geometry[n].pose for n in names)
     document = read_yaml(args.result)
+    sigma = float(document.get("metrics", {}).get("sigma_px", float("nan")))
     if args.moved is None:
-        sigma = float(document.get("metrics", {}).get("sigma_px", float("nan")))
-        monitor = BumpMonitor(names, models, poses, rig.wand, noise_levels(sigma, len(names)))
-        monitor.add(observations.uv)
-        moved = monitor.moved()
-        for line in monitor.messages():
+        moved, lines = judge_moved(names, models, poses, rig.wand, sigma, observations.uv)
+        for line in lines:
             print(line)
         if not moved:
             print(f"no camera moved: every camera pair of {args.observations} agrees with {args.result}")
@@ -608,18 +604,15 @@ def _refine(args: argparse.Namespace) -> int:
             raise WandCalibError(f"--moved: {', '.join(unknown)} not in the rig ({', '.join(names)})")
         moved = tuple(names.index(n.strip()) for n in args.moved.split(","))
     check_writable([args.output])
-    fixed = repair(models, poses, rig.wand, observations.uv, moved, intrinsics=args.with_intrinsics, names=names)
+    first = since_move(models, poses, rig.wand, sigma, observations.uv, moved) if np.isfinite(sigma) else 0
+    uv = observations.uv[first:]
+    fixed = repair(models, poses, rig.wand, uv, moved, intrinsics=args.with_intrinsics, names=names)
     updates = {
-        names[c]: (
-            fixed.models[c],
-            fixed.poses[c],
-            float(fixed.rms_px[c]),
-            {k: float(fixed.camera_std[c, i]) for i, k in enumerate(CAMERA_PARAM_NAMES) if fixed.camera_std[c, i] > 0},
-        )
-        for c in moved
+        names[c]: (fixed.models[c], fixed.poses[c], float(fixed.rms_px[c]), fixed.parameter_std(c)) for c in moved
     }
+    after = f" from frame {int(observations.frames[first])} on" if first else ""
     note = (
-        f"{', '.join(names[c] for c in moved)} re-estimated by refine from {args.observations} "
+        f"{', '.join(names[c] for c in moved)} re-estimated by refine from {args.observations}{after} "
         f"({fixed.placements} placements; every other camera as calibrated)"
     )
     write_yaml(with_cameras_replaced(document, updates, note), args.output)

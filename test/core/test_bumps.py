@@ -16,7 +16,7 @@ from wand_calib_ros.core.bumps import BumpMonitor, calibration_levels
 from wand_calib_ros.core.geometry import Pose
 from wand_calib_ros.core.metrics import camera_errors
 from wand_calib_ros.core.pipeline import calibrate
-from wand_calib_ros.core.repair import repair
+from wand_calib_ros.core.repair import repair, since_move
 from wand_calib_ros.sim.scenarios import Scenario, paper_three_camera_scenario, simulate
 
 FPS = 30
@@ -84,6 +84,20 @@ def test_a_bumped_camera_is_named_within_three_seconds_and_repaired(kind: str) -
             assert np.array_equal(fixed.models[c].intrinsic_vector(), models[c].intrinsic_vector())
     assert rms(repaired) <= 1.5 * rms(recalibrated), (repaired, recalibrated)
     assert alone >= 2  # named alone in most takes
+
+
+@pytest.mark.parametrize("kind", ["turned 0.5 deg", "moved 20 mm"])
+def test_the_views_after_the_move_are_told_from_those_before(kind: str) -> None:
+    """Live, the frames since the calibration start untouched: the repair must use only those after."""
+    misplaced = []
+    for seed in (1, 2, 3, 4):
+        scenario, models, poses, _ = _calibrated(seed)
+        before = simulate(scenario, 1.0, np.random.default_rng(400 + seed), n=150).observations.uv
+        after = simulate(_bumped(scenario, kind), 1.0, np.random.default_rng(500 + seed), n=150).observations.uv
+        misplaced.append(since_move(models, poses, scenario.wand, 1.0, np.concatenate([before, after]), (1,)) - 150)
+        assert since_move(models, poses, scenario.wand, 1.0, after, (1,)) == 0  # every frame after the move
+        assert since_move(models, poses, scenario.wand, 1.0, before, (1,)) == 0  # no evidence of a move
+    assert rms(misplaced) <= 4.0, misplaced  # frames of 150
 
 
 def test_refine_on_the_command_line_finds_the_moved_camera_and_writes_the_repaired_result(

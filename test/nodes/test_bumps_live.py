@@ -1,4 +1,5 @@
-"""After /calibrate, the collector watches the rig: a camera moved is named on /diagnostics and in the log."""
+"""After /calibrate, the collector watches the rig: a camera moved is named on /diagnostics and in the log,
+and /refine re-estimates it from the frames after the move."""
 
 from __future__ import annotations
 
@@ -11,6 +12,8 @@ import pytest
 from conftest import Ros, points_rig, wait_until
 
 from wand_calib_ros.core.geometry import Pose
+from wand_calib_ros.core.metrics import rereference
+from wand_calib_ros.io.result_yaml import read_result
 from wand_calib_ros.sim.scenarios import paper_three_camera_scenario, simulate
 
 rclpy = pytest.importorskip("rclpy")
@@ -19,7 +22,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
 
-def test_a_camera_moved_after_calibrate_is_named_and_an_untouched_one_is_not(ros: Ros, tmp_path: Path) -> None:
+def test_a_moved_camera_is_named_and_refined_and_an_untouched_one_is_not(ros: Ros, tmp_path: Path) -> None:
     scenario = paper_three_camera_scenario()
     diagnostics = ros.collect(DiagnosticArray, "/diagnostics")
     play = points_rig(ros, scenario, tmp_path, {}, watch=True).play
@@ -42,3 +45,23 @@ def test_a_camera_moved_after_calibrate_is_named_and_an_untouched_one_is_not(ros
     play(simulate(replace(scenario, cameras=tuple(cameras)), 1.0, np.random.default_rng(3), n=150).observations.uv)
     assert wait_until(lambda: "cam1" in flagged(), 10), [d.status[1].message for d in diagnostics[-3:]]
     assert flagged()["cam1"].startswith("cam1 moved")
+
+    def cam1_off_mm() -> float:  # cam1's centre from the truth (moved), in cam0's frame, mm
+        _, geometry = read_result(tmp_path / "out" / "result.yaml")
+        poses = rereference({n: g.pose for n, g in geometry.items()}, "cam0")
+        return float(np.linalg.norm(poses["cam1"].center - moved.compose(cameras[0].pose.inverse()).center))
+
+    assert cam1_off_mm() > 15.0  # the calibration's cam1 is where it was
+    refine = ros.helper.create_client(Trigger, "refine")
+    started = time.perf_counter()
+    answer = refine.call(Trigger.Request(), timeout_sec=60)
+    took = time.perf_counter() - started
+    assert answer.success, answer.message
+    assert "re-estimated cam1 from the 1" in answer.message, answer.message  # about the 150 frames after
+    assert cam1_off_mm() < 3.0, (cam1_off_mm(), answer.message)
+    print(f"/refine answered in {took:.2f} s: {answer.message}")
+    play(simulate(replace(scenario, cameras=tuple(cameras)), 1.0, np.random.default_rng(4), n=150).observations.uv)
+    time.sleep(2.5)  # the watch now judges against the repaired calibration
+    assert not flagged(), flagged()
+    again = refine.call(Trigger.Request(), timeout_sec=60)
+    assert again.success and again.message.startswith("no camera moved"), again.message

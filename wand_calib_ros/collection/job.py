@@ -1,4 +1,5 @@
-"""What a /calibrate call does, without ROS: check coverage, calibrate, write the result files.
+"""What /calibrate and /refine do, without ROS: check coverage, calibrate (or repair a moved camera),
+write the result files.
 
 The observations come from the collector's persisted buffer file, so
 ``wand-calib calibrate`` on that file computes exactly the same result.
@@ -15,6 +16,7 @@ import numpy as np
 from wand_calib_ros.collection.coverage import CoverageStatus, CoverageThresholds, CoverageTracker
 from wand_calib_ros.collection.errors import CoverageError
 from wand_calib_ros.core.pipeline import CalibrationOptions, calibrate
+from wand_calib_ros.core.repair import judge_moved, repair, repaired_result, since_move
 from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.core.rig import RigSpec, WandObservations
 from wand_calib_ros.io.errors import ExportError
@@ -105,6 +107,61 @@ def run_calibration(
         except (OSError, ValueError, np.linalg.LinAlgError) as error:
             log.warning("the calibration is written, but its report failed: %s", error)
     return result, CalibrationFiles(result_path, infos, report_path, tuple(exported), tuple(failures))
+
+
+@dataclass(frozen=True, eq=False)
+class Refinement:
+    """What a /refine did.
+
+    Attributes:
+        result: the calibration with the moved cameras re-estimated (None: no camera moved).
+        moved: the cameras judged moved, by name.
+        lines: the judgement, one line per moved camera (``cam1 moved: residual 6.1 px, was 0.4``).
+        frames: new frames used (those after the move).
+        files: where the repaired calibration was written (None: nothing written).
+    """
+
+    result: CalibrationResult | None
+    moved: tuple[str, ...]
+    lines: tuple[str, ...]
+    frames: int
+    files: CalibrationFiles | None
+
+
+def refine_calibration(
+    rig: RigSpec,
+    result: CalibrationResult,
+    new: WandObservations,
+    output_dir: Path,
+    *,
+    intrinsics: bool = False,
+) -> Refinement:
+    """Judge from the views ``new`` (taken after ``result``'s calibration, in time order) which cameras
+    moved, re-estimate only those from the views after the move (their intrinsics too if asked), and
+    write the result files as :func:`run_calibration` does (without the report).
+
+    Raises:
+        InsufficientDataError: too few views after the move tie a moved camera to two unmoved ones.
+        OutputError: the result files cannot be written.
+    """
+    names = rig.camera_names
+    models = tuple(result.camera(n).model for n in names)
+    poses = tuple(result.camera(n).pose for n in names)
+    moved, lines = judge_moved(names, models, poses, rig.wand, result.sigma_px, new.uv)
+    if not moved:
+        return Refinement(None, (), (), 0, None)
+    first = since_move(models, poses, rig.wand, result.sigma_px, new.uv, moved)
+    fixed = repair(models, poses, rig.wand, new.uv[first:], moved, intrinsics=intrinsics, names=names)
+    note = (
+        f"{', '.join(names[c] for c in moved)} re-estimated by /refine from frames {int(new.frames[first])}.."
+        f"{int(new.frames[-1])} ({fixed.placements} placements; every other camera as calibrated)"
+    )
+    repaired = repaired_result(result, fixed, names, note)
+    result_path = output_dir / "result.yaml"
+    check_writable(calibration_paths(names, result_path, output_dir / "camera_info"))
+    infos = tuple(write_calibration(repaired, result_path, output_dir / "camera_info")[1:])
+    files = CalibrationFiles(result_path, infos, None)
+    return Refinement(repaired, tuple(names[c] for c in moved), tuple(lines), int(new.frames.size - first), files)
 
 
 def summary(result: CalibrationResult, files: CalibrationFiles) -> str:

@@ -4,16 +4,21 @@ Every other camera stays as calibrated. The new placements are triangulated by t
 then one robust bundle adjustment frees the moved cameras' poses (and, if asked, their intrinsics)
 with the placements; the reference frame is the unmoved cameras' (also when the reference camera is
 the one that moved).
+
+Live, the views since the calibration also hold the frames from before the move: :func:`since_move`
+finds where the moved cameras began to disagree, so only the views after it are used.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
+from wand_calib_ros.core.bumps import BumpMonitor, noise_levels, pair_dof, pair_squares
 from wand_calib_ros.core.bundle_adjustment import (
+    CAMERA_PARAM_NAMES,
     N_CAMERA_PARAMS,
     N_GEOMETRIC,
     BundleProblem,
@@ -25,12 +30,16 @@ from wand_calib_ros.core.errors import InsufficientDataError
 from wand_calib_ros.core.geometry import Pose, wand_directions
 from wand_calib_ros.core.placements import triangulate_placements
 from wand_calib_ros.core.refine import robust_adjustment
+from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.core.rig import WandSpec
 
 FloatArray = NDArray[np.float64]
 
 #: Fewest new placements (seen whole by two unmoved cameras and by the moved one) a repair needs.
 MIN_PLACEMENTS = 10
+#: How much better (log-likelihood, in units of the fits' chi-square) a start after the first frame must
+#: explain the frames than the first: below it, every frame counts as after the move.
+CHANGE_EVIDENCE = 10.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -43,6 +52,7 @@ class Repair:
         rms_px: (C,) per-coordinate RMS of each camera's residuals on the new views, px.
         camera_std: (C, 15) standard deviations of the re-estimated parameters (0 where held).
         placements: new placements used.
+        wand_lengths: (P,) their |first - last marker| triangulated with the repaired cameras, mm.
     """
 
     models: tuple[CameraModel, ...]
@@ -51,6 +61,60 @@ class Repair:
     rms_px: FloatArray
     camera_std: FloatArray
     placements: int
+    wand_lengths: FloatArray
+
+    def parameter_std(self, c: int) -> dict[str, float]:
+        """Camera ``c``'s re-estimated parameters' standard deviations by name (k1..k5 mm, u0 v0 px,
+        rx ry rz rad, tx ty tz mm)."""
+        return {k: float(self.camera_std[c, i]) for i, k in enumerate(CAMERA_PARAM_NAMES) if self.camera_std[c, i] > 0}
+
+
+def judge_moved(
+    names: tuple[str, ...],
+    models: tuple[CameraModel, ...],
+    poses: tuple[Pose, ...],
+    wand: WandSpec,
+    sigma_px: float,
+    uv: FloatArray,
+) -> tuple[tuple[int, ...], list[str]]:
+    """Which cameras the views ``uv`` (F, C, K, 2) show moved since a calibration of pixel noise
+    ``sigma_px`` (per coordinate): their indices and one message each (:class:`BumpMonitor`)."""
+    monitor = BumpMonitor(names, models, poses, wand, noise_levels(sigma_px, len(names)))
+    monitor.add(uv)
+    return monitor.moved(), monitor.messages()
+
+
+def since_move(
+    models: tuple[CameraModel, ...],
+    poses: tuple[Pose, ...],
+    wand: WandSpec,
+    sigma_px: float,
+    uv: FloatArray,
+    moved: tuple[int, ...],
+) -> int:
+    """The first of the frames ``uv`` (F, C, K, 2, in time order) taken after the ``moved`` cameras moved.
+
+    A frame's ratio r is the mean square per degree of freedom of the moved cameras' two-view wand fits
+    with unmoved cameras over the noise's (``sigma_px`` per coordinate): 1 on average before the move,
+    a larger m after it. The start is the maximum-likelihood change point of that scaled chi-square: the
+    frame k maximising d/2 (m - 1 - log m) over the frames from k on (d their degrees of freedom, m their
+    mean ratio), unless it
+    beats k = 0 by less than :data:`CHANGE_EVIDENCE` (then 0: no frame before the move is evident).
+    """
+    squares = pair_squares(models, poses, wand, uv)
+    still = [c for c in range(len(models)) if c not in moved]
+    pairs = squares[:, list(moved)][:, :, still].reshape(uv.shape[0], -1)
+    counts = np.isfinite(pairs).sum(axis=1)
+    frames = np.flatnonzero(counts > 0)
+    if frames.size < 2:
+        return 0
+    dof = pair_dof(wand) * counts[frames]
+    ratio = np.nansum(pairs[frames], axis=1) / (dof * float(sigma_px) ** 2)
+    n = np.arange(frames.size, 0, -1)  # frames from k on
+    mean = np.maximum(np.cumsum(ratio[::-1])[::-1] / n, 1.0)
+    score = 0.5 * np.cumsum(dof[::-1])[::-1] * (mean - 1.0 - np.log(mean))  # gamma log-likelihood ratio
+    best = int(np.argmax(score))
+    return int(frames[best]) if score[best] - score[0] >= CHANGE_EVIDENCE else 0
 
 
 def repair(
@@ -107,4 +171,35 @@ def repair(
             for c in range(n_cameras)
         ]
     )
-    return Repair(result.state.models, result.state.poses, tuple(moved), rms, result.camera_std, int(rows.size))
+    models, poses = result.state.models, result.state.poses
+    ends = triangulate_placements(models, poses, uv[rows])
+    lengths = np.linalg.norm(ends[:, -1] - ends[:, 0], axis=-1)
+    lengths = lengths[np.isfinite(lengths)]
+    return Repair(models, poses, tuple(moved), rms, result.camera_std, int(rows.size), lengths)
+
+
+def repaired_result(result: CalibrationResult, fixed: Repair, names: tuple[str, ...], note: str) -> CalibrationResult:
+    """``result`` with the cameras ``fixed`` re-estimated replaced (model, pose, RMS on the new views, the
+    re-estimated parameters' standard deviations), the wand-length statistics of the new views, ``note``
+    among its warnings; all else as calibrated.
+    ``names`` are the cameras in the order of ``fixed``'s indices (the rig's)."""
+    cameras = list(result.cameras)
+    order = [camera.name for camera in cameras]
+    for c in fixed.moved:
+        i = order.index(names[c])
+        cameras[i] = replace(
+            cameras[i],
+            model=fixed.models[c],
+            pose=fixed.poses[c],
+            rms_reprojection_px=float(fixed.rms_px[c]),
+            parameter_std={**cameras[i].parameter_std, **fixed.parameter_std(c)},
+        )
+    lengths = fixed.wand_lengths
+    return replace(
+        result,
+        cameras=tuple(cameras),
+        wand_length_rms_mm=float(np.sqrt(np.mean((result.wand.L - lengths) ** 2))),
+        wand_length_mean_mm=float(np.mean(lengths)),
+        wand_length_std_mm=float(np.std(lengths)),
+        warnings=(*result.warnings, note),
+    )

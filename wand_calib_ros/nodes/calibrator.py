@@ -15,6 +15,11 @@ importable (every ROS install; not the PyPI wheels), and writes ``result.yaml``,
 CameraInfo to its driver's ``set_camera_info`` service, as ROS
 camera_calibration's commit does.
 
+``/refine`` (std_srvs/Trigger), after a ``/calibrate``: the frames the buffer gained since then are
+judged for cameras that moved (the pairs' wand fits, as the collector's bump watch does); only those
+cameras are re-estimated from the frames after the move (with ``refine_intrinsics`` also their k1, k2,
+u0, v0), everything else held, and the result is written and published as ``/calibrate``'s.
+
 It runs inside ``collector`` by default, or alone (``ros2 run wand_calib_ros
 calibrator``) on the buffer file of a collector that runs elsewhere or has stopped.
 """
@@ -45,7 +50,7 @@ from std_srvs.srv import Trigger
 
 from wand_calib_ros.collection.buffer import BUFFER_FILE, has_rows
 from wand_calib_ros.collection.floor import FLOOR_FILE, read_floor_frames
-from wand_calib_ros.collection.job import run_calibration, summary
+from wand_calib_ros.collection.job import CalibrationFiles, refine_calibration, run_calibration, summary
 from wand_calib_ros.core.pipeline import CalibrationOptions
 from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.core.timing import TIMING_MODES
@@ -79,6 +84,7 @@ PARAMS = (
         + ", ".join(FORMATS)
         + ")",
     ),
+    Param("refine_intrinsics", False, "/refine also re-estimates the moved cameras' k1, k2, u0 and v0"),
     Param("commit_to_drivers", False, "send the results to each camera driver's set_camera_info service"),
     Param("driver_timeout_s", 5.0, "how long to wait for a driver's set_camera_info (s)", 0.1, 600.0),
     Param(
@@ -135,6 +141,7 @@ class CalibratorNode(Node):
         self.write_report = bool(values["write_report"])
         self.exports = export_formats(values["export_formats"])
         self.world_frame = str(values["world_frame"])
+        self.refine_intrinsics = bool(values["refine_intrinsics"])
         self.commit = bool(values["commit_to_drivers"])
         self.driver_timeout = float(values["driver_timeout_s"])
         self.options = CalibrationOptions(
@@ -145,10 +152,13 @@ class CalibratorNode(Node):
         self._running = threading.Lock()
         self._stopping = threading.Event()
         self._worker: threading.Thread | None = None
+        self.result: CalibrationResult | None = None  # the last calibration (what /refine repairs)
+        self._calibrated_through = -1  # the newest frame id that calibration used
         # Reentrant: a second /calibrate during a solve gets its "in progress" answer at once,
         # and driver answers arrive while the solve's thread waits for them.
         group = ReentrantCallbackGroup()
         self.create_service(Trigger, "calibrate", self._on_calibrate, callback_group=group)
+        self.create_service(Trigger, "refine", self._on_refine, callback_group=group)
         self.info_publishers = {
             name: self.create_publisher(CameraInfo, f"wand_calib/{name}/camera_info", LATCHED)
             for name in self.rig.camera_names
@@ -168,12 +178,21 @@ class CalibratorNode(Node):
         self.get_logger().info(f"/calibrate reads {self.output_dir / BUFFER_FILE}")
 
     def _on_calibrate(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        return self._serve("/calibrate", self._calibrate, response)
+
+    def _on_refine(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        return self._serve("/refine", self._refine, response)
+
+    def _serve(
+        self, service: str, work: Callable[[], tuple[bool, str]], response: Trigger.Response
+    ) -> Trigger.Response:
+        """Run ``work`` in its own thread (so that a stop can still answer the caller); one at a time."""
         if not self._running.acquire(blocking=False):
             response.success, response.message = False, "a calibration is already running; try again when it ends"
             return response
-        try:  # the solve runs in its own thread so that a stop can still answer the caller
+        try:
             outcome: list[tuple[bool, str]] = []
-            worker = threading.Thread(target=self._solve, args=(outcome,), name="calibration", daemon=True)
+            worker = threading.Thread(target=self._solve, args=(service, work, outcome), name=service, daemon=True)
             self._worker = worker
             worker.start()
             while worker.is_alive() and not self._stopping.wait(0.05):
@@ -185,16 +204,16 @@ class CalibratorNode(Node):
         if self._stopping.is_set():  # no log line: the context is gone (the caller gets the answer)
             return response
         if response.success:  # rclpy ties one severity to each logging call site
-            self.get_logger().info(f"/calibrate: {response.message}")
+            self.get_logger().info(f"{service}: {response.message}")
         else:
-            self.get_logger().warning(f"/calibrate: {response.message}")
+            self.get_logger().warning(f"{service}: {response.message}")
         return response
 
-    def _solve(self, outcome: list[tuple[bool, str]]) -> None:
+    def _solve(self, service: str, work: Callable[[], tuple[bool, str]], outcome: list[tuple[bool, str]]) -> None:
         try:
-            outcome.append(self._calibrate())
+            outcome.append(work())
         except Exception as error:  # a bug: still answer, so the caller does not wait forever
-            self.get_logger().error(f"/calibrate: unexpected error\n{traceback.format_exc()}")
+            self.get_logger().error(f"{service}: unexpected error\n{traceback.format_exc()}")
             outcome.append((False, f"unexpected error (please report): {error!r}"))
 
     @property
@@ -231,6 +250,34 @@ class CalibratorNode(Node):
             )
         except WandCalibError as error:
             return False, f"calibration failed: {error}"
+        self.result, self._calibrated_through = result, int(observations.frames.max())
+        return self._publish(result, files)
+
+    def _refine(self) -> tuple[bool, str]:
+        if self.result is None:
+            return False, "nothing to refine: no /calibrate since this node started (offline: wand-calib refine)"
+        if self.before_calibrate is not None:
+            self.before_calibrate()
+        path = self.output_dir / BUFFER_FILE
+        try:
+            observations = read_observations(
+                path, self.rig.camera_names, image_sizes=self.rig.image_sizes, labels=self.rig.wand.labels
+            )
+            new = observations.select_frames(observations.frames > self._calibrated_through)
+            if new.frames.size == 0:
+                return False, f"no frames since the last calibration in {path}: wave the wand, then /refine"
+            refined = refine_calibration(self.rig, self.result, new, self.output_dir, intrinsics=self.refine_intrinsics)
+        except WandCalibError as error:
+            return False, f"refine failed: {error}"
+        if refined.result is None or refined.files is None:
+            return True, f"no camera moved: the {new.frames.size} frames since the calibration agree with it"
+        self.result, self._calibrated_through = refined.result, int(new.frames.max())
+        ok, answer = self._publish(refined.result, refined.files)
+        done = f"re-estimated {', '.join(refined.moved)} from the {refined.frames} frames after the move"
+        return ok, f"{'; '.join(refined.lines)}; {done}: {answer}"
+
+    def _publish(self, result: CalibrationResult, files: CalibrationFiles) -> tuple[bool, str]:
+        """Publish a result (topics, /tf_static, the collector's callback, the drivers) and say so."""
         if self._stopping.is_set():  # the node is going away: publish nothing
             return False, STOPPED
         stamp = self.get_clock().now().to_msg()
