@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import Ros, points_rig, wait_until
+from conftest import LATCHED, Ros, points_rig, wait_until
 
 from wand_calib_ros.core.geometry import Pose
 from wand_calib_ros.core.metrics import rereference
@@ -20,11 +20,13 @@ rclpy = pytest.importorskip("rclpy")
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
+from visualization_msgs.msg import MarkerArray  # noqa: E402
 
 
 def test_a_moved_camera_is_named_and_refined_and_an_untouched_one_is_not(ros: Ros, tmp_path: Path) -> None:
     scenario = paper_three_camera_scenario()
     diagnostics = ros.collect(DiagnosticArray, "/diagnostics")
+    markers = ros.collect(MarkerArray, "wand_calib/markers", LATCHED)
     play = points_rig(ros, scenario, tmp_path, {}, watch=True).play
 
     def flagged() -> dict[str, str]:
@@ -59,6 +61,12 @@ def test_a_moved_camera_is_named_and_refined_and_an_untouched_one_is_not(ros: Ro
     assert answer.success, answer.message
     assert "re-estimated cam1 from the 1" in answer.message, answer.message  # about the 150 frames after
     assert cam1_off_mm() < 3.0, (cam1_off_mm(), answer.message)
+    assert wait_until(lambda: len(markers) == 2, 5)  # the markers follow the repaired result
+    _, geometry = read_result(tmp_path / "out" / "result.yaml")
+    frustum = next(m for m in markers[-1].markers if (m.ns, m.id) == ("frustums", 1))
+    centre = frustum.pose.position
+    assert frustum.header.frame_id == "cam0"
+    assert np.allclose([centre.x, centre.y, centre.z], geometry["cam1"].pose.center / 1000.0, atol=1e-9)
     print(f"/refine answered in {took:.2f} s: {answer.message}")
     play(simulate(replace(scenario, cameras=tuple(cameras)), 1.0, np.random.default_rng(4), n=150).observations.uv)
     time.sleep(2.5)  # the watch now judges against the repaired calibration

@@ -1,4 +1,5 @@
-"""/set_floor live: the wand laid still on the floor twice, then /calibrate publishes the cameras in the world."""
+"""/set_floor live: the wand laid still on the floor twice, then /calibrate publishes the cameras in the world
+(extrinsics, /tf_static and the RViz markers)."""
 
 from __future__ import annotations
 
@@ -17,7 +18,9 @@ rclpy = pytest.importorskip("rclpy")
 
 from builtin_interfaces.msg import Time  # noqa: E402
 from geometry_msgs.msg import TransformStamped  # noqa: E402
+from scipy.spatial.transform import Rotation  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
+from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
 
 try:  # tf2_msgs comes with ROS, not with the PyPI wheels
     from tf2_msgs.msg import TFMessage
@@ -31,6 +34,7 @@ def test_set_floor_twice_then_calibrate_publishes_the_cameras_in_the_world(ros: 
     scenario = paper_three_camera_scenario()
     transforms = ros.collect(TransformStamped, "wand_calib/cam1/extrinsics", LATCHED)
     tf_static = ros.collect(TFMessage, "/tf_static", LATCHED) if TFMessage is not None else None
+    markers = ros.collect(MarkerArray, "wand_calib/markers", LATCHED)
     play = points_rig(ros, scenario, tmp_path, {"floor_hold_s": HOLD_S}).play
 
     floor_service = ros.helper.create_client(Trigger, "set_floor")
@@ -66,6 +70,29 @@ def test_set_floor_twice_then_calibrate_publishes_the_cameras_in_the_world(ros: 
         assert sorted(published) == ["cam0", "cam1", "cam2"]
         assert {t.header.frame_id for t in published.values()} == {"world"}
         assert published["cam1"].transform == transforms[-1].transform
+    assert wait_until(lambda: bool(markers), 5)
+    _check_markers(markers[-1], world["cameras"])
+
+
+def _check_markers(array: MarkerArray, cameras: dict) -> None:  # type: ignore[type-arg]
+    """Every frustum's pose is its camera's in result.yaml's world (X_cam = R X_world + T, mm)."""
+    by = {(m.ns, m.id): m for m in array.markers if m.action == Marker.ADD}
+    for c, name in enumerate(sorted(cameras)):  # the rig's order: cam0, cam1, cam2
+        rotation, translation = np.array(cameras[name]["rotation"]), np.array(cameras[name]["translation"])
+        frustum = by[("frustums", c)]
+        assert frustum.header.frame_id == "world" and by[("names", c)].text == name
+        p, q = frustum.pose.position, frustum.pose.orientation
+        assert np.allclose([p.x, p.y, p.z], -rotation.T @ translation / 1000.0, atol=1e-9)
+        turned = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
+        assert np.allclose(turned, rotation.T, atol=1e-9)
+        apex = frustum.points[0]
+        assert (apex.x, apex.y, apex.z) == (0.0, 0.0, 0.0) and len(frustum.points) == 16
+        ray = np.array([frustum.points[1].x, frustum.points[1].y, frustum.points[1].z])
+        assert ray[2] > 0.0  # toward the top-left corner, in front of the camera
+    wand = np.array([[v.x, v.y, v.z] for v in by[("wand", 0)].points])
+    volume = np.array([[v.x, v.y, v.z] for v in by[("volume", 0)].points])
+    assert len(wand) >= 100 and len(volume) >= 12 and len(volume) % 3 == 0
+    assert np.all(wand >= volume.min(axis=0) - 1e-9) and np.all(wand <= volume.max(axis=0) + 1e-9)
 
 
 def test_tf_static_holds_every_camera_but_none_as_its_own_parent() -> None:

@@ -8,7 +8,9 @@ failed otherwise; on success with per camera RMS, the wand-length RMS and the
 result's path. It publishes per camera ``wand_calib/<cam>/camera_info``
 (sensor_msgs/CameraInfo, ``equidistant``) and ``wand_calib/<cam>/extrinsics``
 (geometry_msgs/TransformStamped, parent = reference camera, or ``world_frame``
-once a floor was set), both transient-local, the same transforms on ``/tf_static``
+once a floor was set), both transient-local, ``wand_calib/markers``
+(visualization_msgs/MarkerArray for RViz: the cameras' frustums and names, the newest wand
+placements and the volume they cover, in the same parent frame; latched), the same transforms on ``/tf_static``
 (tf2_msgs/TFMessage, latched like tf2's static broadcaster) whenever tf2_msgs is
 importable (every ROS install; not the PyPI wheels), and writes ``result.yaml``, ``camera_info/<cam>.yaml`` and
 ``report/index.html``. With ``commit_to_drivers`` it sends each camera's
@@ -47,18 +49,21 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo
 from sensor_msgs.srv import SetCameraInfo
 from std_srvs.srv import Trigger
+from visualization_msgs.msg import MarkerArray
 
 from wand_calib_ros.collection.buffer import BUFFER_FILE, has_rows
 from wand_calib_ros.collection.floor import FLOOR_FILE, read_floor_frames
 from wand_calib_ros.collection.job import CalibrationFiles, refine_calibration, run_calibration, summary
 from wand_calib_ros.core.pipeline import CalibrationOptions
 from wand_calib_ros.core.result import CalibrationResult
+from wand_calib_ros.core.rig_scene import rig_scene
 from wand_calib_ros.core.timing import TIMING_MODES
 from wand_calib_ros.errors import WandCalibError
 from wand_calib_ros.io.export import FORMATS
 from wand_calib_ros.io.observations_csv import read_observations
 from wand_calib_ros.io.rig_yaml import load_camera_endpoints, load_rig
 from wand_calib_ros.nodes import messages
+from wand_calib_ros.nodes.markers import markers_message
 from wand_calib_ros.nodes.params import (
     COVERAGE,
     RIG,
@@ -167,6 +172,7 @@ class CalibratorNode(Node):
             name: self.create_publisher(TransformStamped, f"wand_calib/{name}/extrinsics", LATCHED)
             for name in self.rig.camera_names
         }
+        self.markers = self.create_publisher(MarkerArray, "wand_calib/markers", LATCHED)
         self.tf_static = self.create_publisher(TFMessage, "/tf_static", LATCHED) if TFMessage is not None else None
         if self.tf_static is None:
             self.get_logger().info("tf2_msgs is not installed: camera poses go to wand_calib/<cam>/extrinsics only")
@@ -251,7 +257,7 @@ class CalibratorNode(Node):
         except WandCalibError as error:
             return False, f"calibration failed: {error}"
         self.result, self._calibrated_through = result, int(observations.frames.max())
-        return self._publish(result, files)
+        return self._publish(result, files, observations.uv)
 
     def _refine(self) -> tuple[bool, str]:
         if self.result is None:
@@ -272,12 +278,13 @@ class CalibratorNode(Node):
         if refined.result is None or refined.files is None:
             return True, f"no camera moved: the {new.frames.size} frames since the calibration agree with it"
         self.result, self._calibrated_through = refined.result, int(new.frames.max())
-        ok, answer = self._publish(refined.result, refined.files)
+        ok, answer = self._publish(refined.result, refined.files, new.uv)
         done = f"re-estimated {', '.join(refined.moved)} from the {refined.frames} frames after the move"
         return ok, f"{'; '.join(refined.lines)}; {done}: {answer}"
 
-    def _publish(self, result: CalibrationResult, files: CalibrationFiles) -> tuple[bool, str]:
-        """Publish a result (topics, /tf_static, the collector's callback, the drivers) and say so."""
+    def _publish(self, result: CalibrationResult, files: CalibrationFiles, uv: Any) -> tuple[bool, str]:
+        """Publish a result (topics, /tf_static, the markers of the placements ``uv``, the collector's
+        callback, the drivers) and say so."""
         if self._stopping.is_set():  # the node is going away: publish nothing
             return False, STOPPED
         stamp = self.get_clock().now().to_msg()
@@ -285,6 +292,8 @@ class CalibratorNode(Node):
             self.info_publishers[name].publish(messages.camera_info_message(result, name, stamp, self.frame_ids[name]))
             transform = messages.extrinsics_message(result, name, stamp, self.world_frame, self.frame_ids)
             self.extrinsics_publishers[name].publish(transform)
+        frame = messages.parent_frame(result, self.world_frame, self.frame_ids)
+        self.markers.publish(markers_message(rig_scene(result, self.rig.camera_names, uv), stamp, frame))
         if self.tf_static is not None and TFMessage is not None:
             transforms = messages.static_transforms(result, stamp, self.world_frame, self.frame_ids)
             self.tf_static.publish(TFMessage(transforms=transforms))

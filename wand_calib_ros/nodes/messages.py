@@ -22,6 +22,7 @@ from std_msgs.msg import Header
 
 from wand_calib_ros.collection.coverage import CoverageStatus
 from wand_calib_ros.collection.sync import FrameSynchroniser, SyncedFrame
+from wand_calib_ros.core.geometry import Pose
 from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.io.result_yaml import camera_info_dict
 
@@ -106,17 +107,30 @@ def extrinsics_message(
     pose = result.camera(name).pose
     if result.world is not None:
         pose = result.world.camera_in_world(pose)
-    x, y, z, w = Rotation.from_matrix(pose.rotation.T).as_quat()
     message = TransformStamped()
     message.header.stamp = stamp
-    reference = frame_of.get(result.reference_camera, result.reference_camera)
-    message.header.frame_id = reference if result.world is None else world_frame
+    message.header.frame_id = parent_frame(result, world_frame, frame_of)
     message.child_frame_id = frame_of.get(name, name)
     t = message.transform.translation
-    t.x, t.y, t.z = (float(v) for v in pose.center / 1000.0)
     r = message.transform.rotation
-    r.x, r.y, r.z, r.w = float(x), float(y), float(z), float(w)
+    (t.x, t.y, t.z), (r.x, r.y, r.z, r.w) = camera_in_parent(pose)
     return message
+
+
+def parent_frame(result: CalibrationResult, world_frame: str, frame_ids: Mapping[str, str]) -> str:
+    """The tf frame the result's poses are in: ``world_frame`` once a floor was set, else the reference
+    camera's frame."""
+    if result.world is not None:
+        return world_frame
+    return frame_ids.get(result.reference_camera, result.reference_camera)
+
+
+def camera_in_parent(pose: Pose) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
+    """A camera's pose X_cam = R X_parent + T (mm) as ROS gives a child frame in its parent: position of
+    its centre (m) and orientation (x, y, z, w) of R transposed."""
+    x, y, z, w = Rotation.from_matrix(pose.rotation.T).as_quat()
+    cx, cy, cz = (float(v) for v in pose.center / 1000.0)
+    return (cx, cy, cz), (float(x), float(y), float(z), float(w))
 
 
 def static_transforms(
