@@ -300,6 +300,8 @@ def _print_summary(result: CalibrationResult, output: Path) -> None:
             f"  world frame from the floor ({world.placements} placements): plane residual {world.residual_mm:.2f} mm, "
             f"normal +- {world.normal_std_deg:.3f} deg, origin +- {world.origin_std_mm:.2f} mm"
         )
+    if result.quality is not None:
+        print(f"  {result.quality.line()}")
     for warning in result.warnings:
         print(f"  warning: {warning}")
 

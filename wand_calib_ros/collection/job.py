@@ -8,7 +8,7 @@ The observations come from the collector's persisted buffer file, so
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +16,7 @@ import numpy as np
 from wand_calib_ros.collection.coverage import CoverageStatus, CoverageThresholds, CoverageTracker
 from wand_calib_ros.collection.errors import CoverageError
 from wand_calib_ros.core.pipeline import CalibrationOptions, calibrate
+from wand_calib_ros.core.quality import judge, noise_wand_error
 from wand_calib_ros.core.repair import judge_moved, repair, repaired_result, since_move
 from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.core.rig import RigSpec, WandObservations
@@ -157,6 +158,7 @@ def refine_calibration(
         f"{int(new.frames[-1])} ({fixed.placements} placements; every other camera as calibrated)"
     )
     repaired = repaired_result(result, fixed, names, note)
+    repaired = replace(repaired, quality=judge(repaired, noise_wand_error(repaired, names, new.uv[first:])))
     result_path = output_dir / "result.yaml"
     check_writable(calibration_paths(names, result_path, output_dir / "camera_info"))
     infos = tuple(write_calibration(repaired, result_path, output_dir / "camera_info")[1:])
@@ -173,4 +175,5 @@ def summary(result: CalibrationResult, files: CalibrationFiles) -> str:
         offsets = ", ".join(f"{c.name} {scale * c.time_offset:+.2f}" for c in result.cameras)
         timing = f"; time offsets ({unit}, reference {result.reference_camera}) {offsets}"
     failed = "".join(f"; export {failure}" for failure in files.export_failures)
-    return f"RMS {cameras}; wand {result.wand_length_rms_mm:.2f} mm RMS{timing}; {files.result}{failed}"
+    quality = "" if result.quality is None else f"; {result.quality.line()}"
+    return f"RMS {cameras}; wand {result.wand_length_rms_mm:.2f} mm RMS{timing}{quality}; {files.result}{failed}"

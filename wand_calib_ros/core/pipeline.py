@@ -10,9 +10,11 @@ from numpy.typing import NDArray
 
 from wand_calib_ros.core.diagnostics import clock_offsets, clock_warnings
 from wand_calib_ros.core.errors import InsufficientDataError
+from wand_calib_ros.core.metrics import rereference
 from wand_calib_ros.core.multi_camera import RigInitialisation, initialise_rig
 from wand_calib_ros.core.pairwise import PairOptions
 from wand_calib_ros.core.plausibility import check_result, check_rig, check_views
+from wand_calib_ros.core.quality import judge, noise_wand_error
 from wand_calib_ros.core.refine import refine_calibration
 from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.core.rig import RigSpec, WandObservations, spread_subset
@@ -38,6 +40,10 @@ class CalibrationOptions:
             "fixed" (synchronised cameras: zero).
         rolling_shutter: "auto" (per camera, estimated when significant), "estimate" or "fixed"
             (zero, or the rig description's ``readout_ms``).
+        floor_frames: frames of the wand laid still on the floor: the world frame.
+        floor_origin: the world's origin: the first lay's "A" or its "centre".
+        start: a previous calibration of the same rig whose cameras replace the pairwise
+            initialisation (a warm start: the running estimate's next round; None: Steps 1-3).
     """
 
     reference_camera: str | None = None
@@ -45,8 +51,9 @@ class CalibrationOptions:
     max_placements: int | None = None
     time_offsets: str = "auto"
     rolling_shutter: str = "auto"
-    floor_frames: tuple[int, ...] = ()  # frames of the wand laid still on the floor: the world frame
-    floor_origin: str = "A"  # the world's origin: the first lay's "A" or its "centre"
+    floor_frames: tuple[int, ...] = ()
+    floor_origin: str = "A"
+    start: CalibrationResult | None = None
 
 
 def calibrate(
@@ -103,7 +110,7 @@ def calibrate(
     if rig.wand.n_points == 2:  # a two-marker wand's labels are the detector's: per camera, follow the marker
         uv = continuous_in_image(uv)
     aligned = align_views(uv, line)  # free-running views moved to their placement's time, for the starts
-    init = _initialise(rig, aligned, graph, options.pair)
+    init = _initialise(rig, aligned, graph, options.pair) if options.start is None else _warm(rig, graph, options.start)
     if rig.wand.n_points == 2:  # one label per marker in every view and over time, from the started cameras
         uv = consistent_labels(init.models, init.poses, uv)
         aligned = align_views(uv, line)
@@ -127,6 +134,7 @@ def calibrate(
         poses = tuple(result.camera(n).pose for n in names)
         result = replace(result, world=floor_of(models, poses, floor.uv, origin=options.floor_origin))
     warnings = [*result.warnings, *rate_warnings(obs, timing.line), *offset_warnings(result)]
+    result = replace(result, quality=judge(result, noise_wand_error(result, names, uv)))
     if result.timing is not None and result.timing.time_offsets == "estimated":
         return replace(result, warnings=tuple(warnings))
     offsets = clock_offsets(result, obs)  # not modelled: say when the residuals show them
@@ -141,6 +149,21 @@ def _initialise(rig: RigSpec, uv: NDArray[np.float64], graph: VisionGraph, optio
         return initialise_rig(rig, uv, graph, options)
     three = replace(rig, wand=rig.wand.three_point_wand())
     return initialise_rig(three, uv[:, :, list(rig.wand.three_points())], graph, options)
+
+
+def _warm(rig: RigSpec, graph: VisionGraph, start: CalibrationResult) -> RigInitialisation:
+    """A previous calibration's cameras as the start, its poses re-expressed in the graph's reference."""
+    names = rig.camera_names
+    missing = [n for n in names if n not in {c.name for c in start.cameras}]
+    if missing:
+        raise InsufficientDataError(f"the warm start has no camera {', '.join(missing)}")
+    poses = rereference({n: start.camera(n).pose for n in names}, names[graph.reference])
+    return RigInitialisation(
+        tuple(start.camera(n).model for n in names),
+        tuple(poses[n] for n in names),
+        tuple(start.camera(n).initial_projection for n in names),
+        start.lens_trials,
+    )
 
 
 def _require_whole_views(names: tuple[str, ...], complete: NDArray[np.bool_]) -> None:

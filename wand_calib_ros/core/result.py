@@ -107,6 +107,55 @@ class ClockOffset:
     points: int
 
 
+@dataclass(frozen=True)
+class CameraQuality:
+    """One camera's figures.
+
+    Attributes:
+        name: the camera.
+        image_error_px: per-coordinate reprojection RMS over its used views, px.
+        noise_ratio: ``image_error_px`` over the estimated pixel noise.
+        focal_std_percent: standard deviation of its focal length, % (0: given, not estimated).
+        principal_std_px: standard deviation of its principal point (hypot of u0's and v0's), px (0: given).
+    """
+
+    name: str
+    image_error_px: float
+    noise_ratio: float
+    focal_std_percent: float
+    principal_std_px: float
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """A calibration judged.
+
+    Attributes:
+        grade: "excellent", "good", "acceptable" or "poor".
+        cameras: each camera's figures.
+        noise_px: the pixel noise the bundle adjustment estimated (per coordinate), px.
+        world_error_mm: the wand-length RMS, mm.
+        world_noise_mm: the wand-length RMS the pixel noise alone causes, mm (NaN: not computed).
+        limited_by: what keeps the grade from the next better one, in plain words (empty: excellent).
+    """
+
+    grade: str
+    cameras: tuple[CameraQuality, ...]
+    noise_px: float
+    world_error_mm: float
+    world_noise_mm: float
+    limited_by: tuple[str, ...]
+
+    def line(self) -> str:
+        """One line: the grade, the world error and the worst image error, and what limits the grade."""
+        worst = max(self.cameras, key=lambda c: c.noise_ratio)
+        text = (
+            f"quality {self.grade}: world error {self.world_error_mm:.2f} mm (the noise's {self.world_noise_mm:.2f}), "
+            f"image error up to {worst.image_error_px:.2f} px ({worst.name}; noise {self.noise_px:.2f} px)"
+        )
+        return text + (f"; limited by {'; '.join(self.limited_by)}" if self.limited_by else "")
+
+
 @dataclass(frozen=True, eq=False)
 class CalibrationResult:
     """A complete calibration.
@@ -131,6 +180,7 @@ class CalibrationResult:
         timing: how the cameras' timing was treated (None: not modelled, as for simultaneous views).
         world: the world frame of a floor fit (None: no floor given; poses stay relative to the
             reference camera).
+        quality: the verdict in plain words (:mod:`wand_calib_ros.core.quality`; None: not judged).
     """
 
     reference_camera: str
@@ -149,6 +199,7 @@ class CalibrationResult:
     clock_offsets: tuple[ClockOffset, ...] = ()
     timing: TimingSummary | None = None
     world: WorldFrame | None = None
+    quality: Verdict | None = None
 
     def camera(self, name: str) -> CameraCalibration:
         for camera in self.cameras:

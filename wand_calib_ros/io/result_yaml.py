@@ -145,6 +145,7 @@ def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
         },
         "timing": _timing_dict(result),
         "world": _world_dict(result),
+        "quality": _quality_dict(result),
         "lens_trials": [
             {"projections": list(t.projections), "wand_rms_mm": float(t.wand_rms_mm)}
             | ({"failure": t.failure} if t.failure else {})
@@ -161,6 +162,29 @@ def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
             for o in result.clock_offsets
         },
         "warnings": list(result.warnings),
+    }
+
+
+def _quality_dict(result: CalibrationResult) -> dict[str, Any] | None:
+    """The verdict (README "Quality"): grade, world and image errors, what limits the grade."""
+    verdict = result.quality
+    if verdict is None:
+        return None
+    return {
+        "grade": verdict.grade,
+        "world_error_mm": float(verdict.world_error_mm),
+        "world_noise_mm": float(verdict.world_noise_mm),
+        "noise_px": float(verdict.noise_px),
+        "cameras": {
+            c.name: {
+                "image_error_px": float(c.image_error_px),
+                "noise_ratio": float(c.noise_ratio),
+                "focal_std_percent": float(c.focal_std_percent),
+                "principal_std_px": float(c.principal_std_px),
+            }
+            for c in verdict.cameras
+        },
+        "limited_by": list(verdict.limited_by),
     }
 
 
