@@ -45,7 +45,6 @@ except ImportError:  # pragma: no cover - depends on the ROS install
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.context import Context
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo
 from sensor_msgs.srv import SetCameraInfo
 from std_srvs.srv import Trigger
@@ -66,6 +65,7 @@ from wand_calib_ros.nodes import messages
 from wand_calib_ros.nodes.markers import markers_message
 from wand_calib_ros.nodes.params import (
     COVERAGE,
+    LATCHED,
     RIG,
     Param,
     SettingsError,
@@ -105,9 +105,6 @@ PARAMS = (
         choices=TIMING_MODES,
     ),
 )
-
-#: Results stay available to late subscribers.
-LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
 
 
 #: The answer to a /calibrate the node's stop interrupted.
@@ -207,13 +204,34 @@ class CalibratorNode(Node):
             response.success, response.message = outcome[0] if outcome else (False, STOPPED)
         finally:
             self._running.release()
-        if self._stopping.is_set():  # no log line: the context is gone (the caller gets the answer)
-            return response
-        if response.success:  # rclpy ties one severity to each logging call site
-            self.get_logger().info(f"{service}: {response.message}")
-        else:
-            self.get_logger().warning(f"{service}: {response.message}")
+        self._log(service, response.success, response.message)
         return response
+
+    def calibrate_now(self, source: str) -> bool:
+        """Start a calibration without a service call (the collector's auto_calibrate), logged under
+        ``source``; False when one is already running."""
+        if not self._running.acquire(blocking=False):
+            return False
+
+        def work() -> None:
+            outcome: list[tuple[bool, str]] = []
+            try:
+                self._solve(source, self._calibrate, outcome)
+            finally:
+                self._running.release()
+            self._log(source, *(outcome[0] if outcome else (False, STOPPED)))
+
+        self._worker = threading.Thread(target=work, name=source, daemon=True)
+        self._worker.start()
+        return True
+
+    def _log(self, source: str, success: bool, message: str) -> None:
+        if self._stopping.is_set():  # no log line: the context is gone (a caller gets the answer)
+            return
+        if success:  # rclpy ties one severity to each logging call site
+            self.get_logger().info(f"{source}: {message}")
+        else:
+            self.get_logger().warning(f"{source}: {message}")
 
     def _solve(self, service: str, work: Callable[[], tuple[bool, str]], outcome: list[tuple[bool, str]]) -> None:
         try:
@@ -243,7 +261,7 @@ class CalibratorNode(Node):
             observations = read_observations(
                 path, self.rig.camera_names, image_sizes=self.rig.image_sizes, labels=self.rig.wand.labels
             )
-            self.get_logger().info(f"/calibrate: calibrating {observations.uv.shape[0]} frames of {path}")
+            self.get_logger().info(f"calibrating {observations.uv.shape[0]} frames of {path}")
             floor = read_floor_frames(self.output_dir / FLOOR_FILE)  # from the collector's /set_floor
             result, files = run_calibration(
                 self.rig,

@@ -9,6 +9,15 @@ persisted :class:`ObservationBuffer` and counted by the :class:`CoverageTracker`
 missing tell the person waving the wand what to do. ``/reset`` clears the
 buffer after backing it up.
 
+While waving, a running estimate (``running_estimate``) calibrates the buffer so far every
+``estimate_period_s`` in a worker process (:mod:`wand_calib_ros.collection.estimate`): /diagnostics
+shows per camera its image error, focal and principal-point uncertainty and whether they still fall,
+and its preliminary results go to ``wand_calib/preliminary/<cam>/camera_info``,
+``wand_calib/preliminary/<cam>/extrinsics`` and ``wand_calib/preliminary/markers``, never to the final
+topics. With ``auto_calibrate`` the final calibration starts by itself once coverage is ready and every
+camera's uncertainties are below ``auto_focal_std_percent`` and ``auto_principal_std_px``. After a
+calibration the estimates stop (until ``/reset``) and the bump watch takes over.
+
 ``ros2 run wand_calib_ros collector`` also starts the calibrator node in the
 same process (``with_calibrator``), so a ``/calibrate`` call is the whole
 workflow. Only message and parameter translation lives here.
@@ -20,35 +29,41 @@ import os
 import sys
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PolygonStamped
+from geometry_msgs.msg import PolygonStamped, TransformStamped
 from rclpy.clock import Clock, ClockType
 from rclpy.context import Context
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from sensor_msgs.msg import Image
+from sensor_msgs.msg import CameraInfo, Image
 from std_srvs.srv import Trigger
+from visualization_msgs.msg import MarkerArray
 
 from wand_calib_ros.collection.buffer import BUFFER_FILE, ObservationBuffer
 from wand_calib_ros.collection.coverage import CoverageTracker
+from wand_calib_ros.collection.estimate import MAX_PLACEMENTS, Estimate, RunningEstimate, converged
 from wand_calib_ros.collection.floor import FLOOR_FILE, FloorWindow, append_floor_frame
 from wand_calib_ros.collection.recovery import backup_path
 from wand_calib_ros.collection.sync import FrameSynchroniser, SyncedFrame
 from wand_calib_ros.collection.watch import BumpWatch
+from wand_calib_ros.core.pipeline import CalibrationOptions
 from wand_calib_ros.core.result import CalibrationResult
+from wand_calib_ros.core.rig import WandObservations
 from wand_calib_ros.detection.recording import CameraStream, Labelled
 from wand_calib_ros.detection.wand import WandOptions
 from wand_calib_ros.io.images import image_array
 from wand_calib_ros.io.rig_yaml import load_camera_endpoints, load_rig
 from wand_calib_ros.nodes import messages
+from wand_calib_ros.nodes.markers import markers_message
 from wand_calib_ros.nodes.params import (
     COVERAGE,
     IMAGE_QOS,
     LABEL_HOLD,
+    LATCHED,
     RIG,
     Param,
     coverage_thresholds,
@@ -87,6 +102,26 @@ PARAMS = (
     ),
     LABEL_HOLD,
     Param("with_calibrator", True, "also run the calibrator node (/calibrate) in this process"),
+    Param("running_estimate", True, "calibrate the buffer so far every estimate_period_s while waving (preliminary)"),
+    Param("estimate_period_s", 3.0, "seconds between the running estimate's rounds (at least)", 0.5, 3600.0),
+    Param(
+        "estimate_max_placements", MAX_PLACEMENTS, "placements one running-estimate round calibrates at most", 30, 10**6
+    ),
+    Param("auto_calibrate", False, "calibrate without /calibrate once coverage is ready and the estimate converged"),
+    Param(
+        "auto_focal_std_percent",
+        0.5,
+        "auto_calibrate: every camera's focal-length standard deviation at most this (% of it)",
+        0.0,
+        100.0,
+    ),
+    Param(
+        "auto_principal_std_px",
+        2.0,
+        "auto_calibrate: every camera's principal-point standard deviation at most this (px)",
+        0.0,
+        10000.0,
+    ),
 )
 
 #: Points from detector nodes are few and small: deliver every one.
@@ -123,6 +158,22 @@ class CollectorNode(Node):
         )
         self.timing: CalibrationResult | None = None  # the last /calibrate's result (its time offsets)
         self.watch: BumpWatch | None = None  # after a /calibrate: is a camera moving away from it?
+        self.estimates = (
+            RunningEstimate(
+                self.rig,
+                CalibrationOptions(),
+                period_s=values["estimate_period_s"],
+                max_placements=values["estimate_max_placements"],
+            )
+            if values["running_estimate"]
+            else None
+        )
+        self.auto = (
+            (values["auto_focal_std_percent"], values["auto_principal_std_px"]) if values["auto_calibrate"] else None
+        )
+        self.calibrate_now: Callable[[str], bool] | None = None  # the in-process calibrator's, for auto_calibrate
+        self.calibrated = False  # a final calibration since the start or the last /reset: estimates stop
+        self._auto_started = False
         self._moved_logged: dict[str, str] = {}
         wand = WandOptions.for_wand(self.rig.wand)
         self.streams = {c.name: CameraStream(c, wand, max_hold_ns=hold_ns) for c in self.rig.cameras}
@@ -147,6 +198,16 @@ class CollectorNode(Node):
         self.heat_maps = {
             name: self.create_publisher(Image, f"wand_calib/{name}/coverage", 1) for name in self.rig.camera_names
         }
+        self.preliminary_info = {
+            name: self.create_publisher(CameraInfo, f"wand_calib/preliminary/{name}/camera_info", LATCHED)
+            for name in self.rig.camera_names
+        }
+        self.preliminary_extrinsics = {
+            name: self.create_publisher(TransformStamped, f"wand_calib/preliminary/{name}/extrinsics", LATCHED)
+            for name in self.rig.camera_names
+        }
+        self.preliminary_markers = self.create_publisher(MarkerArray, "wand_calib/preliminary/markers", LATCHED)
+        self.frame_ids = {name: endpoint.frame_id for name, endpoint in self.endpoints.items()}
         # Feedback on the steady clock: with use_sim_time and no /clock, ROS time stands still.
         self.create_timer(1.0, self._publish_feedback, clock=Clock(clock_type=ClockType.STEADY_TIME))
         source = {"images": "image topics", "points": "detector points"}[values["input"]]
@@ -211,6 +272,8 @@ class CollectorNode(Node):
             self.buffer.sync()
             if self.watch is not None:
                 self.watch.close()
+        if self.estimates is not None:
+            self.estimates.close()
 
     def after_calibrate(self, result: CalibrationResult) -> None:
         """Keep a calibration's result: /diagnostics then shows its time offsets, and the frames that
@@ -221,6 +284,43 @@ class CollectorNode(Node):
                 self.watch.close()
             self.watch = BumpWatch(self.rig, result)
             self._moved_logged = {}
+            self.calibrated = True
+
+    def snapshot(self) -> WandObservations:
+        """The buffer so far (for the running estimate)."""
+        with self.lock:
+            return self.buffer.observations()
+
+    def _publish_estimate(self, estimate: Estimate) -> None:
+        """A running estimate's result on the preliminary topics."""
+        result, scene = estimate.round.result, estimate.round.scene
+        if result is None or scene is None:
+            return
+        stamp = self.get_clock().now().to_msg()
+        for name in self.rig.camera_names:
+            frame = self.frame_ids[name]
+            self.preliminary_info[name].publish(messages.camera_info_message(result, name, stamp, frame))
+            transform = messages.extrinsics_message(result, name, stamp, "world", self.frame_ids)
+            self.preliminary_extrinsics[name].publish(transform)
+        parent = messages.parent_frame(result, "world", self.frame_ids)
+        self.preliminary_markers.publish(markers_message(scene, stamp, parent, preliminary=True))
+
+    def _maybe_auto_calibrate(self, ready: bool) -> str | None:
+        """Start the final calibration when auto_calibrate's conditions hold; what it says, if it did."""
+        if self.auto is None or self.calibrated or self._auto_started or self.calibrate_now is None:
+            return None
+        latest = self.estimates.latest if self.estimates is not None else None
+        if not ready or latest is None or latest.round.result is None:
+            return None
+        if not converged(latest.round.result, *self.auto):
+            return None
+        if not self.calibrate_now("auto-calibrate"):
+            return None
+        self._auto_started = True
+        return (
+            f"auto-calibrate: coverage is ready and every camera's focal length is within +-{self.auto[0]:g} % and "
+            f"principal point within +-{self.auto[1]:g} px: calibrating"
+        )
 
     def _counts(self) -> dict[str, dict[str, int | str]]:
         counts: dict[str, dict[str, int | str]] = {}
@@ -251,6 +351,21 @@ class CollectorNode(Node):
             }
             cells = {name: self.coverage.cells[c].copy() for c, name in enumerate(self.rig.camera_names)}
             watch = self.watch
+        now = time.monotonic()
+        if self.estimates is not None and not self.calibrated:
+            arrived = self.estimates.step(now, self.snapshot)
+            if arrived is not None:
+                self._publish_estimate(arrived)
+        if self.estimates is not None and not self.calibrated:
+            per_camera, estimate_rig = messages.estimate_values(self.estimates.latest, self.estimates.failure, now)
+            for name, values in per_camera.items():
+                counts.setdefault(name, {}).update(values)
+            rig_values |= estimate_rig
+        started = self._maybe_auto_calibrate(status.ready)
+        if started is not None:
+            self.get_logger().info(started)
+        if self._auto_started:
+            rig_values["auto_calibrate"] = "calibrated" if self.calibrated else "calibrating"
         moved = {}
         if watch is not None:
             watch.step()
@@ -267,7 +382,6 @@ class CollectorNode(Node):
             self.heat_maps[spec.name].publish(
                 messages.heat_map_message(cells[spec.name], spec.image_size, stamp, spec.name)
             )
-        now = time.monotonic()
         if self._logged is None or self._logged[0] != status.ready or (not status.ready and now - self._logged[1] > 10):
             if status.ready:
                 self.get_logger().info(f"ready to calibrate ({rig_values['frames_stored']} frames): call /calibrate")
@@ -295,6 +409,10 @@ class CollectorNode(Node):
                 os.replace(floor, backup_path(floor, "bak"))
             self.floor.lays = 0
             self.coverage = CoverageTracker(self.rig, self.coverage.thresholds)
+            self.calibrated = self._auto_started = False
+        if self.estimates is not None:  # the next round starts cold on the new buffer
+            self.estimates.close()
+            self.estimates.latest = self.estimates.failure = None
         kept = "it was empty" if backup is None else f"backup {backup}"
         response.success, response.message = True, f"buffer cleared; {kept}"
         self.get_logger().info(response.message)
@@ -318,6 +436,7 @@ def build(context: Context, args: Sequence[str] = ()) -> list[Node]:
         cli_args=second_node_arguments(args),
         use_global_arguments=False,
     )
+    collector.calibrate_now = calibrator.calibrate_now
     return [collector, calibrator]
 
 

@@ -21,6 +21,7 @@ from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
 from wand_calib_ros.collection.coverage import CoverageStatus
+from wand_calib_ros.collection.estimate import Estimate
 from wand_calib_ros.collection.sync import FrameSynchroniser, SyncedFrame
 from wand_calib_ros.core.geometry import Pose
 from wand_calib_ros.core.result import CalibrationResult
@@ -170,6 +171,35 @@ def timing_values(sync: FrameSynchroniser, camera: str, result: CalibrationResul
             std = calibrated.parameter_std.get(key)
             values[f"{label}_{unit}"] = f"{scale * value:+.3f}" + ("" if std is None else f" +- {scale * std:.3f}")
     return values
+
+
+def estimate_values(
+    estimate: Estimate | None, failure: str | None, now: float
+) -> tuple[dict[str, dict[str, str]], dict[str, str]]:
+    """Diagnostics values of the running estimate: per camera its image error, focal and
+    principal-point uncertainty and whether they still fall; for the rig its grade, wand error, age
+    and frames (or why there is none yet)."""
+    if estimate is None or estimate.round.result is None:
+        return {}, {"estimate": failure or "waiting for enough frames"}
+    result = estimate.round.result
+    cameras: dict[str, dict[str, str]] = {}
+    if result.quality is not None:
+        for camera in result.quality.cameras:
+            cameras[camera.name] = {
+                "estimate_rms_px": f"{camera.image_error_px:.3f}",
+                "estimate_focal_std_percent": f"{camera.focal_std_percent:.3f}",
+                "estimate_principal_std_px": f"{camera.principal_std_px:.2f}",
+                "estimate_improving": "yes" if estimate.improving.get(camera.name, True) else "no",
+            }
+    rig = {
+        "estimate": "preliminary" if failure is None else f"preliminary; the newest round failed: {failure}",
+        "estimate_grade": "-" if result.quality is None else result.quality.grade,
+        "estimate_wand_rms_mm": f"{result.wand_length_rms_mm:.3f}",
+        "estimate_age_s": f"{now - estimate.finished:.0f}",
+        "estimate_frames": str(estimate.round.frames),
+        "estimate_seconds": f"{estimate.round.seconds:.2f}",
+    }
+    return cameras, rig
 
 
 def diagnostics_message(

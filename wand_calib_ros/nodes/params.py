@@ -16,7 +16,7 @@ from typing import Any
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.node import Node
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 
 from wand_calib_ros.collection.coverage import CoverageThresholds
 from wand_calib_ros.errors import WandCalibError
@@ -187,6 +187,10 @@ IMAGE_QOS = Param(
     "image subscription QoS (reliable: every image is queued until processed, for bag replay)",
     choices=("sensor_data", "reliable"),
 )
+
+
+#: Results (final and preliminary) stay available to late subscribers, as tf2's static broadcaster does.
+LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
 
 
 def image_qos(choice: str) -> QoSProfile:
