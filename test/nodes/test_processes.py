@@ -186,7 +186,7 @@ def test_stopping_the_calibrator_during_a_calibration_answers_the_caller(tmp_pat
         text=True,
     )
     try:
-        assert wait_until(lambda: "/calibrate: calibrating 6000 frames" in log.read_text(), 60)
+        assert wait_until(lambda: "calibrating 6000 frames" in log.read_text(), 60)
         assert stop(calibrator, signal.SIGINT) == 0
         answer, _ = caller.communicate(timeout=60)
     finally:

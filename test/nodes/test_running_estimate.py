@@ -81,9 +81,8 @@ def test_a_running_estimate_appears_while_waving_and_auto_calibrate_ends_the_ses
     if first_estimate is None:
         first_estimate = time.monotonic()
     assert connected is not None and first_estimate - connected < 10.0, first_estimate - connected
-    print(
-        f"first estimate {first_estimate - connected:.1f} s after 30 frames; final after {time.monotonic() - started:.1f} s"
-    )
+    took = time.monotonic() - started
+    print(f"first estimate {first_estimate - connected:.1f} s after 30 frames; final after {took:.1f} s")
     labels = [m.text for m in preliminary_markers[-1].markers if m.ns == "names"] if preliminary_markers else []
     assert labels == [f"{n} (preliminary)" for n in names]
     assert len(final) == 1  # the final topic carries the final calibration only

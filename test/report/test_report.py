@@ -12,10 +12,11 @@ from wand_calib_ros.report.figures import FIGURES
 DATA = Path(__file__).resolve().parents[1] / "data" / "ewand"
 
 
-def _check(out: Path, *, timing: bool) -> str:
-    """The page has every figure (the timing one only where the result has a timing to show)."""
+def _check(out: Path, *, timing: bool, session: bool = False) -> str:
+    """The page has every figure (the timing one only where the result has a timing to show, the running
+    estimate only for a live session)."""
     page = (out / "index.html").read_text()
-    expected = [name for name in FIGURES if timing or name != "timing"]
+    expected = [n for n in FIGURES if (timing or n != "timing") and (session or n != "running_estimate")]
     assert page.count('src="data:image/png;base64,') == len(expected)
     for name in expected:
         assert (out / f"{name}.png").read_bytes()[:4] == b"\x89PNG"
@@ -104,3 +105,30 @@ def test_the_figures_stay_readable_with_outliers_and_wide_lenses(tmp_path: Path)
     rotvec = np.degrees(data.poses[1].rotvec)
     result = yaml.safe_load((tmp_path / "result.yaml").read_text())
     assert f"{rotvec[0]:.5g}" in page and result["cameras"]["cam1"]["std"]["rx"] > 0
+
+
+def test_report_of_a_live_session_shows_its_running_estimate_and_events(tmp_path: Path) -> None:
+    import numpy as np
+
+    from wand_calib_ros.core.pipeline import CalibrationOptions, calibrate
+    from wand_calib_ros.io.observations_csv import read_observations
+    from wand_calib_ros.io.rig_yaml import load_rig
+    from wand_calib_ros.io.session_csv import ESTIMATES_FILE, EVENTS_FILE, append_estimate, append_event
+    from wand_calib_ros.report.html import write_report
+
+    sim, out = tmp_path / "sim", tmp_path / "out"
+    assert main(["-q", "simulate", "paper3", "--seed", "2", "--out", str(sim)]) == 0
+    files = ["--cameras", str(sim / "cameras.yaml"), "--observations", str(sim / "observations.csv")]
+    assert main(["-q", "calibrate", *files, "--output", str(out / "result.yaml")]) == 0
+    rig = load_rig(sim / "cameras.yaml")
+    observations = read_observations(sim / "observations.csv", rig.camera_names)
+    for second, frames in enumerate((60, 120, 240)):  # three rounds, as the collector appends them
+        result = calibrate(rig, observations.select_frames(np.arange(frames)), CalibrationOptions())
+        append_estimate(out / ESTIMATES_FILE, 1000.0 + 3 * second, frames, result)
+    append_event(out / EVENTS_FILE, 1010.0, "calibrated", "", "RMS ...")
+    append_event(out / EVENTS_FILE, 1030.0, "moved", "cam1", "cam1 moved: residual 1.8 px, was 1.0")
+    write_report(rig, observations, out / "result.yaml", out / "report")
+    page = _check(out / "report", timing=False, session=True)
+    assert "<h2>running estimate</h2>" in page and "Session events" in page
+    assert "cam1 moved: residual 1.8 px, was 1.0" in page
+    assert "<h2>Quality: " in page

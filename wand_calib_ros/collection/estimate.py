@@ -12,6 +12,7 @@ scene for RViz, and per camera whether its uncertainties still fall.
 from __future__ import annotations
 
 import multiprocessing
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -152,6 +153,8 @@ class RunningEstimate:
         self._process: BaseProcess | None = None
         self._busy = False
         self._started = -float("inf")
+        self._lock = threading.Lock()  # step() on the node's executor, close() from its shutdown
+        self._closed = False
 
     def _start_worker(self) -> Connection:
         if self._connection is None:
@@ -170,6 +173,12 @@ class RunningEstimate:
             now: time.monotonic().
             snapshot: the buffer so far (called only when a round starts).
         """
+        with self._lock:
+            if self._closed:
+                return None
+            return self._step(now, snapshot)
+
+    def _step(self, now: float, snapshot: Callable[[], WandObservations]) -> Estimate | None:
         arrived = None
         if self._busy and self._connection is not None and self._connection.poll():
             done: Round = self._connection.recv()
@@ -191,8 +200,20 @@ class RunningEstimate:
                 self._busy, self._started = True, now
         return arrived
 
+    def restart(self) -> None:
+        """Forget every round (a new buffer): the worker stops, the next round starts cold."""
+        with self._lock:
+            self._stop_worker()
+            self.latest = self.failure = None
+            self._started = -float("inf")
+
     def close(self) -> None:
-        """Stop the worker process (a round in progress is dropped)."""
+        """Stop the worker process for good (a round in progress is dropped)."""
+        with self._lock:
+            self._closed = True
+            self._stop_worker()
+
+    def _stop_worker(self) -> None:
         if self._connection is not None:
             try:
                 if not self._busy:

@@ -20,6 +20,7 @@ from wand_calib_ros.core.quality import judge, noise_wand_error
 from wand_calib_ros.core.repair import judge_moved, repair, repaired_result, since_move
 from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.core.rig import RigSpec, WandObservations
+from wand_calib_ros.errors import WandCalibError
 from wand_calib_ros.io.errors import ExportError
 from wand_calib_ros.io.export import WORLD_FORMATS, cameras_of, export
 from wand_calib_ros.io.outputs import check_writable
@@ -46,6 +47,17 @@ class CalibrationFiles:
     report: Path | None
     exports: tuple[Path, ...] = ()
     export_failures: tuple[str, ...] = ()
+
+
+def _write_report(rig: RigSpec, observations: WandObservations, result_path: Path, output_dir: Path) -> Path | None:
+    """``output_dir/report/index.html`` (a failure is logged, not raised: the calibration is written)."""
+    from wand_calib_ros.report.html import write_report  # matplotlib only when a report is asked for
+
+    try:
+        return write_report(rig, observations, result_path, output_dir / "report")
+    except (OSError, ValueError, np.linalg.LinAlgError, WandCalibError) as error:
+        log.warning("the calibration is written, but its report failed: %s", error)
+        return None
 
 
 def coverage_of(rig: RigSpec, observations: WandObservations, thresholds: CoverageThresholds) -> CoverageStatus:
@@ -99,14 +111,7 @@ def run_calibration(
         except ExportError as error:
             log.warning("the calibration is written, but its %s export failed: %s", name, error)
             failures.append(f"{name}: {error}")
-    report_path = None
-    if report:
-        from wand_calib_ros.report.html import write_report  # matplotlib only when a report is asked for
-
-        try:
-            report_path = write_report(rig, observations, result_path, output_dir / "report")
-        except (OSError, ValueError, np.linalg.LinAlgError) as error:
-            log.warning("the calibration is written, but its report failed: %s", error)
+    report_path = _write_report(rig, observations, result_path, output_dir) if report else None
     return result, CalibrationFiles(result_path, infos, report_path, tuple(exported), tuple(failures))
 
 
@@ -136,10 +141,11 @@ def refine_calibration(
     output_dir: Path,
     *,
     intrinsics: bool = False,
+    report: bool = False,
 ) -> Refinement:
     """Judge from the views ``new`` (taken after ``result``'s calibration, in time order) which cameras
     moved, re-estimate only those from the views after the move (their intrinsics too if asked), and
-    write the result files as :func:`run_calibration` does (without the report).
+    write the result files as :func:`run_calibration` does (the report, if asked, on the views after the move).
 
     Raises:
         InsufficientDataError: too few views after the move tie a moved camera to two unmoved ones.
@@ -162,7 +168,12 @@ def refine_calibration(
     result_path = output_dir / "result.yaml"
     check_writable(calibration_paths(names, result_path, output_dir / "camera_info"))
     infos = tuple(write_calibration(repaired, result_path, output_dir / "camera_info")[1:])
-    files = CalibrationFiles(result_path, infos, None)
+    report_path = (
+        _write_report(rig, new.select_frames(np.arange(first, new.frames.size)), result_path, output_dir)
+        if report
+        else None
+    )
+    files = CalibrationFiles(result_path, infos, report_path)
     return Refinement(repaired, tuple(names[c] for c in moved), tuple(lines), int(new.frames.size - first), files)
 
 

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import sys
 import threading
+import time
 import traceback
 from collections.abc import Callable, Sequence
 from dataclasses import replace
@@ -61,6 +62,7 @@ from wand_calib_ros.errors import WandCalibError
 from wand_calib_ros.io.export import FORMATS
 from wand_calib_ros.io.observations_csv import read_observations
 from wand_calib_ros.io.rig_yaml import load_camera_endpoints, load_rig
+from wand_calib_ros.io.session_csv import EVENTS_FILE, append_event
 from wand_calib_ros.nodes import messages
 from wand_calib_ros.nodes.markers import markers_message
 from wand_calib_ros.nodes.params import (
@@ -275,7 +277,7 @@ class CalibratorNode(Node):
         except WandCalibError as error:
             return False, f"calibration failed: {error}"
         self.result, self._calibrated_through = result, int(observations.frames.max())
-        return self._publish(result, files, observations.uv)
+        return self._publish(result, files, observations.uv, "calibrated", ())
 
     def _refine(self) -> tuple[bool, str]:
         if self.result is None:
@@ -296,13 +298,15 @@ class CalibratorNode(Node):
         if refined.result is None or refined.files is None:
             return True, f"no camera moved: the {new.frames.size} frames since the calibration agree with it"
         self.result, self._calibrated_through = refined.result, int(new.frames.max())
-        ok, answer = self._publish(refined.result, refined.files, new.uv)
+        ok, answer = self._publish(refined.result, refined.files, new.uv, "refined", refined.moved)
         done = f"re-estimated {', '.join(refined.moved)} from the {refined.frames} frames after the move"
         return ok, f"{'; '.join(refined.lines)}; {done}: {answer}"
 
-    def _publish(self, result: CalibrationResult, files: CalibrationFiles, uv: Any) -> tuple[bool, str]:
+    def _publish(
+        self, result: CalibrationResult, files: CalibrationFiles, uv: Any, event: str, cameras: tuple[str, ...]
+    ) -> tuple[bool, str]:
         """Publish a result (topics, /tf_static, the markers of the placements ``uv``, the collector's
-        callback, the drivers) and say so."""
+        callback, the drivers), note it in the session's events (``event`` of ``cameras``) and say so."""
         if self._stopping.is_set():  # the node is going away: publish nothing
             return False, STOPPED
         stamp = self.get_clock().now().to_msg()
@@ -318,6 +322,7 @@ class CalibratorNode(Node):
         if self.after_calibrate is not None:
             self.after_calibrate(result)
         answer = summary(result, files)
+        append_event(self.output_dir / EVENTS_FILE, time.time(), event, "+".join(cameras), answer)
         if self.commit:
             failures = self._commit(result, stamp)
             if failures:

@@ -57,6 +57,7 @@ from wand_calib_ros.detection.recording import CameraStream, Labelled
 from wand_calib_ros.detection.wand import WandOptions
 from wand_calib_ros.io.images import image_array
 from wand_calib_ros.io.rig_yaml import load_camera_endpoints, load_rig
+from wand_calib_ros.io.session_csv import ESTIMATES_FILE, EVENTS_FILE, append_estimate, append_event
 from wand_calib_ros.nodes import messages
 from wand_calib_ros.nodes.markers import markers_message
 from wand_calib_ros.nodes.params import (
@@ -354,8 +355,10 @@ class CollectorNode(Node):
         now = time.monotonic()
         if self.estimates is not None and not self.calibrated:
             arrived = self.estimates.step(now, self.snapshot)
-            if arrived is not None:
+            if arrived is not None and arrived.round.result is not None:
                 self._publish_estimate(arrived)
+                history = self.buffer.path.with_name(ESTIMATES_FILE)
+                append_estimate(history, time.time(), arrived.round.frames, arrived.round.result)
         if self.estimates is not None and not self.calibrated:
             per_camera, estimate_rig = messages.estimate_values(self.estimates.latest, self.estimates.failure, now)
             for name, values in per_camera.items():
@@ -370,10 +373,11 @@ class CollectorNode(Node):
         if watch is not None:
             watch.step()
             moved = watch.moved()
-            for line in sorted(set(moved.values()) - set(self._moved_logged.values())):
-                self.get_logger().warning(
-                    f"{line}: /reset, wave and /calibrate again, or repair it with wand-calib refine"
-                )
+            for name, line in sorted(moved.items()):
+                if line in self._moved_logged.values():
+                    continue
+                self.get_logger().warning(f"{line}: call /refine to re-estimate it, or /reset, wave and /calibrate")
+                append_event(self.buffer.path.with_name(EVENTS_FILE), time.time(), "moved", name, line)
             self._moved_logged = moved
         stamp = self.get_clock().now().to_msg()
         source = self.get_fully_qualified_name().lstrip("/")  # e.g. rig1/wand_calib_collector
@@ -404,15 +408,15 @@ class CollectorNode(Node):
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         with self.lock:  # serialised with the frames being stored and with other resets
             backup = self.buffer.reset()
-            floor = self.buffer.path.with_name(FLOOR_FILE)
-            if floor.exists():  # its frame ids belong to the buffer just moved away
-                os.replace(floor, backup_path(floor, "bak"))
+            for name in (FLOOR_FILE, ESTIMATES_FILE, EVENTS_FILE):  # they belong to the buffer just moved away
+                kept = self.buffer.path.with_name(name)
+                if kept.exists():
+                    os.replace(kept, backup_path(kept, "bak"))
             self.floor.lays = 0
             self.coverage = CoverageTracker(self.rig, self.coverage.thresholds)
             self.calibrated = self._auto_started = False
         if self.estimates is not None:  # the next round starts cold on the new buffer
-            self.estimates.close()
-            self.estimates.latest = self.estimates.failure = None
+            self.estimates.restart()
         kept = "it was empty" if backup is None else f"backup {backup}"
         response.success, response.message = True, f"buffer cleared; {kept}"
         self.get_logger().info(response.message)

@@ -35,6 +35,14 @@ from wand_calib_ros.core.timing import Timeline, align_views, smooth_motion, tim
 from wand_calib_ros.core.vision_graph import VisionGraph, build_vision_graph, covisibility
 from wand_calib_ros.io.errors import FormatError
 from wand_calib_ros.io.result_yaml import read_result
+from wand_calib_ros.io.session_csv import (
+    ESTIMATES_FILE,
+    EVENTS_FILE,
+    EstimateHistory,
+    SessionEvent,
+    read_estimates,
+    read_events,
+)
 from wand_calib_ros.io.text import read_yaml
 
 FloatArray = NDArray[np.float64]
@@ -90,6 +98,10 @@ class ReportData:
         graph: the vision graph from the reference (None if the cameras are not connected).
         timing: per camera residuals against image velocity (None when the result has no timing or
             the frames show no continuous motion).
+        estimates: the live session's running-estimate rounds (``estimates.csv`` next to the result;
+            None without one).
+        events: the live session's events (``events.csv`` next to the result: cameras judged moved,
+            calibrations, repairs).
     """
 
     rig: RigSpec
@@ -104,6 +116,18 @@ class ReportData:
     shared: NDArray[np.int64]
     graph: VisionGraph | None
     timing: tuple[TimingResiduals, ...] | None = None
+    estimates: EstimateHistory | None = None
+    events: tuple[SessionEvent, ...] = ()
+
+
+def session_history(folder: Path) -> tuple[EstimateHistory | None, tuple[SessionEvent, ...]]:
+    """The live session's history files in ``folder`` (the collector's output_dir), where present."""
+    estimates = folder / ESTIMATES_FILE
+    events = folder / EVENTS_FILE
+    return (
+        read_estimates(estimates) if estimates.exists() else None,
+        read_events(events) if events.exists() else (),
+    )
 
 
 def prepare(rig: RigSpec, observations: WandObservations, result_path: Path) -> ReportData:
@@ -160,8 +184,22 @@ def prepare(rig: RigSpec, observations: WandObservations, result_path: Path) -> 
         graph: VisionGraph | None = build_vision_graph(names, complete, reference=reference)
     except CoreError:
         graph = None
+    estimates, events = session_history(result_path.parent)
     return ReportData(
-        rig, names, models, poses, reference, document, tuple(cameras), wand_points, lengths, shared, graph, against
+        rig,
+        names,
+        models,
+        poses,
+        reference,
+        document,
+        tuple(cameras),
+        wand_points,
+        lengths,
+        shared,
+        graph,
+        against,
+        estimates,
+        events,
     )
 
 

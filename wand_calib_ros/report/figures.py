@@ -240,6 +240,36 @@ def timing(data: ReportData) -> Figure:
     return figure
 
 
+def running_estimate(data: ReportData) -> Figure:
+    """The live session's running estimate over time: per camera image error, focal-length and
+    principal-point uncertainty, and the wand error; the session's events as vertical lines."""
+    history = data.estimates
+    assert history is not None
+    start = float(history.time.min())
+    figure, axes = plt.subplots(1, 4, figsize=(16, 3.6))
+    panels = (
+        (history.rms_px, "image error (px, per coordinate)"),
+        (history.focal_std_percent, "focal length std (%)"),
+        (history.principal_std_px, "principal point std (px)"),
+    )
+    for axis, (values, label) in zip(axes, panels, strict=False):
+        for name in data.names:
+            mine = np.array([c == name for c in history.camera])
+            axis.plot(history.time[mine] - start, values[mine], marker=".", label=name)
+        axis.set_ylabel(label)
+    first = np.unique(history.time, return_index=True)[1]
+    axes[3].plot(history.time[first] - start, history.wand_rms_mm[first], marker=".", color="k")
+    axes[3].set_ylabel("wand-length RMS (mm)")
+    colours = {"moved": "tab:red", "calibrated": "tab:green", "refined": "tab:purple"}
+    for axis in axes:
+        axis.set_xlabel("time since the first round (s)")
+        for event in data.events:
+            axis.axvline(event.time - start, color=colours.get(event.event, "k"), linewidth=0.8, linestyle="--")
+    axes[0].legend(fontsize=7)
+    figure.tight_layout()
+    return figure
+
+
 FIGURES = {
     "residual_histograms": residual_histograms,
     "residual_vectors": residual_vectors,
@@ -249,4 +279,5 @@ FIGURES = {
     "rig_3d": rig_3d,
     "vision_graph": vision_graph,
     "timing": timing,
+    "running_estimate": running_estimate,
 }

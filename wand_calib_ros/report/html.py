@@ -31,6 +31,9 @@ _CAPTIONS = {
     "wand_lengths": "Wand length |AC| of every placement triangulated linearly with the calibration.",
     "rig_3d": "Camera frustums and wand placements in the reference camera's frame.",
     "vision_graph": "Placements shared by camera pairs (M_ij) and the pairs used to chain the initial poses.",
+    "running_estimate": "The live session's running estimate, round by round: each camera's image error and "
+    "parameter uncertainties and the wand error, as they fell while the wand was waved. Dashed lines: a camera "
+    "judged moved (red), a calibration (green), a repair (purple).",
     "timing": "Residual along each point's image motion against its image speed: grey as if the cameras had "
     "seen each frame at one instant, blue with the result's time offsets and readout times. A slope in grey "
     "is a camera out of step; blue should be flat.",
@@ -88,6 +91,35 @@ def _metrics(data: ReportData) -> str:
     return f"<ul>{items}</ul>"
 
 
+def _quality(data: ReportData) -> str:
+    """The quality verdict (result.yaml's ``quality`` block), when the result has one."""
+    quality = data.document.get("quality")
+    if not quality:
+        return ""
+    limited = "".join(f"<li>{html.escape(str(reason))}</li>" for reason in quality.get("limited_by", []))
+    return (
+        f"<h2>Quality: {html.escape(str(quality['grade']))}</h2><p>world error {quality['world_error_mm']:.3g} mm "
+        f"(what the pixel noise alone causes: {quality['world_noise_mm']:.3g} mm); pixel noise "
+        f"{quality['noise_px']:.3g} px.</p>" + (f"<p>Limited by:</p><ul>{limited}</ul>" if limited else "")
+    )
+
+
+def _events(data: ReportData) -> str:
+    """The live session's events (cameras judged moved, calibrations, repairs), when there were any."""
+    if not data.events:
+        return ""
+    start = data.events[0].time
+    rows = "".join(
+        f"<tr><td>{e.time - start:.1f}</td><td>{html.escape(e.event)}</td><td>{html.escape(e.camera)}</td>"
+        f'<td style="text-align:left">{html.escape(e.message)}</td></tr>'
+        for e in data.events
+    )
+    return (
+        "<h2>Session events</h2><table><tr><th>time (s)</th><th>event</th><th>camera</th><th>message</th></tr>"
+        f"{rows}</table>"
+    )
+
+
 def write_report(rig: RigSpec, observations: WandObservations, result_path: Path, out: Path) -> Path:
     """Write ``out/index.html`` (self-contained) and one PNG per figure; returns the HTML path."""
     data = prepare(rig, observations, result_path)
@@ -96,6 +128,8 @@ def write_report(rig: RigSpec, observations: WandObservations, result_path: Path
     for name, make in FIGURES.items():
         if name == "timing" and data.timing is None:
             continue  # nothing to compare: synchronised views
+        if name == "running_estimate" and data.estimates is None:
+            continue  # not a live session
         figure = make(data)
         buffer = io.BytesIO()
         figure.savefig(buffer, format="png", dpi=80)
@@ -124,6 +158,7 @@ def write_report(rig: RigSpec, observations: WandObservations, result_path: Path
 <h2>Warnings</h2>{warning_html}
 <h2>Parameters (&plusmn; one standard deviation)</h2>{_parameter_table(data)}
 <h2>Metrics</h2>{_metrics(data)}
+{_quality(data)}{_events(data)}
 {"".join(sections)}
 </body></html>
 """
