@@ -7,7 +7,8 @@ frames and the collector's CPU use; then times ``/calibrate`` on what it stored.
 Runs with the image QoS the collector uses by default (sensor data, best effort)
 and with reliable delivery, once with the publishing "drivers" on Fast DDS's
 default transport and once with the package's large-image profile
-(``wand_calib_ros/nodes/fastdds_large_images.xml``), each in its own process.
+(``wand_calib_ros/nodes/fastdds_large_images.xml``), each in its own process. The collector runs with
+its defaults otherwise, the running estimate included (rounds every 3 s in its worker process).
 
 Run: .venv/bin/python benchmarks/live_collector.py [--seconds 20]
 Target on this 2-core machine: no dropped frames at 4 x 1280x1024 x 30 fps.
@@ -50,7 +51,7 @@ def _cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def run(folder: Path, frames: list, names: tuple[str, ...], qos_name: str, seconds: float) -> None:
+def run(folder: Path, frames: list, names: tuple[str, ...], qos_name: str, seconds: float, estimate: bool) -> None:
     domain_id = free_domain_id()
     out = folder / f"out_{qos_name}"
     params = {
@@ -59,6 +60,7 @@ def run(folder: Path, frames: list, names: tuple[str, ...], qos_name: str, secon
         "image_qos": qos_name,
         "require_coverage": False,
         "write_report": False,
+        "running_estimate": estimate,
     }
     collector = start("wand_calib_ros.nodes.collector", params, domain_id=domain_id, log=folder / f"{qos_name}.log")
     context = Context()
@@ -131,25 +133,28 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=20.0, help="publishing time per run")
     parser.add_argument("--keep", type=Path, help="keep the collectors' output here (default: a temporary folder)")
     parser.add_argument("--drivers", choices=("default", "large-images"), help="run one transport set-up only")
+    parser.add_argument("--no-estimate", action="store_true", help="collector with running_estimate off")
     args = parser.parse_args()
     if args.drivers is None:  # Fast DDS reads its profile once per process: one child per set-up
         for drivers in ("default", "large-images"):
             command = [sys.executable, __file__, "--seconds", str(args.seconds), "--drivers", drivers]
             command += ["--keep", str(args.keep / drivers)] if args.keep else []
+            command += ["--no-estimate"] if args.no_estimate else []
             subprocess.run(command, check=True)
         return
     if args.drivers == "large-images":
         use_large_image_transport(os.environ)
     else:
         os.environ.pop("FASTRTPS_DEFAULT_PROFILES_FILE", None)  # the collector still loads its own
-    print(f"camera drivers on the {args.drivers} Fast DDS transport")
+    estimate = "off" if args.no_estimate else "on"
+    print(f"camera drivers on the {args.drivers} Fast DDS transport; the collector's running estimate {estimate}")
     mocap = mocap_scenario()
     scenario = dataclasses.replace(mocap, cameras=mocap.cameras[:4], min_views=2)
     names = scenario.rig.camera_names
     print(f"  rendering 150 frames x {len(names)} cameras at {scenario.rig.cameras[0].image_size} ...")
     recording = render_recording(scenario, 150, FPS, RenderOptions(), np.random.default_rng(0))
     frames: list[dict[str, Image]] = [{} for _ in range(150)]
-    index = {int(s): k for k, s in enumerate(recording.stamps_ns)}
+    index = {stamp: k for k, stamp in enumerate(sorted({int(stamp) for _, stamp, _ in recording.frames}))}
     for camera, stamp, pixels in recording.frames:
         frames[index[int(stamp)]][camera] = array_to_image(pixels, stamp, camera)
     with tempfile.TemporaryDirectory() as tmp:
@@ -157,7 +162,7 @@ def main() -> None:
         folder.mkdir(parents=True, exist_ok=True)
         save_rig(scenario.rig, folder / "cameras.yaml")
         for qos_name in ("sensor_data", "reliable"):
-            run(folder, frames, names, qos_name, args.seconds)
+            run(folder, frames, names, qos_name, args.seconds, not args.no_estimate)
 
 
 if __name__ == "__main__":

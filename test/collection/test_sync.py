@@ -89,3 +89,31 @@ def test_out_of_order_duplicate_and_late_images_are_counted_per_camera() -> None
     _stream(late, [("a", k * PERIOD) for k in range(10)] + [("b", k * PERIOD) for k in range(3)])
     late.add("b", 4 * PERIOD, POINTS)  # its frame went out without it 150 ms ago
     assert late.stats.late == {"a": 0, "b": 1}
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_on_a_lossy_transport_each_cameras_stamps_still_increase_from_frame_to_frame(seed: int) -> None:
+    """30-80 % of each camera's images lost (the anchor's too), each camera's delivery late by up to 80 ms
+    (in order per camera): no camera's stamp goes backwards from one emitted frame to the next (the buffer
+    file requires it; before, 73 of 200 such streams broke it), and every image is in a frame or counted."""
+    rng = np.random.default_rng(seed)
+    names = ("a", "b", "c", "d")
+    lost, jitter_ms = rng.uniform(0.3, 0.8, len(names)), rng.uniform(0, 80, len(names))
+    items = []
+    delivered = dict.fromkeys(names, 0.0)
+    for k in range(300):
+        for c, name in enumerate(names):
+            if rng.random() > lost[c]:
+                delivered[name] = max(delivered[name], k * PERIOD + rng.uniform(0, jitter_ms[c]) * MS)
+                items.append((delivered[name], name, k * PERIOD))
+    sync = FrameSynchroniser(names, max_delay_ns=1200 * MS)
+    frames = []
+    for _, camera, stamp in sorted(items):
+        frames += sync.add(camera, stamp, POINTS)
+    frames += sync.flush_all()
+    for c in range(len(names)):
+        stamps = [int(f.stamps_ns[c]) for f in frames if f.reported[c]]
+        assert np.all(np.diff(stamps) > 0), names[c]
+    late = sum(sync.stats.late.values()) + sum(sync.stats.out_of_order.values())
+    assert sum(int(f.reported.sum()) for f in frames) + late == len(items)
+    assert late <= 0.02 * len(items), late  # the order is kept by grouping, rarely by leaving a view out

@@ -90,14 +90,28 @@ def test_a_bumped_camera_is_named_within_three_seconds_and_repaired(kind: str) -
 def test_the_views_after_the_move_are_told_from_those_before(kind: str) -> None:
     """Live, the frames since the calibration start untouched: the repair must use only those after."""
     misplaced = []
+    repaired: list[float] = []
+    recalibrated: list[float] = []
     for seed in (1, 2, 3, 4):
         scenario, models, poses, _ = _calibrated(seed)
+        bumped = _bumped(scenario, kind)
         before = simulate(scenario, 1.0, np.random.default_rng(400 + seed), n=150).observations.uv
-        after = simulate(_bumped(scenario, kind), 1.0, np.random.default_rng(500 + seed), n=150).observations.uv
-        misplaced.append(since_move(models, poses, scenario.wand, 1.0, np.concatenate([before, after]), (1,)) - 150)
-        assert since_move(models, poses, scenario.wand, 1.0, after, (1,)) == 0  # every frame after the move
+        after = simulate(bumped, 1.0, np.random.default_rng(500 + seed), n=150).observations
+        both = np.concatenate([before, after.uv])
+        first = since_move(models, poses, scenario.wand, 1.0, both, (1,))
+        misplaced.append(first - 150)
+        assert since_move(models, poses, scenario.wand, 1.0, after.uv, (1,)) == 0  # every frame after the move
         assert since_move(models, poses, scenario.wand, 1.0, before, (1,)) == 0  # no evidence of a move
+        # What /refine does with them: as good as a full recalibration on the frames after the move.
+        fixed = repair(models, poses, scenario.wand, both[first:], (1,))
+        truth = bumped.cameras[1]
+        mine = camera_errors(fixed.models[1], fixed.poses[1], truth.model, truth.pose)
+        full_models, full_poses = in_truth_frame(calibrate(bumped.rig, after), bumped)
+        full = camera_errors(full_models[1], full_poses[1], truth.model, truth.pose)
+        repaired += [mine.rotation_deg, 100 * mine.translation]
+        recalibrated += [full.rotation_deg, 100 * full.translation]
     assert rms(misplaced) <= 4.0, misplaced  # frames of 150
+    assert rms(repaired) <= 1.5 * rms(recalibrated), (repaired, recalibrated)
 
 
 def test_refine_on_the_command_line_finds_the_moved_camera_and_writes_the_repaired_result(

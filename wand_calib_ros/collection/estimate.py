@@ -2,7 +2,8 @@
 
 Each round calibrates at most :data:`MAX_PLACEMENTS` placements spread over the buffer (a time bound),
 warm-started from the previous round's cameras (its pairwise initialisation skipped), in one worker
-process of its own: the node's detection never waits for it, not even for the interpreter's lock. The
+process of its own at the lowest CPU priority (:mod:`~wand_calib_ros.collection.estimate_worker`): the
+node's detection never waits for it, not even for the interpreter's lock. The
 first round starts once the buffer holds :data:`MIN_FRAMES` frames showing the whole wand to two
 cameras; a round that fails (the rig not connected yet, too few views) says why and the next one
 starts cold. Each finished round is an :class:`Estimate`: the result with its quality verdict, the
@@ -21,6 +22,7 @@ from multiprocessing.process import BaseProcess
 
 import numpy as np
 
+from wand_calib_ros.collection.estimate_worker import serve
 from wand_calib_ros.core.pipeline import CalibrationOptions, calibrate
 from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.core.rig import RigSpec, WandObservations, spread_subset
@@ -79,18 +81,6 @@ def calibrate_round(rig: RigSpec, observations: WandObservations, options: Calib
         return Round(None, None, str(error), frames, time.perf_counter() - started)
     scene = rig_scene(result, rig.camera_names, observations.uv)
     return Round(result, scene, None, frames, time.perf_counter() - started)
-
-
-def _serve(connection: Connection) -> None:
-    """The worker process: one round per request until the pipe closes or says None."""
-    while True:
-        try:
-            request = connection.recv()
-        except (EOFError, OSError):  # the node went away
-            return
-        if request is None:
-            return
-        connection.send(calibrate_round(*request))
 
 
 def round_input(rig: RigSpec, observations: WandObservations, max_placements: int) -> WandObservations | None:
@@ -160,7 +150,7 @@ class RunningEstimate:
         if self._connection is None:
             context = multiprocessing.get_context("spawn")  # no fork of a process with DDS threads
             ours, theirs = context.Pipe()
-            process = context.Process(target=_serve, args=(theirs,), name="wand_calib running estimate", daemon=True)
+            process = context.Process(target=serve, args=(theirs,), name="wand_calib running estimate", daemon=True)
             process.start()
             theirs.close()
             self._connection, self._process = ours, process

@@ -84,6 +84,7 @@ class _Stream:
     phases: deque[int] = field(default_factory=lambda: deque(maxlen=RATE_WINDOW))
     newest: int | None = None
     count: int = 0
+    emitted: int | None = None  # the stamp of its newest image emitted in a frame
 
     @property
     def period_ns(self) -> float | None:
@@ -114,6 +115,7 @@ class FrameSynchroniser:
     _last_slot_ns: int | None = None
     _emitted_until: int | None = None
     _newest: int | None = None
+    _held: list[SyncedFrame] = field(default_factory=list)  # single images waiting for older frames to go
 
     def __post_init__(self) -> None:
         self._streams = [_Stream() for _ in self.cameras]
@@ -196,7 +198,7 @@ class FrameSynchroniser:
             stamp, points = anchor.pending[0]
             self._predict_slots(stamp - HALF * period, period)  # the anchor dropped images before this one
             anchor.pending.popleft()
-            slot = self._new_slot(stamp)
+            slot = self._slot_for_anchor(stamp, period)
             slot.reported[self.anchor] = True
             slot.stamps_ns[self.anchor] = stamp
             if points is not None:
@@ -217,13 +219,29 @@ class FrameSynchroniser:
             if steps >= 1 and self._last_slot_ns + steps * period < until_ns:
                 self._new_slot(round(self._last_slot_ns + steps * period))
 
+    def _slot_for_anchor(self, stamp_ns: int, period: float) -> _Slot:
+        """The frame an anchor image opens; an anchor image older than frames already opened for the
+        other cameras' waiting images (its delivery lagged behind theirs) fills the predicted frame it
+        belongs to, or a frame of its own in stamp order."""
+        if self._last_slot_ns is None or stamp_ns > self._last_slot_ns:
+            return self._new_slot(stamp_ns)
+        near = min(self._slots, key=lambda s: abs(s.stamp_ns - stamp_ns), default=None)
+        if near is not None and not near.reported[self.anchor] and abs(near.stamp_ns - stamp_ns) <= HALF * period:
+            return near
+        return self._new_slot(stamp_ns)
+
     def _new_slot(self, stamp_ns: int) -> _Slot:
+        """A new frame at ``stamp_ns``, kept in stamp order among those not yet emitted."""
         n = len(self.cameras)
         slot = _Slot(
             stamp_ns, np.full((n, self.n_points, 2), np.nan), np.zeros(n, dtype=bool), np.zeros(n, dtype=np.int64)
         )
-        self._slots.append(slot)
-        self._last_slot_ns = stamp_ns
+        if self._slots and stamp_ns < self._slots[-1].stamp_ns:
+            index = sum(s.stamp_ns <= stamp_ns for s in self._slots)
+            self._slots.insert(index, slot)
+        else:
+            self._slots.append(slot)
+        self._last_slot_ns = stamp_ns if self._last_slot_ns is None else max(self._last_slot_ns, stamp_ns)
         return slot
 
     def _assign(self, final: bool) -> list[SyncedFrame]:
@@ -275,7 +293,7 @@ class FrameSynchroniser:
         reported[c] = True
         stamps = np.zeros(n, dtype=np.int64)
         stamps[c] = stamp
-        return self._count(SyncedFrame(stamp, uv, reported, stamps))
+        return SyncedFrame(stamp, uv, reported, stamps)
 
     def _settled(self, slot: _Slot) -> bool:
         """Whether no image still to come can join or replace one in this frame."""
@@ -302,20 +320,45 @@ class FrameSynchroniser:
             if self.anchor is None:
                 return []
         self._open_slots(final)
-        out = self._assign(final)
+        # Frames leave in stamp order: an image alone in its frame waits for the older frames, else a
+        # camera's stamps could go backwards from one stored frame to the next (lossy transports).
+        self._held = sorted([*self._held, *self._assign(final)], key=lambda f: f.stamp_ns)
+        out: list[SyncedFrame] = []
         while self._slots and (final or self._settled(self._slots[0])):
             slot = self._slots.popleft()
+            out += self._release_held(before_ns=slot.stamp_ns)
             if slot.reported[self.anchor]:
                 for c in np.flatnonzero(slot.reported):
                     self._streams[c].phases.append(int(slot.stamps_ns[c]) - slot.stamp_ns)
-            out.append(self._count(SyncedFrame(slot.stamp_ns, slot.uv, slot.reported, slot.stamps_ns)))
+            out.append(SyncedFrame(slot.stamp_ns, slot.uv, slot.reported, slot.stamps_ns))
             self._emitted_until = slot.stamp_ns
-        return out
+        out += self._release_held(before_ns=self._slots[0].stamp_ns if self._slots else None)
+        return [frame for frame in out if self._in_order(frame)]
 
-    def _count(self, frame: SyncedFrame) -> SyncedFrame:
+    def _release_held(self, before_ns: int | None) -> list[SyncedFrame]:
+        """The held single images not newer than ``before_ns`` (None: all)."""
+        count = len(self._held) if before_ns is None else sum(f.stamp_ns <= before_ns for f in self._held)
+        released, self._held = self._held[:count], self._held[count:]
+        return released
+
+    def _in_order(self, frame: SyncedFrame) -> bool:
+        """Count an emitted frame; a view not newer than its camera's last emitted one (a rare grouping on a
+        lossy transport) is taken out of it and counted late, so that no camera's stamps ever go backwards
+        from frame to frame. False when nothing is left of the frame."""
+        for c in np.flatnonzero(frame.reported):
+            stream = self._streams[c]
+            stamp = int(frame.stamps_ns[c])
+            if stream.emitted is not None and stamp <= stream.emitted:
+                frame.reported[c] = False
+                frame.uv[c] = np.nan
+                self.stats.late[self.cameras[c]] += 1
+            else:
+                stream.emitted = stamp
+        if not frame.reported.any():
+            return False
         self.stats.frames += 1
         self.stats.complete += int(frame.reported.all())
-        return frame
+        return True
 
 
 def group_by_stamps(

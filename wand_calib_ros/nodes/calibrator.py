@@ -209,9 +209,9 @@ class CalibratorNode(Node):
         self._log(service, response.success, response.message)
         return response
 
-    def calibrate_now(self, source: str) -> bool:
+    def calibrate_now(self, source: str, done: Callable[[bool, str], None] | None = None) -> bool:
         """Start a calibration without a service call (the collector's auto_calibrate), logged under
-        ``source``; False when one is already running."""
+        ``source``, ``done(success, answer)`` called at its end; False when one is already running."""
         if not self._running.acquire(blocking=False):
             return False
 
@@ -221,7 +221,10 @@ class CalibratorNode(Node):
                 self._solve(source, self._calibrate, outcome)
             finally:
                 self._running.release()
-            self._log(source, *(outcome[0] if outcome else (False, STOPPED)))
+            success, answer = outcome[0] if outcome else (False, STOPPED)
+            self._log(source, success, answer)
+            if done is not None:
+                done(success, answer)
 
         self._worker = threading.Thread(target=work, name=source, daemon=True)
         self._worker.start()
@@ -292,7 +295,14 @@ class CalibratorNode(Node):
             new = observations.select_frames(observations.frames > self._calibrated_through)
             if new.frames.size == 0:
                 return False, f"no frames since the last calibration in {path}: wave the wand, then /refine"
-            refined = refine_calibration(self.rig, self.result, new, self.output_dir, intrinsics=self.refine_intrinsics)
+            refined = refine_calibration(
+                self.rig,
+                self.result,
+                new,
+                self.output_dir,
+                intrinsics=self.refine_intrinsics,
+                report=self.write_report,
+            )
         except WandCalibError as error:
             return False, f"refine failed: {error}"
         if refined.result is None or refined.files is None:

@@ -172,9 +172,11 @@ class CollectorNode(Node):
         self.auto = (
             (values["auto_focal_std_percent"], values["auto_principal_std_px"]) if values["auto_calibrate"] else None
         )
-        self.calibrate_now: Callable[[str], bool] | None = None  # the in-process calibrator's, for auto_calibrate
+        #: the in-process calibrator's, for auto_calibrate: (source, when done(success, answer)) -> started
+        self.calibrate_now: Callable[[str, Callable[[bool, str], None]], bool] | None = None
         self.calibrated = False  # a final calibration since the start or the last /reset: estimates stop
-        self._auto_started = False
+        self._auto_state: str | None = None  # auto_calibrate: None (not started), calibrating, failed ...
+        self._auto_round: Estimate | None = None  # the round that started it
         self._moved_logged: dict[str, str] = {}
         wand = WandOptions.for_wand(self.rig.wand)
         self.streams = {c.name: CameraStream(c, wand, max_hold_ns=hold_ns) for c in self.rig.cameras}
@@ -306,18 +308,46 @@ class CollectorNode(Node):
         parent = messages.parent_frame(result, "world", self.frame_ids)
         self.preliminary_markers.publish(markers_message(scene, stamp, parent, preliminary=True))
 
+    def _estimate_feedback(
+        self, now: float, ready: bool, counts: dict[str, dict[str, int | str]], rig_values: dict[str, int | str]
+    ) -> None:
+        """Step the running estimate (publishing and noting a new round), add its diagnostics values,
+        and start auto_calibrate when its conditions hold."""
+        if self.estimates is not None and not self.calibrated:
+            arrived = self.estimates.step(now, self.snapshot)
+            if arrived is not None and arrived.round.result is not None:
+                self._publish_estimate(arrived)
+                history = self.buffer.path.with_name(ESTIMATES_FILE)
+                append_estimate(history, time.time(), arrived.round.frames, arrived.round.result)
+            per_camera, estimate_rig = messages.estimate_values(self.estimates.latest, self.estimates.failure, now)
+            for name, values in per_camera.items():
+                counts.setdefault(name, {}).update(values)
+            rig_values |= estimate_rig
+        started = self._maybe_auto_calibrate(ready)
+        if started is not None:
+            self.get_logger().info(started)
+        if self._auto_state is not None:
+            rig_values["auto_calibrate"] = "calibrated" if self.calibrated else self._auto_state
+
+    def _auto_done(self, success: bool, message: str) -> None:
+        """auto_calibrate's calibration ended (the calibrator's thread): a failure lets a later round retry."""
+        if not success:
+            self._auto_state = f"failed, retrying after the next round: {message}"
+
     def _maybe_auto_calibrate(self, ready: bool) -> str | None:
         """Start the final calibration when auto_calibrate's conditions hold; what it says, if it did."""
-        if self.auto is None or self.calibrated or self._auto_started or self.calibrate_now is None:
+        if self.auto is None or self.calibrated or self.calibrate_now is None or self._auto_state == "calibrating":
             return None
         latest = self.estimates.latest if self.estimates is not None else None
         if not ready or latest is None or latest.round.result is None:
             return None
         if not converged(latest.round.result, *self.auto):
             return None
-        if not self.calibrate_now("auto-calibrate"):
+        if self._auto_state is not None and self._auto_round is latest:  # a failed try: wait for a new round
             return None
-        self._auto_started = True
+        if not self.calibrate_now("auto-calibrate", self._auto_done):
+            return None
+        self._auto_state, self._auto_round = "calibrating", latest
         return (
             f"auto-calibrate: coverage is ready and every camera's focal length is within +-{self.auto[0]:g} % and "
             f"principal point within +-{self.auto[1]:g} px: calibrating"
@@ -353,22 +383,7 @@ class CollectorNode(Node):
             cells = {name: self.coverage.cells[c].copy() for c, name in enumerate(self.rig.camera_names)}
             watch = self.watch
         now = time.monotonic()
-        if self.estimates is not None and not self.calibrated:
-            arrived = self.estimates.step(now, self.snapshot)
-            if arrived is not None and arrived.round.result is not None:
-                self._publish_estimate(arrived)
-                history = self.buffer.path.with_name(ESTIMATES_FILE)
-                append_estimate(history, time.time(), arrived.round.frames, arrived.round.result)
-        if self.estimates is not None and not self.calibrated:
-            per_camera, estimate_rig = messages.estimate_values(self.estimates.latest, self.estimates.failure, now)
-            for name, values in per_camera.items():
-                counts.setdefault(name, {}).update(values)
-            rig_values |= estimate_rig
-        started = self._maybe_auto_calibrate(status.ready)
-        if started is not None:
-            self.get_logger().info(started)
-        if self._auto_started:
-            rig_values["auto_calibrate"] = "calibrated" if self.calibrated else "calibrating"
+        self._estimate_feedback(now, status.ready, counts, rig_values)
         moved = {}
         if watch is not None:
             watch.step()
@@ -414,7 +429,7 @@ class CollectorNode(Node):
                     os.replace(kept, backup_path(kept, "bak"))
             self.floor.lays = 0
             self.coverage = CoverageTracker(self.rig, self.coverage.thresholds)
-            self.calibrated = self._auto_started = False
+            self.calibrated, self._auto_state = False, None
         if self.estimates is not None:  # the next round starts cold on the new buffer
             self.estimates.restart()
         kept = "it was empty" if backup is None else f"backup {backup}"
