@@ -8,9 +8,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wand_calib_ros.core.camera_model import CameraModel, inverse_radius, radius
+from wand_calib_ros.core.gating import ac_length_errors
 from wand_calib_ros.core.geometry import Pose, rotation_error_deg, translation_error
 from wand_calib_ros.core.placements import triangulate_placements
-from wand_calib_ros.core.refine import ac_length_errors
 from wand_calib_ros.core.rig import WandSpec
 
 FloatArray = NDArray[np.float64]

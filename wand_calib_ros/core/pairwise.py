@@ -24,10 +24,10 @@ from wand_calib_ros.core.bundle_adjustment import (
 from wand_calib_ros.core.camera_model import CameraModel, monotonic_limit, unproject
 from wand_calib_ros.core.errors import CoreError, DegenerateDataError, InsufficientDataError
 from wand_calib_ros.core.essential import RelativePose, epipolar_angles, relative_pose
+from wand_calib_ros.core.gating import robust_adjustment
 from wand_calib_ros.core.geometry import Pose, wand_directions
 from wand_calib_ros.core.intrinsics_init import initial_model, lens_candidates
 from wand_calib_ros.core.placements import triangulate_placements
-from wand_calib_ros.core.refine import robust_adjustment
 from wand_calib_ros.core.result import LensTrial
 from wand_calib_ros.core.rig import CameraSpec, WandSpec, spread_subset
 from wand_calib_ros.core.two_markers import match_pair

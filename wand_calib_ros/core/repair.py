@@ -27,9 +27,9 @@ from wand_calib_ros.core.bundle_adjustment import (
 )
 from wand_calib_ros.core.camera_model import N_INTRINSIC, CameraModel
 from wand_calib_ros.core.errors import InsufficientDataError
+from wand_calib_ros.core.gating import robust_adjustment
 from wand_calib_ros.core.geometry import Pose, wand_directions
 from wand_calib_ros.core.placements import triangulate_placements
-from wand_calib_ros.core.refine import robust_adjustment
 from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.core.rig import WandSpec
 

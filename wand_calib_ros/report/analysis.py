@@ -27,9 +27,9 @@ from wand_calib_ros.core.bundle_adjustment import (
 )
 from wand_calib_ros.core.camera_model import CameraModel
 from wand_calib_ros.core.errors import CoreError
+from wand_calib_ros.core.gating import VIEW_GATE_SIGMAS, gate_views
 from wand_calib_ros.core.geometry import Pose, wand_directions
 from wand_calib_ros.core.placements import triangulate_placements
-from wand_calib_ros.core.refine import VIEW_GATE_SIGMAS, gate_views
 from wand_calib_ros.core.rig import RigSpec, WandObservations
 from wand_calib_ros.core.timing import Timeline, align_views, smooth_motion, timeline
 from wand_calib_ros.core.vision_graph import VisionGraph, build_vision_graph, covisibility

@@ -1,0 +1,156 @@
+"""The distortion model's order and the timing parameters the data support: adjust, drop what is not
+significant (sequential Wald tests on k5, k4, k3; the timing's own tests), re-adjust."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wand_calib_ros.core.bundle_adjustment import (
+    N_GEOMETRIC,
+    BundleProblem,
+    BundleResult,
+    BundleState,
+    bundle_adjust,
+    default_free_mask,
+)
+from wand_calib_ros.core.camera_model import (
+    N_INTRINSIC,
+    CameraModel,
+    turns_over_in_image,
+)
+from wand_calib_ros.core.errors import ModelError
+from wand_calib_ros.core.rig import CameraSpec, RigSpec
+from wand_calib_ros.core.timing import (
+    ClockModel,
+    reduce_timing,
+)
+
+FloatArray = NDArray[np.float64]
+log = logging.getLogger(__name__)
+
+#: The highest free radial coefficient is fixed to zero while |k| / std(k) is below this (Wald test).
+SIGNIFICANCE = 2.0
+
+
+@dataclass(frozen=True, eq=False)
+class FixedParameters:
+    """Radial coefficients held at zero per camera (indices into k1..k5), and the timing estimated.
+
+    Attributes:
+        per_camera: per camera the fixed radial indices.
+        timing: (C, 2) whether each camera's time offset and readout time are estimated.
+        held: (C,) cameras whose given intrinsics are held fixed (all seven).
+    """
+
+    per_camera: tuple[tuple[int, ...], ...]
+    timing: NDArray[np.bool_]
+    held: NDArray[np.bool_]
+
+
+def held_intrinsics(rig: RigSpec) -> NDArray[np.bool_]:
+    """(C,) cameras of the rig whose intrinsics are given and held fixed."""
+    return np.array([spec.holds_intrinsics for spec in rig.cameras], dtype=bool)
+
+
+def free_mask(n_cameras: int, reference: int, fixed: FixedParameters) -> NDArray[np.bool_]:
+    free = default_free_mask(n_cameras, reference)
+    for camera, indices in enumerate(fixed.per_camera):
+        free[camera, list(indices)] = False
+    free[fixed.held, :N_INTRINSIC] = False
+    free[:, N_GEOMETRIC:] = fixed.timing
+    return free
+
+
+def zero_fixed(models: tuple[CameraModel, ...], fixed: FixedParameters) -> tuple[CameraModel, ...]:
+    out = []
+    for model, indices in zip(models, fixed.per_camera, strict=True):
+        vector = model.intrinsic_vector()
+        vector[list(indices)] = 0.0
+        out.append(model.with_intrinsic_vector(vector))
+    return tuple(out)
+
+
+def adjust_with_model_selection(
+    rig: RigSpec, uv: FloatArray, initial: BundleState, reference: int, clocks: ClockModel, used: NDArray[np.int64]
+) -> tuple[BundleResult, FixedParameters]:
+    """Bundle-adjust with every k3..k5 (and the timing) free, then drop what the data do not support and re-adjust.
+
+    Per camera the highest free coefficient among k3..k5 is fixed to zero while it
+    is insignificant (|k| < SIGNIFICANCE sigma) or makes r(theta) turn over inside
+    the image. The decisions are made on the linearised problem: fixing k_h = 0
+    moves the other parameters to their conditional mean
+    ``x - cov[:, h] / cov[h, h] * x[h]`` and shrinks the covariance accordingly, so
+    one re-adjustment (from that better start) usually settles the model. Time
+    offsets and readout times under ``auto`` are kept only when significant
+    (:func:`wand_calib_ros.core.timing.reduce_timing`).
+
+    Args:
+        uv: (P, C, 3, 2) the placements to adjust, ``used`` (P,) their indices in the timeline.
+    """
+    problem = BundleProblem.from_dense(rig.wand, uv, clocks.placements(used))
+    fixed = FixedParameters(tuple(() for _ in rig.cameras), clocks.free.copy(), held_intrinsics(rig))
+    start = initial
+    while True:
+        result = bundle_adjust(start, problem, free_mask(len(rig.cameras), reference, fixed))
+        log.info("bundle adjustment: %d iterations, sigma %.3f px", result.iterations, result.sigma)
+        per_camera = list(fixed.per_camera)
+        models = list(result.state.models)
+        for c, spec in enumerate(rig.cameras):
+            if not fixed.held[c]:  # given intrinsics held fixed have no model order to decide
+                per_camera[c], models[c] = reduce_radial(spec, result, c, per_camera[c])
+        timing = reduce_timing(clocks, result, fixed.timing)
+        if tuple(per_camera) == fixed.per_camera and np.array_equal(timing, fixed.timing):
+            return result, fixed
+        state = result.state
+        values = state.camera_timing.copy()
+        values[fixed.timing & ~timing] = clocks.start[fixed.timing & ~timing]
+        fixed = FixedParameters(tuple(per_camera), timing, fixed.held)
+        start = BundleState(zero_fixed(tuple(models), fixed), state.poses, state.wand_a, state.wand_direction, values)
+
+
+def reduce_radial(
+    spec: CameraSpec, result: BundleResult, camera: int, fixed: tuple[int, ...]
+) -> tuple[tuple[int, ...], CameraModel]:
+    """Sequential Wald tests on k5, k4, k3 of one camera (see adjust_with_model_selection).
+
+    Returns:
+        The camera's fixed radial indices and its intrinsics moved to the conditional estimate.
+    """
+    model = result.state.models[camera]
+    estimate = model.intrinsic_vector()
+    covariance = result.camera_block(camera, slice(0, 7)).copy()
+    fixed_now = list(fixed)
+    for highest in (4, 3, 2):
+        if highest in fixed_now:
+            continue
+        variance = covariance[highest, highest]
+        significance = abs(estimate[highest]) / np.sqrt(variance) if variance > 0 else 0.0
+        current = model.with_intrinsic_vector(estimate)
+        if turns_over_in_image(current, spec.max_view_angle):
+            log.info("%s: r(theta) turns over inside the image with k%d free: fixed to 0", spec.name, highest + 1)
+        elif significance < SIGNIFICANCE:
+            log.info(
+                "%s: k%d = %.3g is not significant (%.1f sigma): fixed to 0",
+                spec.name,
+                highest + 1,
+                estimate[highest],
+                significance,
+            )
+        else:
+            break
+        if variance > 0:
+            gain = covariance[:, highest] / variance
+            estimate = estimate - gain * estimate[highest]
+            covariance = covariance - np.outer(gain, covariance[highest])
+        estimate[highest] = 0.0
+        fixed_now.append(highest)
+    try:
+        return tuple(fixed_now), model.with_intrinsic_vector(estimate)
+    except ModelError:  # the linearised shift leaves the camera model (k1 <= 0): re-adjust from the zeros instead
+        vector = model.intrinsic_vector()
+        vector[fixed_now] = 0.0
+        return tuple(fixed_now), model.with_intrinsic_vector(vector)
