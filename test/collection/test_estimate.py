@@ -105,3 +105,23 @@ def test_the_worker_process_computes_rounds_and_goes_away_on_close() -> None:
     finally:
         estimates.close()
     assert not process.is_alive()
+
+
+def test_a_worker_that_dies_is_replaced_without_an_error_in_the_node() -> None:
+    scenario, observations = _take("paper3", 6, 20.0)
+    estimates = RunningEstimate(scenario.rig, CalibrationOptions(), period_s=0.2)
+    try:
+        assert estimates.step(time.monotonic(), lambda: observations) is None  # the first round starts
+        first = estimates._process
+        assert first is not None
+        first.kill()
+        first.join(5)
+        deadline = time.monotonic() + 60
+        arrived = None
+        while arrived is None and time.monotonic() < deadline:
+            arrived = estimates.step(time.monotonic(), lambda: observations)  # never raises
+            time.sleep(0.05)
+        assert arrived is not None and arrived.round.result is not None
+        assert estimates._process is not None and estimates._process is not first
+    finally:
+        estimates.close()

@@ -170,9 +170,13 @@ class RunningEstimate:
 
     def _step(self, now: float, snapshot: Callable[[], WandObservations]) -> Estimate | None:
         arrived = None
-        if self._busy and self._connection is not None and self._connection.poll():
-            done: Round = self._connection.recv()
-            self._busy = False
+        try:
+            done = self._finished()
+        except (EOFError, OSError):  # the worker died (killed, out of memory): the next round starts a new one
+            self._stop_worker()
+            self.failure = "the running estimate's worker process stopped; starting a new one"
+            done = None
+        if done is not None:
             if done.result is None:
                 self.failure = done.failure
             else:
@@ -186,9 +190,21 @@ class RunningEstimate:
             if chosen is not None:
                 warm = self.latest.round.result if self.latest is not None and self.failure is None else None
                 options = replace(self.options, start=warm)
-                self._start_worker().send((self.rig, chosen, options, frames))
-                self._busy, self._started = True, now
+                try:
+                    self._start_worker().send((self.rig, chosen, options, frames))
+                    self._busy = True
+                except OSError:  # a broken pipe: the worker died between rounds
+                    self._stop_worker()
+                self._started = now
         return arrived
+
+    def _finished(self) -> Round | None:
+        """The round the worker finished, if any (EOFError, OSError: it died)."""
+        if not self._busy or self._connection is None or not self._connection.poll():
+            return None
+        done: Round = self._connection.recv()
+        self._busy = False
+        return done
 
     def restart(self) -> None:
         """Forget every round (a new buffer): the worker stops, the next round starts cold."""
