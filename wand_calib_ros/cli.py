@@ -576,7 +576,7 @@ def _export(args: argparse.Namespace) -> int:
 
 
 def _refine(args: argparse.Namespace) -> int:
-    from wand_calib_ros.core.repair import judge_moved, repair, since_move
+    from wand_calib_ros.core.repair import judge_moved, repair_moved
     from wand_calib_ros.io.result_yaml import with_cameras_replaced, write_yaml
     from wand_calib_ros.io.text import read_yaml
 
@@ -606,9 +606,9 @@ def _refine(args: argparse.Namespace) -> int:
             raise WandCalibError(f"--moved: {', '.join(unknown)} not in the rig ({', '.join(names)})")
         moved = tuple(names.index(n.strip()) for n in args.moved.split(","))
     check_writable([args.output])
-    first = since_move(models, poses, rig.wand, sigma, observations.uv, moved) if np.isfinite(sigma) else 0
-    uv = observations.uv[first:]
-    fixed = repair(models, poses, rig.wand, uv, moved, intrinsics=args.with_intrinsics, names=names)
+    first, fixed = repair_moved(
+        models, poses, rig.wand, sigma, observations.uv, moved, intrinsics=args.with_intrinsics, names=names
+    )
     updates = {
         names[c]: (fixed.models[c], fixed.poses[c], float(fixed.rms_px[c]), fixed.parameter_std(c)) for c in moved
     }

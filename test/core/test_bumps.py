@@ -16,7 +16,8 @@ from wand_calib_ros.core.bumps import BumpMonitor, calibration_levels
 from wand_calib_ros.core.geometry import Pose
 from wand_calib_ros.core.metrics import camera_errors
 from wand_calib_ros.core.pipeline import calibrate
-from wand_calib_ros.core.repair import repair, since_move
+from wand_calib_ros.core.repair import Repair, repair, since_move
+from wand_calib_ros.core.rig import WandObservations
 from wand_calib_ros.sim.scenarios import Scenario, paper_three_camera_scenario, simulate
 
 FPS = 30
@@ -40,6 +41,15 @@ def _bumped(scenario: Scenario, kind: str) -> Scenario:
         pose = Pose(camera.pose.rotation, camera.pose.translation + np.array([20.0, 0.0, 0.0]))
     cameras[1] = replace(camera, pose=pose)
     return replace(scenario, cameras=tuple(cameras))
+
+
+def _against_recalibration(fixed: Repair, bumped: Scenario, views: WandObservations) -> tuple[list[float], list[float]]:
+    """cam1's E_r (deg) and E_t (%) against the truth: repaired, and recalibrated in full from ``views``."""
+    truth = bumped.cameras[1]
+    mine = camera_errors(fixed.models[1], fixed.poses[1], truth.model, truth.pose)
+    full_models, full_poses = in_truth_frame(calibrate(bumped.rig, views), bumped)
+    full = camera_errors(full_models[1], full_poses[1], truth.model, truth.pose)
+    return [mine.rotation_deg, 100 * mine.translation], [full.rotation_deg, 100 * full.translation]
 
 
 def test_an_untouched_rig_raises_no_alarm_over_five_minutes_of_waving() -> None:
@@ -72,12 +82,9 @@ def test_a_bumped_camera_is_named_within_three_seconds_and_repaired(kind: str) -
         start = time.perf_counter()
         fixed = repair(models, poses, scenario.wand, views.uv, (1,))
         assert time.perf_counter() - start < 1.0  # the paper rig's size: well under a second
-        truth = bumped.cameras[1]
-        mine = camera_errors(fixed.models[1], fixed.poses[1], truth.model, truth.pose)
-        full_models, full_poses = in_truth_frame(calibrate(bumped.rig, views), bumped)
-        full = camera_errors(full_models[1], full_poses[1], truth.model, truth.pose)
-        repaired += [mine.rotation_deg, 100 * mine.translation]
-        recalibrated += [full.rotation_deg, 100 * full.translation]
+        mine, full = _against_recalibration(fixed, bumped, views)
+        repaired += mine
+        recalibrated += full
         for c in (0, 2):  # the others held as calibrated
             assert np.array_equal(fixed.poses[c].rotation, poses[c].rotation)
             assert np.array_equal(fixed.poses[c].translation, poses[c].translation)
@@ -104,12 +111,9 @@ def test_the_views_after_the_move_are_told_from_those_before(kind: str) -> None:
         assert since_move(models, poses, scenario.wand, 1.0, before, (1,)) == 0  # no evidence of a move
         # What /refine does with them: as good as a full recalibration on the frames after the move.
         fixed = repair(models, poses, scenario.wand, both[first:], (1,))
-        truth = bumped.cameras[1]
-        mine = camera_errors(fixed.models[1], fixed.poses[1], truth.model, truth.pose)
-        full_models, full_poses = in_truth_frame(calibrate(bumped.rig, after), bumped)
-        full = camera_errors(full_models[1], full_poses[1], truth.model, truth.pose)
-        repaired += [mine.rotation_deg, 100 * mine.translation]
-        recalibrated += [full.rotation_deg, 100 * full.translation]
+        mine, full = _against_recalibration(fixed, bumped, after)
+        repaired += mine
+        recalibrated += full
     assert rms(misplaced) <= 4.0, misplaced  # frames of 150
     assert rms(repaired) <= 1.5 * rms(recalibrated), (repaired, recalibrated)
 

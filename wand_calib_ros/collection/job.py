@@ -17,7 +17,7 @@ from wand_calib_ros.collection.coverage import CoverageStatus, CoverageThreshold
 from wand_calib_ros.collection.errors import CoverageError
 from wand_calib_ros.core.pipeline import CalibrationOptions, calibrate
 from wand_calib_ros.core.quality import judge, noise_wand_error
-from wand_calib_ros.core.repair import judge_moved, repair, repaired_result, since_move
+from wand_calib_ros.core.repair import judge_moved, repair_moved, repaired_result
 from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.core.rig import RigSpec, WandObservations
 from wand_calib_ros.errors import WandCalibError
@@ -157,24 +157,22 @@ def refine_calibration(
     moved, lines = judge_moved(names, models, poses, rig.wand, result.sigma_px, new.uv)
     if not moved:
         return Refinement(None, (), (), 0, None)
-    first = since_move(models, poses, rig.wand, result.sigma_px, new.uv, moved)
-    fixed = repair(models, poses, rig.wand, new.uv[first:], moved, intrinsics=intrinsics, names=names)
+    first, fixed = repair_moved(
+        models, poses, rig.wand, result.sigma_px, new.uv, moved, intrinsics=intrinsics, names=names
+    )
+    after = new.select_frames(np.arange(first, new.frames.size))
     note = (
         f"{', '.join(names[c] for c in moved)} re-estimated by /refine from frames {int(new.frames[first])}.."
         f"{int(new.frames[-1])} ({fixed.placements} placements; every other camera as calibrated)"
     )
     repaired = repaired_result(result, fixed, names, note)
-    repaired = replace(repaired, quality=judge(repaired, noise_wand_error(repaired, names, new.uv[first:])))
+    repaired = replace(repaired, quality=judge(repaired, noise_wand_error(repaired, names, after.uv)))
     result_path = output_dir / "result.yaml"
     check_writable(calibration_paths(names, result_path, output_dir / "camera_info"))
     infos = tuple(write_calibration(repaired, result_path, output_dir / "camera_info")[1:])
-    report_path = (
-        _write_report(rig, new.select_frames(np.arange(first, new.frames.size)), result_path, output_dir)
-        if report
-        else None
-    )
+    report_path = _write_report(rig, after, result_path, output_dir) if report else None
     files = CalibrationFiles(result_path, infos, report_path)
-    return Refinement(repaired, tuple(names[c] for c in moved), tuple(lines), int(new.frames.size - first), files)
+    return Refinement(repaired, tuple(names[c] for c in moved), tuple(lines), int(after.frames.size), files)
 
 
 def summary(result: CalibrationResult, files: CalibrationFiles) -> str:

@@ -3,7 +3,6 @@ plain-language warnings on what the data leave weak, the wand-length statistics,
 
 from __future__ import annotations
 
-import logging
 from dataclasses import replace
 
 import numpy as np
@@ -31,7 +30,6 @@ from wand_calib_ros.core.timing import (
 )
 
 FloatArray = NDArray[np.float64]
-log = logging.getLogger(__name__)
 
 #: Image coverage: grid cells per side and the fraction that should see the wand.
 COVERAGE_GRID = 8

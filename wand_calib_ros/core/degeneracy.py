@@ -3,8 +3,6 @@ a camera left with too few views, intrinsics the data leave undetermined."""
 
 from __future__ import annotations
 
-import logging
-
 import numpy as np
 from numpy.typing import NDArray
 
@@ -15,7 +13,6 @@ from wand_calib_ros.core.errors import DegenerateDataError, InsufficientDataErro
 from wand_calib_ros.core.rig import RigSpec
 
 FloatArray = NDArray[np.float64]
-log = logging.getLogger(__name__)
 
 #: Wand points whose second (third) principal spread is below this fraction of the first lie on a line (plane).
 DEGENERATE_SPREAD = 0.03

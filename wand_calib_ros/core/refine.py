@@ -70,8 +70,6 @@ COARSE_PLACEMENTS = 1500
 #: The final adjustment refits the wand's motion and adjusts again, at most MOTION_ROUNDS times in all,
 #: while an adjustment moves a timing parameter by more than MOTION_SETTLED standard deviations.
 MOTION_ROUNDS = 3
-
-
 MOTION_SETTLED = 1.0
 
 

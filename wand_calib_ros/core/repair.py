@@ -178,6 +178,24 @@ def repair(
     return Repair(models, poses, tuple(moved), rms, result.camera_std, int(rows.size), lengths)
 
 
+def repair_moved(
+    models: tuple[CameraModel, ...],
+    poses: tuple[Pose, ...],
+    wand: WandSpec,
+    sigma_px: float,
+    uv: FloatArray,
+    moved: tuple[int, ...],
+    *,
+    intrinsics: bool = False,
+    names: tuple[str, ...] | None = None,
+) -> tuple[int, Repair]:
+    """:func:`repair` from the views after the move: the first frame of ``uv`` (F, C, K, 2, in time order)
+    taken after it (:func:`since_move`; 0 when the calibration's noise ``sigma_px`` is unknown) and the
+    repair from there."""
+    first = since_move(models, poses, wand, sigma_px, uv, moved) if np.isfinite(sigma_px) else 0
+    return first, repair(models, poses, wand, uv[first:], moved, intrinsics=intrinsics, names=names)
+
+
 def repaired_result(result: CalibrationResult, fixed: Repair, names: tuple[str, ...], note: str) -> CalibrationResult:
     """``result`` with the cameras ``fixed`` re-estimated replaced (model, pose, RMS on the new views, the
     re-estimated parameters' standard deviations), the wand-length statistics of the new views, ``note``

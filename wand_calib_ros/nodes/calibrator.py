@@ -56,6 +56,7 @@ from wand_calib_ros.collection.floor import FLOOR_FILE, read_floor_frames
 from wand_calib_ros.collection.job import CalibrationFiles, refine_calibration, run_calibration, summary
 from wand_calib_ros.core.pipeline import CalibrationOptions
 from wand_calib_ros.core.result import CalibrationResult
+from wand_calib_ros.core.rig import WandObservations
 from wand_calib_ros.core.rig_scene import rig_scene
 from wand_calib_ros.core.timing import TIMING_MODES
 from wand_calib_ros.errors import WandCalibError
@@ -263,9 +264,7 @@ class CalibratorNode(Node):
         if not path.exists() or not has_rows(path):
             return False, f"nothing collected yet in {path}: is the collector running and the wand in view?"
         try:
-            observations = read_observations(
-                path, self.rig.camera_names, image_sizes=self.rig.image_sizes, labels=self.rig.wand.labels
-            )
+            observations = self._read_buffer(path)
             self.get_logger().info(f"calibrating {observations.uv.shape[0]} frames of {path}")
             floor = read_floor_frames(self.output_dir / FLOOR_FILE)  # from the collector's /set_floor
             result, files = run_calibration(
@@ -282,6 +281,12 @@ class CalibratorNode(Node):
         self.result, self._calibrated_through = result, int(observations.frames.max())
         return self._publish(result, files, observations.uv, "calibrated", ())
 
+    def _read_buffer(self, path: Path) -> WandObservations:
+        """The collector's buffer file as the rig's observations (FormatError naming the file and row)."""
+        return read_observations(
+            path, self.rig.camera_names, image_sizes=self.rig.image_sizes, labels=self.rig.wand.labels
+        )
+
     def _refine(self) -> tuple[bool, str]:
         if self.result is None:
             return False, "nothing to refine: no /calibrate since this node started (offline: wand-calib refine)"
@@ -289,9 +294,7 @@ class CalibratorNode(Node):
             self.before_calibrate()
         path = self.output_dir / BUFFER_FILE
         try:
-            observations = read_observations(
-                path, self.rig.camera_names, image_sizes=self.rig.image_sizes, labels=self.rig.wand.labels
-            )
+            observations = self._read_buffer(path)
             new = observations.select_frames(observations.frames > self._calibrated_through)
             if new.frames.size == 0:
                 return False, f"no frames since the last calibration in {path}: wave the wand, then /refine"

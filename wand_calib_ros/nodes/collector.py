@@ -303,6 +303,7 @@ class CollectorNode(Node):
         for name in self.rig.camera_names:
             frame = self.frame_ids[name]
             self.preliminary_info[name].publish(messages.camera_info_message(result, name, stamp, frame))
+            # the rounds fit no floor: the poses are the reference camera's, "world" is never their parent
             transform = messages.extrinsics_message(result, name, stamp, "world", self.frame_ids)
             self.preliminary_extrinsics[name].publish(transform)
         parent = messages.parent_frame(result, "world", self.frame_ids)
