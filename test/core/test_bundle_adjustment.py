@@ -12,7 +12,11 @@ from wand_calib_ros.core.bundle_adjustment import (
     BundleState,
     PlacementTiming,
     _apply_step,
+    _huber_weights,
     _linearise,
+    _normal_equations,
+    _reduced_system,
+    _structure,
     bundle_adjust,
     default_free_mask,
     residuals,
@@ -38,10 +42,11 @@ def test_residuals_vanish_at_the_truth_without_noise() -> None:
     assert np.max(np.abs(residuals(state, problem))) < 1e-9
 
 
-def _with_timing(scenario, data, state, seed: int):  # type: ignore[no-untyped-def]
-    """The same views seen at random instants around their placements, the wand moving."""
+def _with_timing(scenario, data, state, seed: int, uv=None):  # type: ignore[no-untyped-def]
+    """The same views (``uv``, default the data's) seen at random instants around their placements, the wand moving."""
     rng = np.random.default_rng(seed)
-    n_placements, n_cameras = data.observations.uv.shape[:2]
+    uv = data.observations.uv if uv is None else uv
+    n_placements, n_cameras = uv.shape[:2]
     timing = PlacementTiming(
         rng.uniform(-0.02, 0.02, (n_placements, n_cameras)),
         np.array([c.spec.image_size[1] for c in scenario.cameras], dtype=float),
@@ -49,8 +54,10 @@ def _with_timing(scenario, data, state, seed: int):  # type: ignore[no-untyped-d
         rng.normal(scale=5000.0, size=(n_placements, 3, 3)),
         rng.normal(scale=50000.0, size=(n_placements, 3, 3)),
     )
-    timed = BundleState(state.models, state.poses, state.wand_a, state.wand_direction, rng.normal(0.004, 0.003, (3, 2)))
-    return timed, BundleProblem.from_dense(scenario.wand, data.observations.uv, timing)
+    timed = BundleState(
+        state.models, state.poses, state.wand_a, state.wand_direction, rng.normal(0.004, 0.003, (n_cameras, 2))
+    )
+    return timed, BundleProblem.from_dense(scenario.wand, uv, timing)
 
 
 def test_jacobians_match_finite_differences() -> None:
@@ -77,6 +84,44 @@ def test_jacobians_match_finite_differences() -> None:
             - residuals(_apply_step(state, np.zeros((3, 15)), -delta, every), problem)
         ) / (2 * h)
         assert np.allclose(jp[:, :, j], numeric, atol=1e-5)
+
+
+def test_sparse_normal_equations_and_schur_complement_match_the_dense_jacobian() -> None:
+    # Three cameras, each view missing with probability 0.3 (placements seen by two or three), Huber
+    # weights on some residuals, a timing column: the sparse sums and the chunked Schur complement
+    # against J^T W J and its dense elimination.
+    scenario, data, state, _ = _setup(1.0, 300, 4, n_cameras=3)
+    uv = data.observations.uv.copy()
+    rng = np.random.default_rng(5)
+    uv[rng.random(uv.shape[:2]) < 0.3] = np.nan
+    seen = np.all(np.isfinite(uv), axis=(2, 3)).sum(axis=1) >= 2
+    state = BundleState(state.models, state.poses, data.wand_a[seen], data.wand_direction[seen])
+    state, problem = _with_timing(scenario, data, state, 6, uv[seen])
+    every = np.array([TIME_OFFSET])
+    res, jc, jp = _linearise(state, problem, timing=every)
+    weights = _huber_weights(res, 1.5)
+    assert 0 < np.sum(weights < 1) < weights.size
+    structure = _structure(problem, jc.shape[2])
+    assert len(structure.schur_chunks) > 1
+    u, v, w, gc, gp = _normal_equations(res, jc, jp, weights, structure, 3)
+    s, rhs, _ = _reduced_system(u, v, w, gc, gp, structure, 3)
+
+    m, k, n_p = problem.n_observations, jc.shape[2], problem.n_placements
+    dense = np.zeros((m, 2, 3 * k + 5 * n_p))
+    rows = np.arange(m)
+    for i in range(k):
+        dense[rows, :, problem.camera * k + i] = jc[:, :, i]
+    for j in range(5):
+        dense[rows, :, 3 * k + problem.placement * 5 + j] = jp[:, :, j]
+    dense = dense.reshape(2 * m, -1)
+    root = np.repeat(np.sqrt(weights), 2)
+    jtj = (dense * root[:, None] ** 2).T @ dense
+    g = -(dense * root[:, None] ** 2).T @ res.reshape(-1)
+    a, b, d = jtj[: 3 * k, : 3 * k], jtj[: 3 * k, 3 * k :], jtj[3 * k :, 3 * k :]
+    d_inv = np.linalg.inv(d)
+    scale = np.max(np.abs(a))
+    assert np.allclose(s, a - b @ d_inv @ b.T, atol=1e-9 * scale)
+    assert np.allclose(rhs, g[: 3 * k] - b @ d_inv @ g[3 * k :], atol=1e-9 * np.max(np.abs(g)))
 
 
 def test_recovers_the_truth_from_a_perturbed_start_without_noise() -> None:

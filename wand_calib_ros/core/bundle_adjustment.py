@@ -27,11 +27,11 @@ complement needs is computed once).
 
 from __future__ import annotations
 
+import itertools
 import logging
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
 import scipy.sparse
 from numpy.typing import NDArray
 
@@ -338,29 +338,86 @@ def _apply_step(state: BundleState, delta_c: FloatArray, delta_p: FloatArray, ti
 
 @dataclass(frozen=True, eq=False)
 class _Structure:
-    """Index structure of the Schur complement, computed once per problem.
+    """Index structure of the normal equations and the Schur complement, computed once per adjustment.
 
-    A block is one (placement, camera) pair; observations are sorted by block.
-    Sums over observations, blocks and placements are products with sparse
-    0/1 indicator matrices (much faster than ``np.add.reduceat`` on 3D arrays).
+    A block is one (placement, camera) pair. Every sum over observations is the product of a sparse
+    matrix whose nonzeros are the Jacobian entries themselves (the Jacobian array is its data, in place)
+    with a dense Jacobian: one C loop over the nonzeros instead of a stack of tiny matrix products.
     """
 
     block_camera: IntArray  # (B,)
-    block_placement: IntArray  # (B,)
+    block_placement: IntArray  # (B,) non-decreasing
     placement_block_starts: IntArray  # (P,) first block of each placement
-    observations_of_camera: tuple[IntArray, ...]  # per camera, its observation indices
-    obs_to_block: scipy.sparse.csr_matrix  # (B, M)
-    obs_to_placement: scipy.sparse.csr_matrix  # (P, M)
-    block_to_placement: scipy.sparse.csr_matrix  # (P, B)
-    block_to_camera: scipy.sparse.csr_matrix  # (C, B)
+    block_to_camera: scipy.sparse.csr_matrix  # (C, B) sums blocks into their camera
+    schur_chunks: tuple[_SchurChunk, ...]  # placements with similar cameras, for S = U - Z Z^T
+    width: int  # camera parameters carried: 13 + timing ones
+    # CSC layouts of (rows x params) -> (params x rows) scatter matrices, data filled per iteration:
+    # row r (of the 2M residual rows) with parameter j goes to output row index[r * n + j].
+    by_block: NDArray[np.int32]  # (2M * 5,) 5 * block + j
+    by_placement: NDArray[np.int32]  # (2M * 5,) 5 * placement + j
+    by_camera: NDArray[np.int32]  # (2M * width,) width * camera + j
 
 
-def _indicator(rows: IntArray, n_rows: int) -> scipy.sparse.csr_matrix:
-    """(n_rows, len(rows)) matrix summing columns into their row."""
-    return scipy.sparse.csr_matrix((np.ones(rows.size), (rows, np.arange(rows.size))), shape=(n_rows, rows.size))
+@dataclass(frozen=True, eq=False)
+class _SchurChunk:
+    """Placements accumulated into the Schur complement together, and the cameras they are seen by.
+
+    Attributes:
+        n_placements: placements in the chunk (n).
+        blocks: (b,) their blocks.
+        position: (b,) each block's row in the chunk's dense (n * u, 5, K) array: placement-major.
+        cameras: (u,) the cameras seeing them, ascending.
+    """
+
+    n_placements: int
+    blocks: IntArray
+    position: IntArray
+    cameras: IntArray
 
 
-def _structure(problem: BundleProblem) -> _Structure:
+#: Placements per Schur chunk: small enough that a chunk's placements share most of their cameras
+#: once sorted by which cameras see them, large enough for one BLAS product to pay.
+_SCHUR_CHUNK = 128
+
+
+def _schur_chunks(block_camera: IntArray, block_placement: IntArray, n_cameras: int) -> tuple[_SchurChunk, ...]:
+    """Placements sorted by the set of cameras seeing them (lexicographically), cut into chunks."""
+    n_placements = int(block_placement[-1]) + 1
+    seen = np.zeros((n_placements, n_cameras), dtype=bool)
+    seen[block_placement, block_camera] = True
+    rank = np.empty(n_placements, dtype=np.int64)
+    rank[np.lexsort(seen[:, ::-1].T)] = np.arange(n_placements)
+    block_rank = rank[block_placement]
+    order = np.argsort(block_rank, kind="stable")
+    bounds = np.searchsorted(block_rank[order], np.arange(0, n_placements + _SCHUR_CHUNK, _SCHUR_CHUNK))
+    chunks = []
+    for i, (first, last) in enumerate(itertools.pairwise(bounds)):
+        if first == last:
+            continue
+        blocks = order[first:last]
+        cameras, local = np.unique(block_camera[blocks], return_inverse=True)
+        n = int(block_rank[blocks[-1]] - i * _SCHUR_CHUNK + 1)
+        chunks.append(_SchurChunk(n, blocks, (block_rank[blocks] - i * _SCHUR_CHUNK) * cameras.size + local, cameras))
+    return tuple(chunks)
+
+
+def _scatter(index: NDArray[np.int32], data: FloatArray, n_out: int) -> scipy.sparse.csc_matrix:
+    """(n_out, R) sparse matrix whose column r holds ``data[r]`` (R, n) at rows ``index[r * n : r * n + n]``."""
+    n_rows, n = data.shape
+    indptr = np.arange(0, n_rows * n + 1, n, dtype=np.int32)
+    matrix = scipy.sparse.csc_matrix((n_out, n_rows))
+    matrix.data, matrix.indices, matrix.indptr = data.reshape(-1), index, indptr  # trusted: no format check
+    return matrix
+
+
+def _spread(rows: IntArray, n: int) -> NDArray[np.int32]:
+    """(2M * n,) output rows ``n * rows[r] + j`` for each residual row r (two per observation) and j < n."""
+    per_row = np.repeat(rows, 2)
+    return (n * per_row[:, None] + np.arange(n)).reshape(-1).astype(np.int32)
+
+
+def _structure(problem: BundleProblem, width: int) -> _Structure:
+    """The index structure of ``problem`` with ``width`` camera parameters carried (0: placements only)."""
     order_key = problem.placement * problem.n_cameras + problem.camera
     if np.any(np.diff(order_key) < 0):
         raise ValueError("observations must be sorted by placement, then camera")
@@ -370,15 +427,19 @@ def _structure(problem: BundleProblem) -> _Structure:
     if np.unique(block_placement).size != problem.n_placements:
         raise CalibrationFailedError("a placement has no observation")
     c, p, b = problem.n_cameras, problem.n_placements, keys.size
+    if 2 * problem.n_observations * max(width, N_PLACEMENT_PARAMS) >= np.iinfo(np.int32).max:
+        raise CalibrationFailedError(f"{problem.n_observations} observations: more than one adjustment can hold")
+    cameras = width > 0
     return _Structure(
         block_camera,
         block_placement,
         np.searchsorted(block_placement, np.arange(p)),
-        tuple(np.flatnonzero(problem.camera == i) for i in range(c)),
-        _indicator(block_of_obs, b),
-        _indicator(problem.placement, p),
-        _indicator(block_placement, p),
-        _indicator(block_camera, c),
+        scipy.sparse.csr_matrix((np.ones(b), (block_camera, np.arange(b))), shape=(c, b)),
+        _schur_chunks(block_camera, block_placement, c) if cameras else (),
+        width,
+        _spread(block_of_obs, N_PLACEMENT_PARAMS if cameras else 0),
+        _spread(problem.placement, N_PLACEMENT_PARAMS),
+        _spread(problem.camera, width),
     )
 
 
@@ -406,20 +467,21 @@ def _normal_equations(
     if not np.all(weights == 1.0):
         root = np.sqrt(weights)[:, None, None]
         jc, jp, res = jc * root[: jc.shape[0]], jp * root, res * root[:, :, 0]
-    m = res.shape[0]
-    jp_t = jp.transpose(0, 2, 1)
-    v = (structure.obs_to_placement @ (jp_t @ jp).reshape(m, -1)).reshape(-1, 5, 5)
-    gp = -(structure.obs_to_placement @ (jp_t @ res[..., None])[..., 0])
+    rows = 2 * res.shape[0]
+    jp_rows, res_rows = jp.reshape(rows, N_PLACEMENT_PARAMS), res.reshape(rows)
+    n_placements = int(structure.placement_block_starts.size)
+    to_placement = _scatter(structure.by_placement, jp_rows, N_PLACEMENT_PARAMS * n_placements)
+    v = (to_placement @ jp_rows).reshape(-1, N_PLACEMENT_PARAMS, N_PLACEMENT_PARAMS)
+    gp = -(to_placement @ res_rows).reshape(-1, N_PLACEMENT_PARAMS)
     if jc.shape[0] == 0:  # placements only
         return np.empty((0,)), v, np.empty((0,)), np.empty((0,)), gp
     width = jc.shape[2]
-    u = np.empty((n_cameras, width, width))
-    gc = np.empty((n_cameras, width))
-    for c in range(n_cameras):
-        rows = jc[structure.observations_of_camera[c]].reshape(-1, width)
-        u[c] = rows.T @ rows
-        gc[c] = -(rows.T @ res[structure.observations_of_camera[c]].reshape(-1))
-    w = (structure.obs_to_block @ (jc.transpose(0, 2, 1) @ jp).reshape(m, -1)).reshape(-1, width, 5)
+    jc_rows = jc.reshape(rows, width)
+    to_camera = _scatter(structure.by_camera, jc_rows, width * n_cameras)
+    u = (to_camera @ jc_rows).reshape(n_cameras, width, width)
+    gc = -(to_camera @ res_rows).reshape(n_cameras, width)
+    to_block = _scatter(structure.by_block, jp_rows, N_PLACEMENT_PARAMS * structure.block_camera.size)
+    w = (to_block @ jc_rows).reshape(-1, N_PLACEMENT_PARAMS, width).transpose(0, 2, 1)
     return u, v, w, gc, gp
 
 
@@ -434,10 +496,6 @@ def _inverse_and_root(v: FloatArray) -> tuple[FloatArray, FloatArray]:
         return v_inv, vectors * np.sqrt(np.clip(values, 0.0, None))[:, None, :]
 
 
-#: Placements per chunk when the Schur complement is accumulated (bounds memory to ~C*13*5*chunk doubles).
-_SCHUR_CHUNK = 4000
-
-
 def _reduced_system(
     u: FloatArray,
     v: FloatArray,
@@ -449,28 +507,29 @@ def _reduced_system(
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Schur complement S = U - W V^-1 W^T (dense, KC square), its right-hand side and V^-1.
 
-    With L L^T = V_j^-1 and Z_b = W_b L_j, S = U - Z Z^T where Z is the dense
-    (13C x 5P) matrix of the blocks Z_b: one BLAS product per chunk of placements.
+    With L L^T = V_j^-1 and Z_b = W_b L_j, S = U - Z Z^T where Z is the (KC x 5P) matrix of the
+    blocks Z_b: one BLAS product per chunk of placements, over the cameras that chunk's placements
+    are seen by (so cameras that share no placement cost nothing).
     """
     v_inv, root = _inverse_and_root(v)
-    z = w @ root[structure.block_placement]  # (B, 13, 5)
+    z = w @ root[structure.block_placement]  # (B, K, 5)
     width = u.shape[1]
     size = n_cameras * width
-    s = scipy.linalg.block_diag(*u) if n_cameras > 1 else u[0].copy()
-    n_placements = v.shape[0]
-    for first in range(0, n_placements, _SCHUR_CHUNK):
-        last = min(first + _SCHUR_CHUNK, n_placements)
-        blocks = slice(
-            structure.placement_block_starts[first],
-            structure.placement_block_starts[last] if last < n_placements else z.shape[0],
-        )
-        dense = np.zeros((n_cameras, width, last - first, N_PLACEMENT_PARAMS))
-        dense[structure.block_camera[blocks], :, structure.block_placement[blocks] - first, :] = z[blocks]
-        dense = dense.reshape(size, -1)
-        s -= dense @ dense.T
+    s = np.zeros((size, size))
+    for c in range(n_cameras):
+        s[c * width : (c + 1) * width, c * width : (c + 1) * width] = u[c]
+    z_t = z.transpose(0, 2, 1)  # (B, 5, K)
+    for chunk in structure.schur_chunks:
+        n, u_local = chunk.n_placements, chunk.cameras.size
+        blocks = np.zeros((n * u_local, N_PLACEMENT_PARAMS, width))  # (placement, camera) major
+        blocks[chunk.position] = z_t[chunk.blocks]
+        dense = blocks.reshape(n, u_local, N_PLACEMENT_PARAMS, width).transpose(0, 2, 1, 3)
+        rows = (chunk.cameras[:, None] * width + np.arange(width)).reshape(-1)
+        flat = dense.reshape(n * N_PLACEMENT_PARAMS, u_local * width)  # rows (placement, j), columns (camera, k)
+        s[np.ix_(rows, rows)] -= flat.T @ flat
     # rhs = gc - sum_b W_b V_j^-1 gp_j = gc - sum_b Z_b (L_j^T gp_j)
     projected = (root.transpose(0, 2, 1) @ gp[..., None])[..., 0]  # (P, 5)
-    per_block = (z @ projected[structure.block_placement][..., None])[..., 0]  # (B, 13)
+    per_block = (z @ projected[structure.block_placement][..., None])[..., 0]  # (B, K)
     rhs = (gc - structure.block_to_camera @ per_block).reshape(size)
     return s, rhs, v_inv
 
@@ -479,7 +538,7 @@ def _back_substitute(
     delta_c: FloatArray, v_inv: FloatArray, w: FloatArray, gp: FloatArray, structure: _Structure
 ) -> FloatArray:
     wt_dc = (w.transpose(0, 2, 1) @ delta_c[structure.block_camera][..., None])[..., 0]  # (B, 5)
-    per_placement = structure.block_to_placement @ wt_dc
+    per_placement = np.add.reduceat(wt_dc, structure.placement_block_starts, axis=0)
     return (v_inv @ (gp - per_placement)[..., None])[..., 0]
 
 
@@ -498,7 +557,9 @@ def _solve_free(s: FloatArray, rhs: FloatArray, free: NDArray[np.bool_]) -> Floa
         return delta
     sub = s[np.ix_(free, free)]
     try:
-        delta[free] = scipy.linalg.cho_solve(scipy.linalg.cho_factor(sub), rhs[free])
+        # numpy's LAPACK throughout: scipy's is a second BLAS thread pool, and the two contend
+        np.linalg.cholesky(sub)  # positive definite, else least squares
+        delta[free] = np.linalg.solve(sub, rhs[free])
     except np.linalg.LinAlgError:
         delta[free] = np.linalg.lstsq(sub, rhs[free], rcond=None)[0]
     return delta
@@ -536,12 +597,12 @@ def bundle_adjust(
     Returns:
         The optimised state, residuals and parameter uncertainties.
     """
-    structure = _structure(problem)
     n_cameras = problem.n_cameras
     timing = timing_columns(free)
     columns = np.concatenate([np.arange(N_GEOMETRIC), timing])  # the camera parameters carried
     free_flat = free[:, columns].reshape(-1)
     cameras = bool(free_flat.any())
+    structure = _structure(problem, columns.size if cameras else 0)
     lam = 1e-6
     res, jc, jp = _linearise(state, problem, cameras=cameras, timing=timing)
     if not np.all(np.isfinite(res)):

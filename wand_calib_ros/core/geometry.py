@@ -118,17 +118,18 @@ def triangulate(bearings: FloatArray, rotations: FloatArray, translations: Float
         views see the point or the rays are (nearly) parallel.
     """
     m = np.asarray(bearings, dtype=np.float64)
-    seen = np.all(np.isfinite(m), axis=-1)  # (N, V)
-    w = np.einsum("nvj,vji->nvi", np.where(seen[..., None], m, 0.0), rotations)  # R^T m
+    seen = np.isfinite(m[..., 0] + m[..., 1] + m[..., 2])  # (N, V): unit vectors, finite or NaN
+    m = np.where(seen[..., None], m, 0.0)
+    w = np.matmul(m.transpose(1, 0, 2), rotations).transpose(1, 0, 2)  # (N, V, 3) R^T m: one product per view
     centres = -np.einsum("vji,vj->vi", rotations, translations)  # (V, 3)
     count = seen.sum(axis=1).astype(np.float64)
-    # lhs = count * I - sum w w^T ; rhs = sum c - sum w (w . c)
-    outer = np.einsum("nvi,nvj->nij", w, w)
-    lhs = -outer
-    lhs[:, 0, 0] += count
-    lhs[:, 1, 1] += count
-    lhs[:, 2, 2] += count
-    rhs = seen.astype(np.float64) @ centres - np.einsum("nvi,nv->ni", w, np.einsum("nvj,vj->nv", w, centres))
+    # lhs = count * I - sum w w^T ; rhs = sum c - sum w (w . c): sums over the views of (N, V) products
+    lhs = np.empty((m.shape[0], 3, 3))
+    for i in range(3):
+        for j in range(i, 3):
+            lhs[:, i, j] = lhs[:, j, i] = (count if i == j else 0.0) - np.sum(w[..., i] * w[..., j], axis=1)
+    along = np.sum(w * centres, axis=-1)  # (N, V) w . c
+    rhs = seen.astype(np.float64) @ centres - np.sum(w * along[..., None], axis=1)
     adjugate, det = _adjugate_sym3(lhs)
     # A tiny determinant relative to (trace/3)^3 means (nearly) parallel rays.
     ok = (count >= 2) & (det > 1e-12 * (np.trace(lhs, axis1=1, axis2=2) / 3.0) ** 3)

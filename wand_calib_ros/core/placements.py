@@ -35,7 +35,10 @@ def triangulate_placements(models: tuple[CameraModel, ...], poses: tuple[Pose, .
         (P, K, 3) the markers in the reference frame (NaN where fewer than two views).
     """
     n_placements, n_cameras = uv.shape[:2]
-    bearings = np.stack([unproject(models[c], uv[:, c]) for c in range(n_cameras)], axis=2)  # (P, K, C, 3)
+    bearings = np.full((n_placements, uv.shape[2], n_cameras, 3), np.nan)  # (P, K, C, 3)
+    for c in range(n_cameras):  # only the pixels seen: a camera sees a fraction of the placements
+        seen = np.isfinite(uv[:, c, :, 0]) & np.isfinite(uv[:, c, :, 1])
+        bearings[:, :, c][seen] = unproject(models[c], uv[:, c][seen])
     rotations = np.stack([p.rotation for p in poses])
     translations = np.stack([p.translation for p in poses])
     points = triangulate(bearings.reshape(-1, n_cameras, 3), rotations, translations)
