@@ -8,6 +8,8 @@ import pytest
 from wand_calib_ros.core.geometry import (
     Pose,
     rotation_error_deg,
+    rotation_from_rotvec,
+    rotvec_from_rotation,
     spherical_angles,
     tangent_basis,
     translation_error,
@@ -106,3 +108,23 @@ def test_wand_direction_helpers() -> None:
     basis = tangent_basis(directions)
     assert np.allclose(np.einsum("ni,nik->nk", directions, basis), 0.0)
     assert np.allclose(np.einsum("nik,nil->nkl", basis, basis), np.eye(2))
+
+
+def test_rotation_vectors_round_trip_at_every_angle() -> None:
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(3)
+    axes = rng.normal(size=(200, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    angles = np.concatenate([[0.0, 1e-9, 1e-5, 1e-3, np.pi - 1e-7, np.pi], rng.uniform(0, np.pi, 194)])
+    for axis, angle in zip(axes, angles, strict=True):
+        rotvec = angle * axis
+        rotation = rotation_from_rotvec(rotvec)
+        assert np.allclose(rotation, Rotation.from_rotvec(rotvec).as_matrix(), atol=1e-14)
+        back = rotvec_from_rotation(rotation)
+        if angle < np.pi - 1e-6:
+            assert np.allclose(back, rotvec, atol=1e-9)
+        else:  # at pi, r and -r are the same rotation
+            assert np.allclose(rotation_from_rotvec(back), rotation, atol=1e-12)
+    batch = angles[:, None] * axes
+    assert np.allclose(rotation_from_rotvec(batch), Rotation.from_rotvec(batch).as_matrix(), atol=1e-14)

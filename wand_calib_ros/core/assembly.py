@@ -60,10 +60,8 @@ def coverage_warnings(
     points = uv.reshape(-1, 2)
     points = points[np.all(np.isfinite(points), axis=1)]
     width, height = spec.image_size
-    cells = np.unique(
-        np.clip((points / [width, height] * COVERAGE_GRID).astype(np.int64), 0, COVERAGE_GRID - 1), axis=0
-    )
-    covered = cells.shape[0] / COVERAGE_GRID**2
+    cell = np.clip((points / [width, height] * COVERAGE_GRID).astype(np.int64), 0, COVERAGE_GRID - 1)
+    covered = np.unique(cell[:, 0] * COVERAGE_GRID + cell[:, 1]).size / COVERAGE_GRID**2
     if covered < MIN_COVERAGE:
         out.append(
             f"{spec.name}: the wand covered only {100 * covered:.0f} % of the image ({COVERAGE_GRID}x{COVERAGE_GRID} "

@@ -57,12 +57,13 @@ def clock_offsets(result: CalibrationResult, observations: WandObservations) -> 
     translations = np.stack([p.translation for p in poses])
     out = []
     for c, name in enumerate(names):
-        others = bearings.copy()
+        mine = np.flatnonzero(np.any(np.isfinite(uv[:, c, :, 0]), axis=1))  # the frames camera c sees
+        others = bearings[mine].copy()
         others[:, :, c] = np.nan
-        points = triangulate(others.reshape(-1, len(names), 3), rotations, translations).reshape(uv.shape[0], -1, 3)
-        residual = project(models[c], poses[c].apply(points)) - uv[:, c]  # (F, K, 2)
-        ok = np.all(np.isfinite(residual), axis=-1) & np.all(np.isfinite(velocity[:, c]), axis=-1)
-        r, v = residual[ok], velocity[:, c][ok]
+        points = triangulate(others.reshape(-1, len(names), 3), rotations, translations).reshape(mine.size, -1, 3)
+        residual = project(models[c], poses[c].apply(points)) - uv[mine, c]  # (F_c, K, 2)
+        ok = np.all(np.isfinite(residual), axis=-1) & np.all(np.isfinite(velocity[mine, c]), axis=-1)
+        r, v = residual[ok], velocity[mine, c][ok]
         if r.shape[0] < 10 or not np.any(v):
             continue
         offset = -float(np.sum(v * r) / np.sum(v * v))

@@ -7,11 +7,11 @@ frame.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial.transform import Rotation
 
 FloatArray = NDArray[np.float64]
 
@@ -49,7 +49,7 @@ class Pose:
     @property
     def rotvec(self) -> FloatArray:
         """(3,) Rodrigues vector of the rotation, rad."""
-        return Rotation.from_matrix(self.rotation).as_rotvec()
+        return rotvec_from_rotation(self.rotation)
 
     @property
     def center(self) -> FloatArray:
@@ -70,8 +70,58 @@ class Pose:
 
 
 def rotation_from_rotvec(rotvec: FloatArray) -> FloatArray:
-    """(3, 3) rotation matrix of a Rodrigues vector, R = exp([r]x)."""
-    return Rotation.from_rotvec(np.asarray(rotvec, dtype=np.float64)).as_matrix()
+    """(..., 3, 3) rotation matrices of (..., 3) Rodrigues vectors (rad), R = exp([r]x) (Rodrigues' formula)."""
+    r = np.asarray(rotvec, dtype=np.float64)
+    if r.shape == (3,):  # one vector (the common case, in inner loops): scalars
+        x, y, z = float(r[0]), float(r[1]), float(r[2])
+        t2 = x * x + y * y + z * z
+        if t2 < 1e-12:
+            a1, b1 = 1.0 - t2 / 6.0, 0.5 - t2 / 24.0
+        else:
+            t = math.sqrt(t2)
+            a1, b1 = math.sin(t) / t, (1.0 - math.cos(t)) / t2
+        return np.array(
+            [
+                [1.0 - b1 * (y * y + z * z), b1 * x * y - a1 * z, b1 * x * z + a1 * y],
+                [b1 * x * y + a1 * z, 1.0 - b1 * (x * x + z * z), b1 * y * z - a1 * x],
+                [b1 * x * z - a1 * y, b1 * y * z + a1 * x, 1.0 - b1 * (x * x + y * y)],
+            ]
+        )
+    angle2 = np.sum(r * r, axis=-1)[..., None, None]
+    small = angle2 < 1e-12  # there the Taylor series of sin(t)/t and (1 - cos(t))/t^2
+    angle = np.sqrt(np.where(small, 1.0, angle2))
+    a = np.where(small, 1.0 - angle2 / 6.0, np.sin(angle) / angle)
+    b = np.where(small, 0.5 - angle2 / 24.0, (1.0 - np.cos(angle)) / (angle * angle))
+    k = skew(r)
+    return np.asarray(np.eye(3) + a * k + b * (k @ k), dtype=np.float64)
+
+
+def rotvec_from_rotation(rotation: FloatArray) -> FloatArray:
+    """(3,) Rodrigues vector (rad, angle in [0, pi]) of a (3, 3) rotation matrix, through its unit quaternion.
+
+    The quaternion is taken from the largest of its four squared components (Shepperd), so it is
+    accurate at every angle, 0 and pi included.
+    """
+    m = np.asarray(rotation, dtype=np.float64)
+    trace = m[0, 0] + m[1, 1] + m[2, 2]
+    choice = int(np.argmax([m[0, 0], m[1, 1], m[2, 2], trace]))
+    q = np.empty(4)  # x, y, z, w
+    if choice == 3:
+        q[3] = 1.0 + trace
+        q[:3] = m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1]
+    else:
+        i, j, k = choice, (choice + 1) % 3, (choice + 2) % 3
+        q[i] = 1.0 - trace + 2.0 * m[i, i]
+        q[j] = m[j, i] + m[i, j]
+        q[k] = m[k, i] + m[i, k]
+        q[3] = m[k, j] - m[j, k]
+    q /= np.linalg.norm(q)
+    if q[3] < 0:
+        q = -q
+    sine = float(np.linalg.norm(q[:3]))  # sin(angle / 2)
+    angle = 2.0 * np.arctan2(sine, q[3])
+    scale = 2.0 + angle**2 / 12.0 + 7.0 * angle**4 / 2880.0 if angle < 1e-3 else angle / sine
+    return np.asarray(scale * q[:3], dtype=np.float64)
 
 
 def skew(vectors: FloatArray) -> FloatArray:

@@ -22,7 +22,7 @@ import logging
 from dataclasses import dataclass, replace
 
 import numpy as np
-import scipy.stats
+import scipy.special
 from numpy.typing import NDArray
 
 from wand_calib_ros.core.bundle_adjustment import (
@@ -388,7 +388,7 @@ def significant(values: FloatArray, covariance: FloatArray, level: float = SIGNI
     if values.size == 0:
         return False
     statistic = float(values @ np.linalg.pinv(covariance, hermitian=True) @ values)
-    return statistic > float(scipy.stats.chi2.ppf(level, values.size))
+    return statistic > float(scipy.special.chdtri(values.size, 1.0 - level))  # the chi-square quantile
 
 
 @dataclass(frozen=True, eq=False)
