@@ -263,6 +263,45 @@ def mocap_scenario(*, n_cameras: int = 16, n_placements: int = 10_000, cone_deg:
     return Scenario("mocap16", WandSpec.from_lengths(400.0, 200.0), tuple(cameras), volume, n_placements, 2, cone_deg)
 
 
+#: The stage scenario's zones: one ring of cameras every ZONE_MM along x.
+ZONE_MM = 5000.0
+
+
+def stage_scenario(*, n_rings: int = 4, per_ring: int = 16, n_placements: int = 50_000) -> Scenario:
+    """A large motion-capture stage: ``n_rings`` rings of cameras side by side, each around its own 5 x 5 m
+    zone of the floor (default 64 cameras over a 20 x 5 m stage), the wand waved up to 2 m high.
+
+    Each ring's cameras hang 3 m from their zone's centre, alternately 4.0 m and 3.4 m high, looking
+    down at it; three 6 mm lenses to one 3.5 mm wide lens, on 1280x1024 sensors. The wand is waved over the whole stage, the LEDs shine into a 75 degree cone:
+    a ring's cameras share views with their neighbour rings' only near the zones' borders, cameras of
+    rings further apart never.
+    """
+    world_poses, lenses = [], []
+    for ring in range(n_rings):
+        zone = np.array([ZONE_MM * (ring - (n_rings - 1) / 2), 0.0, 0.0])  # on the floor (y is down)
+        for i in range(per_ring):
+            angle = 2 * np.pi * (i + 0.5 * ring) / per_ring
+            height = -4000.0 if i % 2 == 0 else -3400.0  # on a truss, looking down at the zone's floor
+            centre = zone + np.array([3000.0 * np.sin(angle), height, -3000.0 * np.cos(angle)])
+            world_poses.append(_look_at(centre, zone, np.array([0.0, 1.0, 0.0])))
+            lenses.append(3.5 if i % 4 == 3 else 6.0)
+    poses = _relative_to_first(world_poses)
+    cameras = []
+    for i, (pose, focal) in enumerate(zip(poses, lenses, strict=True)):
+        view_deg = 50.0 if focal < 5 else 35.0
+        spec = CameraSpec(f"cam{i:02d}", (1280, 1024), (4.8, 4.8), focal, view_deg)
+        k = fit_radial(_barrel_perspective, focal * (1.0 + 0.004 * (i % 5)), np.radians(view_deg + 3.0))
+        principal = (640.0 + 4 * ((i * 7) % 5) - 8, 512.0 + 3 * ((i * 3) % 5) - 6)
+        model = CameraModel(k, spec.m, principal, spec.image_size)
+        cameras.append(TrueCamera(spec, model, pose, np.radians(view_deg + 3.0)))
+    half = np.array([ZONE_MM / 2 * n_rings, 1000.0, 2500.0])
+    corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * half
+    in_first = world_poses[0].apply(corners + np.array([0.0, -1000.0, 0.0]))
+    volume = np.stack([in_first.min(axis=0), in_first.max(axis=0)])
+    name = f"stage{n_rings * per_ring}"
+    return Scenario(name, WandSpec.from_lengths(400.0, 200.0), tuple(cameras), volume, n_placements, 2, 75.0)
+
+
 SCENARIOS: dict[str, Callable[..., Scenario]] = {
     "paper": paper_fisheye_scenario,
     "paper3": paper_three_camera_scenario,
@@ -271,6 +310,7 @@ SCENARIOS: dict[str, Callable[..., Scenario]] = {
     "mixed3": mixed_three_camera_scenario,
     "ring6": ring_scenario,
     "mocap16": mocap_scenario,
+    "stage64": stage_scenario,
 }
 
 
