@@ -272,9 +272,10 @@ def stage_scenario(*, n_rings: int = 4, per_ring: int = 16, n_placements: int = 
     zone of the floor (default 64 cameras over a 20 x 5 m stage), the wand waved up to 2 m high.
 
     Each ring's cameras hang 3 m from their zone's centre, alternately 4.0 m and 3.4 m high, looking
-    down at it; three 6 mm lenses to one 3.5 mm wide lens, on 1280x1024 sensors. The wand is waved over the whole stage, the LEDs shine into a 75 degree cone:
-    a ring's cameras share views with their neighbour rings' only near the zones' borders, cameras of
-    rings further apart never.
+    down at it; three 6 mm lenses to one 3.5 mm wide lens, on 1280x1024 sensors. The LEDs shine into
+    a 75 degree cone. A ring's cameras share most views among themselves, fewer with the neighbour
+    rings' and few with rings further away (on 3,000 placements, 1,162 of the 2,016 camera pairs
+    share 10 or more; ring 0 shares 35 times fewer view pairs with ring 3 than with itself).
     """
     world_poses, lenses = [], []
     for ring in range(n_rings):
