@@ -515,8 +515,8 @@ def _reduced_system(
     z = w @ root[structure.block_placement]  # (B, K, 5)
     width = u.shape[1]
     size = n_cameras * width
-    s = np.zeros((n_cameras, n_cameras, width, width))  # camera-block layout: whole blocks per update
-    s[np.arange(n_cameras), np.arange(n_cameras)] = u
+    by_block = np.zeros((n_cameras, n_cameras, width, width))  # camera-block layout: whole blocks per update
+    by_block[np.arange(n_cameras), np.arange(n_cameras)] = u
     z_t = z.transpose(0, 2, 1)  # (B, 5, K)
     for chunk in structure.schur_chunks:
         n, u_local = chunk.n_placements, chunk.cameras.size
@@ -525,8 +525,8 @@ def _reduced_system(
         dense = blocks.reshape(n, u_local, N_PLACEMENT_PARAMS, width).transpose(0, 2, 1, 3)
         flat = dense.reshape(n * N_PLACEMENT_PARAMS, u_local * width)  # rows (placement, j), columns (camera, k)
         product = (flat.T @ flat).reshape(u_local, width, u_local, width).transpose(0, 2, 1, 3)
-        s[chunk.cameras[:, None], chunk.cameras[None, :]] -= product
-    s = s.transpose(0, 2, 1, 3).reshape(size, size)
+        by_block[chunk.cameras[:, None], chunk.cameras[None, :]] -= product
+    s = by_block.transpose(0, 2, 1, 3).reshape(size, size)
     # rhs = gc - sum_b W_b V_j^-1 gp_j = gc - sum_b Z_b (L_j^T gp_j)
     projected = (root.transpose(0, 2, 1) @ gp[..., None])[..., 0]  # (P, 5)
     per_block = (z @ projected[structure.block_placement][..., None])[..., 0]  # (B, K)
