@@ -542,12 +542,18 @@ def _back_substitute(
     return (v_inv @ (gp - per_placement)[..., None])[..., 0]
 
 
-def _damp(blocks: FloatArray, lam: float) -> FloatArray:
+def _scaling(blocks: FloatArray) -> FloatArray:
+    """(..., n) the Levenberg-Marquardt scaling D of (..., n, n) diagonal blocks: their diagonal, floored."""
     diag = np.einsum("...ii->...i", blocks)
-    floor = 1e-9 * max(float(np.max(diag, initial=0.0)), 1e-12)
+    return np.maximum(diag, 1e-9 * max(float(np.max(diag, initial=0.0)), 1e-12))
+
+
+def _damp(blocks: FloatArray, lam: float) -> FloatArray:
+    """The blocks plus lam D (and a trace of D, so that zero rows stay solvable)."""
+    scaling = _scaling(blocks)
     damped = blocks.copy()
     idx = np.arange(blocks.shape[-1])
-    damped[..., idx, idx] += lam * np.maximum(diag, floor) + 1e-12 * floor
+    damped[..., idx, idx] += lam * scaling + 1e-12 * float(np.min(scaling, initial=1.0))
     return damped
 
 
@@ -611,23 +617,31 @@ def bundle_adjust(
         raise CalibrationFailedError("the bundle adjustment starts from non-finite reprojections")
     cost = robust_cost(res, loss_scale)
     iterations, converged = 0, False
+    growth = 2.0  # Nielsen's damping update: lambda grows by 2, 4, 8, ... over rejected steps
     while iterations < max_iterations and not converged:
         iterations += 1
         weights = _huber_weights(res, loss_scale)
         u, v, w, gc, gp = _normal_equations(res, jc, jp, weights, structure, n_cameras)
         accepted = False
-        for _ in range(30):
+        for attempt in range(30):
             if cameras:
                 s, rhs, v_inv = _reduced_system(_damp(u, lam), _damp(v, lam), w, gc, gp, structure, n_cameras)
                 delta_c = _solve_free(s, rhs, free_flat).reshape(n_cameras, columns.size)
                 delta_p = _back_substitute(delta_c, v_inv, w, gp, structure)
+                # the decrease the linearised problem promises: delta^T g + lambda delta^T D delta
+                predicted = float(np.sum(delta_c * gc)) + lam * float(np.sum(_scaling(u) * delta_c**2))
             else:  # placements only: independent 5x5 systems
                 delta_c = np.zeros((n_cameras, columns.size))
                 delta_p = np.asarray(np.linalg.solve(_damp(v, lam), gp[..., None])[..., 0], dtype=np.float64)
+                predicted = 0.0
+            predicted += float(np.sum(delta_p * gp)) + lam * float(np.sum(_scaling(v) * delta_p**2))
+            if attempt == 0 and predicted < tolerance * cost:  # the undamped step is not worth taking: converged
+                accepted = converged = True
+                break
             try:
                 candidate = _apply_step(state, delta_c, delta_p, timing)
             except ModelError:  # e.g. k1 <= 0: not a camera, reject the step
-                lam *= 10.0
+                lam, growth = lam * growth, 2.0 * growth
                 continue
             # Jacobians come with the trial residuals: steps are rarely rejected near a solution.
             new_res, new_jc, new_jp = _linearise(candidate, problem, cameras=cameras, timing=timing)
@@ -642,12 +656,14 @@ def bundle_adjust(
                     relative_decrease,
                     lam,
                 )
+                gain = (cost - new_cost) / predicted if predicted > 0 else 1.0
                 state, cost = candidate, new_cost
-                lam = max(lam / 10.0, 1e-12)
+                lam = max(lam * max(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3), 1e-12)
+                growth = 2.0
                 res, jc, jp = new_res, new_jc, new_jp
                 converged = relative_decrease < tolerance
                 break
-            lam *= 10.0
+            lam, growth = lam * growth, 2.0 * growth
         if not accepted:
             converged = True  # no decrease possible: at a minimum to machine precision
     weights = _huber_weights(res, loss_scale)

@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
 
 
 @dataclass(frozen=True, eq=False)
@@ -168,18 +169,33 @@ def triangulate(bearings: FloatArray, rotations: FloatArray, translations: Float
         views see the point or the rays are (nearly) parallel.
     """
     m = np.asarray(bearings, dtype=np.float64)
-    seen = np.isfinite(m[..., 0] + m[..., 1] + m[..., 2])  # (N, V): unit vectors, finite or NaN
-    m = np.where(seen[..., None], m, 0.0)
-    w = np.matmul(m.transpose(1, 0, 2), rotations).transpose(1, 0, 2)  # (N, V, 3) R^T m: one product per view
+    point, view = np.nonzero(np.isfinite(m[..., 0] + m[..., 1] + m[..., 2]))  # unit vectors, finite or NaN
+    rays = np.einsum("mj,mji->mi", m[point, view], rotations[view])  # R^T m
     centres = -np.einsum("vji,vj->vi", rotations, translations)  # (V, 3)
-    count = seen.sum(axis=1).astype(np.float64)
-    # lhs = count * I - sum w w^T ; rhs = sum c - sum w (w . c): sums over the views of (N, V) products
-    lhs = np.empty((m.shape[0], 3, 3))
+    return triangulate_rays(point, m.shape[0], rays, centres[view])
+
+
+def triangulate_rays(point: IntArray, n_points: int, rays: FloatArray, centres: FloatArray) -> FloatArray:
+    """The points closest to their rays (the normal equations of :func:`triangulate`), from flat arrays.
+
+    Args:
+        point: (M,) which point each ray belongs to (0 <= point < n_points).
+        n_points: number of points.
+        rays: (M, 3) unit ray directions in the reference frame (w = R^T m).
+        centres: (M, 3) the rays' origins, the camera centres, mm.
+
+    Returns:
+        (n_points, 3) the points, mm; NaN where fewer than two rays or (nearly) parallel ones.
+    """
+    count = np.bincount(point, minlength=n_points).astype(np.float64)
+    # lhs = count * I - sum w w^T ; rhs = sum c - sum w (w . c): sums over each point's rays
+    lhs = np.empty((n_points, 3, 3))
     for i in range(3):
         for j in range(i, 3):
-            lhs[:, i, j] = lhs[:, j, i] = (count if i == j else 0.0) - np.sum(w[..., i] * w[..., j], axis=1)
-    along = np.sum(w * centres, axis=-1)  # (N, V) w . c
-    rhs = seen.astype(np.float64) @ centres - np.sum(w * along[..., None], axis=1)
+            summed = np.bincount(point, rays[:, i] * rays[:, j], minlength=n_points)
+            lhs[:, i, j] = lhs[:, j, i] = (count if i == j else 0.0) - summed
+    along = rays * np.sum(rays * centres, axis=1)[:, None]  # w (w . c)
+    rhs = np.stack([np.bincount(point, centres[:, i] - along[:, i], minlength=n_points) for i in range(3)], axis=1)
     adjugate, det = _adjugate_sym3(lhs)
     # A tiny determinant relative to (trace/3)^3 means (nearly) parallel rays.
     ok = (count >= 2) & (det > 1e-12 * (np.trace(lhs, axis1=1, axis2=2) / 3.0) ** 3)

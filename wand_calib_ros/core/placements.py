@@ -18,7 +18,7 @@ from wand_calib_ros.core.bundle_adjustment import (
     bundle_adjust,
 )
 from wand_calib_ros.core.camera_model import CameraModel, unproject
-from wand_calib_ros.core.geometry import Pose, triangulate, wand_directions
+from wand_calib_ros.core.geometry import Pose, triangulate_rays, wand_directions
 from wand_calib_ros.core.rig import WandSpec
 
 FloatArray = NDArray[np.float64]
@@ -34,14 +34,16 @@ def triangulate_placements(models: tuple[CameraModel, ...], poses: tuple[Pose, .
     Returns:
         (P, K, 3) the markers in the reference frame (NaN where fewer than two views).
     """
-    n_placements, n_cameras = uv.shape[:2]
-    bearings = np.full((n_placements, uv.shape[2], n_cameras, 3), np.nan)  # (P, K, C, 3)
+    n_placements, n_cameras, n_markers = uv.shape[:3]
+    point, rays, centres = [], [], []
     for c in range(n_cameras):  # only the pixels seen: a camera sees a fraction of the placements
-        seen = np.isfinite(uv[:, c, :, 0]) & np.isfinite(uv[:, c, :, 1])
-        bearings[:, :, c][seen] = unproject(models[c], uv[:, c][seen])
-    rotations = np.stack([p.rotation for p in poses])
-    translations = np.stack([p.translation for p in poses])
-    points = triangulate(bearings.reshape(-1, n_cameras, 3), rotations, translations)
+        placement, marker = np.nonzero(np.isfinite(uv[:, c, :, 0]) & np.isfinite(uv[:, c, :, 1]))
+        rotation = poses[c].rotation
+        point.append(placement * n_markers + marker)
+        rays.append(unproject(models[c], uv[placement, c, marker]) @ rotation)  # R^T m
+        centres.append(np.broadcast_to(poses[c].center, (placement.size, 3)))
+    points = triangulate_rays(np.concatenate(point), n_placements * n_markers, np.concatenate(rays),
+                              np.concatenate(centres))  # fmt: skip
     return points.reshape(n_placements, uv.shape[2], 3)
 
 

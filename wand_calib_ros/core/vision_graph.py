@@ -44,8 +44,8 @@ class VisionGraph:
 
 def covisibility(complete: NDArray[np.bool_]) -> IntArray:
     """(C, C) number of placements both cameras see completely, from a (P, C) mask."""
-    as_int = complete.astype(np.int64)
-    return as_int.T @ as_int
+    as_float = complete.astype(np.float64)  # BLAS: exact for counts below 2^53, integer products are not vectorised
+    return np.rint(as_float.T @ as_float).astype(np.int64)
 
 
 def build_vision_graph(
