@@ -51,3 +51,28 @@ def test_camera_that_never_sees_the_wand_is_named() -> None:
 def test_unknown_reference_is_an_error() -> None:
     with pytest.raises(InsufficientDataError, match="reference camera 'cX'"):
         build_vision_graph(NAMES, _complete({(0, 1): 50, (1, 2): 50, (2, 3): 50}), reference="cX")
+
+
+def test_the_chains_are_networkx_shortest_paths_on_random_rigs() -> None:
+    import networkx as nx
+
+    rng = np.random.default_rng(8)
+    tested = 0
+    for _ in range(40):
+        n = int(rng.integers(2, 12))
+        complete = rng.random((200, n)) < rng.uniform(0.2, 0.9, n)
+        complete[:, 0] |= complete.sum(axis=1) == 1  # every camera shares with camera 0 somewhere
+        names = tuple(f"c{i}" for i in range(n))
+        shared = covisibility(complete)
+        graph = nx.Graph()
+        graph.add_nodes_from(range(n))
+        for i in range(n):
+            for j in range(i + 1, n):
+                if shared[i, j] >= 15:
+                    graph.add_edge(i, j, weight=1.0 / shared[i, j])
+        if not nx.is_connected(graph) or np.any(np.diag(shared) == 0):
+            continue
+        result = build_vision_graph(names, complete, min_shared=15)
+        assert result.paths == nx.single_source_dijkstra_path(graph, result.reference, weight="weight")
+        tested += 1
+    assert tested >= 20

@@ -8,9 +8,9 @@ chain of pairwise calibrations that places it in the reference frame.
 
 from __future__ import annotations
 
+import heapq
 from dataclasses import dataclass
 
-import networkx as nx
 import numpy as np
 from numpy.typing import NDArray
 
@@ -68,13 +68,8 @@ def build_vision_graph(
     lonely = [names[i] for i in range(len(names)) if shared[i, i] == 0]
     if lonely:
         raise InsufficientDataError(f"camera(s) {', '.join(lonely)} never see the whole wand")
-    graph = nx.Graph()
-    graph.add_nodes_from(range(len(names)))
-    for i in range(len(names)):
-        for j in range(i + 1, len(names)):
-            if shared[i, j] >= min_shared:
-                graph.add_edge(i, j, weight=1.0 / shared[i, j])
-    groups = sorted((sorted(g) for g in nx.connected_components(graph)), key=lambda g: g[0])
+    linked = (shared >= min_shared) & ~np.eye(len(names), dtype=bool)
+    groups = _components(linked)
     if len(groups) > 1 and len(names) == 2:
         raise DisconnectedRigError(
             f"cameras '{names[0]}' and '{names[1]}' both see the whole wand in only {shared[0, 1]} placements; "
@@ -89,13 +84,48 @@ def build_vision_graph(
         ref = names.index(reference)
     else:
         raise InsufficientDataError(f"reference camera '{reference}' is not in the rig ({', '.join(names)})")
-    paths = nx.single_source_dijkstra_path(graph, ref, weight="weight")
+    paths = _shortest_paths(linked, shared, ref)
     edges: list[tuple[int, int]] = []
     for target in sorted(paths, key=lambda t: (len(paths[t]), t)):
         path = paths[target]
         if len(path) > 1 and (path[-2], path[-1]) not in edges:
             edges.append((path[-2], path[-1]))
     return VisionGraph(names, shared, ref, {int(k): [int(x) for x in v] for k, v in paths.items()}, tuple(edges))
+
+
+def _components(linked: NDArray[np.bool_]) -> list[list[int]]:
+    """The connected groups of cameras (ascending, ordered by their first camera) of a (C, C) adjacency."""
+    unseen, groups = set(range(linked.shape[0])), []
+    while unseen:
+        group, frontier = set(), [min(unseen)]
+        while frontier:
+            camera = frontier.pop()
+            if camera not in group:
+                group.add(camera)
+                frontier.extend(int(j) for j in np.flatnonzero(linked[camera]) if j not in group)
+        unseen -= group
+        groups.append(sorted(group))
+    return groups
+
+
+def _shortest_paths(linked: NDArray[np.bool_], shared: IntArray, source: int) -> dict[int, list[int]]:
+    """Dijkstra's paths from ``source`` over the edges ``linked`` weighted 1 / shared (neighbours in
+    ascending order, the first path found kept on a tie)."""
+    distance, paths = {source: 0.0}, {source: [source]}
+    done: set[int] = set()
+    heap, pushed = [(0.0, 0, source)], 1
+    while heap:
+        dist, _, camera = heapq.heappop(heap)
+        if camera in done:
+            continue
+        done.add(camera)
+        for other in (int(j) for j in np.flatnonzero(linked[camera])):
+            through = dist + 1.0 / float(shared[camera, other])
+            if other not in done and (other not in distance or through < distance[other]):
+                distance[other], paths[other] = through, [*paths[camera], other]
+                heapq.heappush(heap, (through, pushed, other))
+                pushed += 1
+    return paths
 
 
 def _disconnected_message(names: tuple[str, ...], shared: IntArray, groups: list[list[int]], min_shared: int) -> str:
