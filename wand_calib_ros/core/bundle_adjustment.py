@@ -586,7 +586,7 @@ def bundle_adjust(
     *,
     loss_scale: float | None = None,
     max_iterations: int = 100,
-    tolerance: float = 1e-6,
+    tolerance: float = 1e-8,
 ) -> BundleResult:
     """Sparse Levenberg-Marquardt over all unknowns (paper's bundle adjustment).
 
@@ -598,9 +598,11 @@ def bundle_adjust(
         loss_scale: Huber threshold on each observation's 2D residual (px), or None for least
             squares. The robust problem is solved by iteratively reweighted least squares.
         max_iterations: LM iteration cap.
-        tolerance: stop when the relative decrease of the cost falls below it. The default (Ceres'
-            function tolerance) stops a Gauss-Newton step after the one that moved the cost by a few
-            parts in a million: what is left is orders of magnitude below the parameters' noise.
+        tolerance: stop when the relative decrease of the cost falls below it, or when the
+            undamped step promises less (then without taking it). On 1,000,000 residuals at 1 px the
+            default leaves the state within 0.01 of a chi-square unit of the optimum: a small
+            fraction of a standard deviation in every direction (1e-6 left 1-2 units on a 64-camera
+            rig: its focal lengths 25 % worse).
 
     Returns:
         The optimised state, residuals and parameter uncertainties.
@@ -617,7 +619,6 @@ def bundle_adjust(
         raise CalibrationFailedError("the bundle adjustment starts from non-finite reprojections")
     cost = robust_cost(res, loss_scale)
     iterations, converged = 0, False
-    growth = 2.0  # Nielsen's damping update: lambda grows by 2, 4, 8, ... over rejected steps
     while iterations < max_iterations and not converged:
         iterations += 1
         weights = _huber_weights(res, loss_scale)
@@ -641,7 +642,7 @@ def bundle_adjust(
             try:
                 candidate = _apply_step(state, delta_c, delta_p, timing)
             except ModelError:  # e.g. k1 <= 0: not a camera, reject the step
-                lam, growth = lam * growth, 2.0 * growth
+                lam *= 10.0
                 continue
             # Jacobians come with the trial residuals: steps are rarely rejected near a solution.
             new_res, new_jc, new_jp = _linearise(candidate, problem, cameras=cameras, timing=timing)
@@ -656,14 +657,12 @@ def bundle_adjust(
                     relative_decrease,
                     lam,
                 )
-                gain = (cost - new_cost) / predicted if predicted > 0 else 1.0
                 state, cost = candidate, new_cost
-                lam = max(lam * max(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3), 1e-12)
-                growth = 2.0
+                lam = max(lam / 10.0, 1e-12)
                 res, jc, jp = new_res, new_jc, new_jp
                 converged = relative_decrease < tolerance
                 break
-            lam, growth = lam * growth, 2.0 * growth
+            lam *= 10.0
         if not accepted:
             converged = True  # no decrease possible: at a minimum to machine precision
     weights = _huber_weights(res, loss_scale)
