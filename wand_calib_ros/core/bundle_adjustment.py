@@ -626,12 +626,15 @@ def bundle_adjust(
     if not np.all(np.isfinite(res)):
         raise CalibrationFailedError("the bundle adjustment starts from non-finite reprojections")
     cost = robust_cost(res, loss_scale)
-    dof = max(res.size - int(free_flat.sum()) - N_PLACEMENT_PARAMS * problem.n_placements, 1)
+    m, p = res.size, int(free_flat.sum()) + N_PLACEMENT_PARAMS * problem.n_placements
+    dof = max(m - p, 1)
     iterations, converged = 0, False
+    normal = None  # the normal equations at the current state, once computed
     while iterations < max_iterations and not converged:
         iterations += 1
         weights = _huber_weights(res, loss_scale)
-        u, v, w, gc, gp = _normal_equations(res, jc, jp, weights, structure, n_cameras)
+        normal = _normal_equations(res, jc, jp, weights, structure, n_cameras)
+        u, v, w, gc, gp = normal
         accepted = False
         for attempt in range(30):
             if cameras:
@@ -671,7 +674,7 @@ def bundle_adjust(
                     relative_decrease,
                     lam,
                 )
-                state, cost = candidate, new_cost
+                state, cost, normal = candidate, new_cost, None
                 lam = max(lam / 10.0, 1e-12)
                 res, jc, jp = new_res, new_jc, new_jp
                 converged = relative_decrease < tolerance
@@ -680,12 +683,13 @@ def bundle_adjust(
         if not accepted:
             converged = True  # no decrease possible: at a minimum to machine precision
     weights = _huber_weights(res, loss_scale)
-    m, p = res.size, int(free_flat.sum()) + N_PLACEMENT_PARAMS * problem.n_placements
-    sigma = float(np.sqrt(np.sum(weights[:, None] * res**2) / max(m - p, 1)))
+    sigma = float(np.sqrt(np.sum(weights[:, None] * res**2) / dof))
     size = n_cameras * N_CAMERA_PARAMS
     covariance = np.zeros((size, size))
-    if cameras:
-        u, v, w, gc, gp = _normal_equations(res, jc, jp, weights, structure, n_cameras)
+    if cameras:  # stopped before a step: the iteration's normal equations are the state's
+        u, v, w, gc, gp = (
+            normal if normal is not None else _normal_equations(res, jc, jp, weights, structure, n_cameras)
+        )
         s, _, _ = _reduced_system(u, _damp(v, 0.0), w, gc, gp, structure, n_cameras)
         carried = (np.arange(n_cameras)[:, None] * N_CAMERA_PARAMS + columns[None, :]).reshape(-1)[free_flat]
         covariance[np.ix_(carried, carried)] = np.linalg.pinv(s[np.ix_(free_flat, free_flat)], hermitian=True)
