@@ -51,9 +51,8 @@ STAGES = (
 #: Counted inside the stages: (module, function, label).
 INNER = (
     ("wand_calib_ros.core.bundle_adjustment", "bundle_adjust", "bundle_adjust"),
-    ("wand_calib_ros.core.bundle_adjustment", "_linearise", "residuals and Jacobians"),
-    ("wand_calib_ros.core.bundle_adjustment", "_normal_equations", "normal equations"),
-    ("wand_calib_ros.core.bundle_adjustment", "_reduced_system", "Schur complement"),
+    ("wand_calib_ros.core.bundle_adjustment", "_evaluate", "residuals and normal equations"),
+    ("wand_calib_ros.core.normal_equations", "reduced_system", "Schur complement"),
     ("wand_calib_ros.core.pairwise", "initialise_pair", "pair initialisations"),
 )
 

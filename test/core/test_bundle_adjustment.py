@@ -12,16 +12,15 @@ from wand_calib_ros.core.bundle_adjustment import (
     BundleState,
     PlacementTiming,
     _apply_step,
+    _evaluate,
     _huber_weights,
     _linearise,
-    _normal_equations,
-    _reduced_system,
-    _structure,
     bundle_adjust,
     default_free_mask,
     residuals,
 )
 from wand_calib_ros.core.geometry import Pose
+from wand_calib_ros.core.normal_equations import block_layout, reduced_system
 from wand_calib_ros.sim.scenarios import paper_fisheye_scenario, simulate
 
 
@@ -86,25 +85,31 @@ def test_jacobians_match_finite_differences() -> None:
         assert np.allclose(jp[:, :, j], numeric, atol=1e-5)
 
 
-def test_sparse_normal_equations_and_schur_complement_match_the_dense_jacobian() -> None:
-    # Three cameras, each view missing with probability 0.3 (placements seen by two or three), Huber
-    # weights on some residuals, a timing column: the sparse sums and the chunked Schur complement
-    # against J^T W J and its dense elimination.
+def test_sparse_normal_equations_and_schur_complement_match_the_dense_jacobian(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    # Three cameras, each view missing with probability 0.3 (placements seen by two or three), some
+    # single markers missing (views of one or two points), Huber weights on some residuals, a timing
+    # column, chunks of about 64 observations: the sums chunk by chunk and the chunked Schur
+    # complement against J^T W J and its dense elimination.
+    monkeypatch.setattr("wand_calib_ros.core.normal_equations.CHUNK_OBSERVATIONS", 64)
     scenario, data, state, _ = _setup(1.0, 300, 4, n_cameras=3)
     uv = data.observations.uv.copy()
     rng = np.random.default_rng(5)
     uv[rng.random(uv.shape[:2]) < 0.3] = np.nan
     seen = np.all(np.isfinite(uv), axis=(2, 3)).sum(axis=1) >= 2
+    uv[rng.random(uv.shape[:3]) < 0.05] = np.nan
     state = BundleState(state.models, state.poses, data.wand_a[seen], data.wand_direction[seen])
     state, problem = _with_timing(scenario, data, state, 6, uv[seen])
     every = np.array([TIME_OFFSET])
     res, jc, jp = _linearise(state, problem, timing=every)
     weights = _huber_weights(res, 1.5)
     assert 0 < np.sum(weights < 1) < weights.size
-    structure = _structure(problem, jc.shape[2])
-    assert len(structure.schur_chunks) > 1
-    u, v, w, gc, gp = _normal_equations(res, jc, jp, weights, structure, 3)
-    s, rhs, _ = _reduced_system(u, v, w, gc, gp, structure, 3)
+    layout = block_layout(problem.camera, problem.placement, problem.point, 3, problem.n_placements, 3, jc.shape[2])
+    assert len(layout.chunks) > 10 and len(layout.schur_chunks) > 1
+    assert not all(chunk.full for chunk in layout.chunks)
+    chunked_res, normal = _evaluate(state, problem, layout, every, 1.5)
+    assert np.array_equal(chunked_res, res)
+    s, rhs, _ = reduced_system(normal, layout)
+    u, gc = normal.u, normal.gc
 
     m, k, n_p = problem.n_observations, jc.shape[2], problem.n_placements
     dense = np.zeros((m, 2, 3 * k + 5 * n_p))
@@ -120,6 +125,8 @@ def test_sparse_normal_equations_and_schur_complement_match_the_dense_jacobian()
     a, b, d = jtj[: 3 * k, : 3 * k], jtj[: 3 * k, 3 * k :], jtj[3 * k :, 3 * k :]
     d_inv = np.linalg.inv(d)
     scale = np.max(np.abs(a))
+    assert np.allclose(np.stack([a[i * k : (i + 1) * k, i * k : (i + 1) * k] for i in range(3)]), u, atol=1e-12 * scale)
+    assert np.allclose(gc.reshape(-1), g[: 3 * k], atol=1e-12 * np.max(np.abs(g)))
     assert np.allclose(s, a - b @ d_inv @ b.T, atol=1e-9 * scale)
     assert np.allclose(rhs, g[: 3 * k] - b @ d_inv @ g[3 * k :], atol=1e-9 * np.max(np.abs(g)))
 

@@ -27,21 +27,34 @@ complement needs is computed once).
 
 from __future__ import annotations
 
-import itertools
 import logging
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse
 from numpy.typing import NDArray
 
 from wand_calib_ros.core.camera_model import (
     N_INTRINSIC,
+    N_RADIAL,
     CameraModel,
-    project_with_jacobian_arrays,
 )
 from wand_calib_ros.core.errors import CalibrationFailedError, ModelError
-from wand_calib_ros.core.geometry import Pose, rotation_from_rotvec, skew, tangent_basis
+from wand_calib_ros.core.geometry import Pose, rotation_from_rotvec, tangent_basis
+from wand_calib_ros.core.normal_equations import (
+    CHUNK_OBSERVATIONS,
+    N_PLACEMENT_PARAMS,
+    BlockLayout,
+    NormalEquations,
+    accumulate,
+    back_substitute,
+    block_layout,
+    damp,
+    damped,
+    empty_normal_equations,
+    reduced_system,
+    scaling,
+    solve_free,
+)
 from wand_calib_ros.core.rig import WandSpec
 
 FloatArray = NDArray[np.float64]
@@ -54,8 +67,6 @@ N_GEOMETRIC = N_INTRINSIC + 6
 N_CAMERA_PARAMS = N_GEOMETRIC + 2
 #: Indices of the timing parameters in a camera's parameter vector.
 TIME_OFFSET, READOUT = N_GEOMETRIC, N_GEOMETRIC + 1
-#: Parameters per placement: A (3), wand direction (2, tangent plane).
-N_PLACEMENT_PARAMS = 5
 #: Names of the per-camera parameters in order (rotation as a small-angle update, rad; the timing
 #: parameters in the time unit of the observations).
 CAMERA_PARAM_NAMES = (
@@ -236,32 +247,165 @@ class BundleResult:
         return self.camera_covariance[block, block]
 
 
-def _camera_arrays(state: BundleState) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
-    k = np.stack([m.k for m in state.models])
-    mm = np.stack([m.m for m in state.models])
-    pp = np.stack([m.principal_point for m in state.models])
-    rotations = np.stack([p.rotation for p in state.poses])
-    translations = np.stack([p.translation for p in state.poses])
-    return k, mm, pp, rotations, translations
+#: Columns of :class:`_Unknowns`' camera table: k (5), dk (5), m (2), principal point (2), rotation (9, row-major),
+#: translation (3), time offset and readout (2).
+_K, _DK, _M, _PP, _ROT, _T, _TIMING = 0, 5, 10, 12, 14, 23, 26
+#: Columns of its placement table: A (3), the direction (3), its tangent basis e1 (3) and e2 (3).
+_A, _DIRECTION, _E1, _E2 = 0, 3, 6, 9
 
 
-def _world_points(state: BundleState, problem: BundleProblem) -> tuple[FloatArray, FloatArray | None]:
-    """(M, 3) observed points where their cameras saw them, and d(point)/d(tau) (None without timing)."""
-    offsets = problem.wand.offsets[problem.point]
-    world = state.wand_a[problem.placement] + offsets[:, None] * state.wand_direction[problem.placement]
-    timing = problem.timing
-    if timing is None:
-        return world, None
-    dt, readout = state.camera_timing[problem.camera].T
-    tau = timing.time - dt + readout * timing.row
-    half = (0.5 * tau * tau)[:, None]
-    world = world + tau[:, None] * (timing.velocity + half / 3.0 * timing.jerk) + half * timing.acceleration
-    return world, timing.velocity + tau[:, None] * timing.acceleration + half * timing.jerk
+@dataclass(frozen=True, eq=False)
+class _Unknowns:
+    """The state as two tables the linearisation gathers rows from, one gather per chunk.
+
+    Attributes:
+        cameras: (C, 28) per camera k, dk = k * (1, 3, 5, 7, 9) (the coefficients of dr/dtheta), m,
+            principal point, rotation (row-major), translation, time offset and readout time.
+        placements: (P, 12) per placement A, the unit direction A -> C and its tangent basis e1, e2.
+    """
+
+    cameras: FloatArray
+    placements: FloatArray
+
+    @staticmethod
+    def of(state: BundleState) -> _Unknowns:
+        k = np.stack([m.k for m in state.models])
+        cameras = np.concatenate(
+            [
+                k,
+                k * np.array([1.0, 3.0, 5.0, 7.0, 9.0]),
+                np.stack([m.m for m in state.models]),
+                np.stack([m.principal_point for m in state.models]),
+                np.stack([p.rotation.reshape(9) for p in state.poses]),
+                np.stack([p.translation for p in state.poses]),
+                state.camera_timing,
+            ],
+            axis=1,
+        )
+        basis = tangent_basis(state.wand_direction)  # (P, 3, 2)
+        placements = np.concatenate([state.wand_a, state.wand_direction, basis[:, :, 0], basis[:, :, 1]], axis=1)
+        return _Unknowns(cameras, placements)
+
+
+def _linearise_rows(
+    unknowns: _Unknowns,
+    problem: BundleProblem,
+    first: int,
+    stop: int,
+    *,
+    jacobians: bool,
+    cameras: bool,
+    timing: IntArray,
+) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
+    """The observations ``first:stop`` linearised: residuals (n, 2) and, when ``jacobians``, the camera
+    Jacobians (n, 2, 13 + len(timing) + 1; None unless ``cameras``) and the placement Jacobians
+    (n, 2, 5 + 1), each with the residuals as last column (:func:`accumulate` sums [J | r]^T [J | r]).
+
+    Written on component arrays (n,) of a chunk small enough to stay in cache (see
+    :mod:`~wand_calib_ros.core.normal_equations`): the projection and its derivatives are those of
+    :func:`~wand_calib_ros.core.camera_model.project_with_jacobian_arrays`; the rotation columns are
+    ``d uv / d rotvec = -d_point [R X]x`` (R <- exp([d]x) R), row by row the cross product ``R X x
+    d_point_row``.
+    """
+    c = problem.camera[first:stop]
+    pl = problem.placement[first:stop]
+    cam = np.take(unknowns.cameras, c, axis=0).T  # (28, n)
+    placed = np.take(unknowns.placements, pl, axis=0).T  # (12, n)
+    offsets = problem.wand.offsets[problem.point[first:stop]]
+    world = placed[_A : _A + 3] + offsets * placed[_DIRECTION : _DIRECTION + 3]  # (3, n) reference frame
+    along_time = None
+    if problem.timing is not None:  # carried along the wand's motion to the instant the camera saw it
+        obs = problem.timing
+        tau = obs.time[first:stop] - cam[_TIMING] + cam[_TIMING + 1] * obs.row[first:stop]
+        velocity, acceleration = obs.velocity[first:stop].T, obs.acceleration[first:stop].T
+        jerk = obs.jerk[first:stop].T
+        half = 0.5 * tau * tau
+        world = world + tau * (velocity + half / 3.0 * jerk) + half * acceleration
+        along_time = velocity + tau * acceleration + half * jerk  # d world / d tau
+    rot = cam[_ROT : _ROT + 9]
+    q0 = rot[0] * world[0] + rot[1] * world[1] + rot[2] * world[2]  # R X
+    q1 = rot[3] * world[0] + rot[4] * world[1] + rot[5] * world[2]
+    q2 = rot[6] * world[0] + rot[7] * world[1] + rot[8] * world[2]
+    x, y, z = q0 + cam[_T], q1 + cam[_T + 1], q2 + cam[_T + 2]
+    rho = np.hypot(x, y)
+    theta = np.arctan2(rho, z)
+    tiny = rho <= 1e-12 * np.abs(z)
+    if tiny.any():  # on the optical axis: phi = 0, theta / rho -> 1 / z
+        safe = np.where(tiny, 1.0, rho)
+        cos_phi, sin_phi = np.where(tiny, 1.0, x / safe), np.where(tiny, 0.0, y / safe)
+        theta_over_rho = np.where(tiny, 1.0 / np.where(z == 0, 1.0, z), theta / safe)
+    else:
+        inverse = 1.0 / rho
+        cos_phi, sin_phi, theta_over_rho = x * inverse, y * inverse, theta * inverse
+    k = cam[_K : _K + 5]
+    t2 = theta * theta
+    r_over_theta = k[0] + t2 * (k[1] + t2 * (k[2] + t2 * (k[3] + t2 * k[4])))
+    r = r_over_theta * theta
+    mu, mv = cam[_M], cam[_M + 1]
+    uv = problem.uv[first:stop]
+    n = stop - first
+    res = np.empty((n, 2))
+    res[:, 0] = mu * r * cos_phi + cam[_PP] - uv[:, 0]
+    res[:, 1] = mv * r * sin_phi + cam[_PP + 1] - uv[:, 1]
+    if not jacobians:
+        return res, None, None
+    dk = cam[_DK : _DK + 5]
+    dr = dk[0] + t2 * (dk[1] + t2 * (dk[2] + t2 * (dk[3] + t2 * dk[4])))
+    d2 = rho * rho + z * z
+    b = r_over_theta * theta_over_rho  # r / rho
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a = np.where(d2 > 0, dr * z / d2, b)  # dr/dtheta * dtheta/drho
+        dz = np.where(d2 > 0, -dr / d2, 0.0)
+    a_minus_b = a - b
+    mixed = a_minus_b * cos_phi * sin_phi
+    d_point = (  # d(u, v) / d(x, y, z), camera frame
+        (mu * (b + a_minus_b * cos_phi * cos_phi), mu * mixed, mu * dz * x),
+        (mv * mixed, mv * (b + a_minus_b * sin_phi * sin_phi), mv * dz * y),
+    )
+    e1, e2 = placed[_E1 : _E1 + 3], placed[_E2 : _E2 + 3]
+    width = N_GEOMETRIC + timing.size
+    jc = np.empty((n, 2, width + 1)) if cameras else None
+    jp = np.empty((n, 2, N_PLACEMENT_PARAMS + 1))
+    jp[:, :, N_PLACEMENT_PARAMS] = res
+    if jc is not None:
+        jc[:, :, width] = res
+    for i, (p0, p1, p2) in enumerate(d_point):
+        w0 = p0 * rot[0] + p1 * rot[3] + p2 * rot[6]  # d uv_i / d world point: d_point R
+        w1 = p0 * rot[1] + p1 * rot[4] + p2 * rot[7]
+        w2 = p0 * rot[2] + p1 * rot[5] + p2 * rot[8]
+        jp[:, i, 0], jp[:, i, 1], jp[:, i, 2] = w0, w1, w2
+        jp[:, i, 3] = offsets * (w0 * e1[0] + w1 * e1[1] + w2 * e1[2])
+        jp[:, i, 4] = offsets * (w0 * e2[0] + w1 * e2[1] + w2 * e2[2])
+        if jc is None:
+            continue
+        power = (mu * cos_phi if i == 0 else mv * sin_phi) * theta
+        for j in range(N_RADIAL):  # d / d k_j: m cos(phi) theta^(2j + 1)
+            jc[:, i, j] = power
+            power = power * t2
+        jc[:, i, 5], jc[:, i, 6] = (1.0, 0.0) if i == 0 else (0.0, 1.0)
+        jc[:, i, 7] = q1 * p2 - q2 * p1
+        jc[:, i, 8] = q2 * p0 - q0 * p2
+        jc[:, i, 9] = q0 * p1 - q1 * p0
+        jc[:, i, 10], jc[:, i, 11], jc[:, i, 12] = p0, p1, p2
+        if timing.size:
+            if along_time is None or problem.timing is None:
+                raise ValueError("timing parameters need the observations' timing")
+            along = w0 * along_time[0] + w1 * along_time[1] + w2 * along_time[2]  # d uv_i / d tau
+            for column, parameter in enumerate(timing, start=N_GEOMETRIC):
+                jc[:, i, column] = -along if parameter == TIME_OFFSET else problem.timing.row[first:stop] * along
+    return res, jc, jp
 
 
 def residuals(state: BundleState, problem: BundleProblem) -> FloatArray:
     """(M, 2) reprojection residuals (projected minus observed) in px. Pure."""
-    return _linearise(state, problem, jacobians=False)[0]
+    unknowns = _Unknowns.of(state)
+    out = np.empty((problem.n_observations, 2))
+    for first in range(0, problem.n_observations, CHUNK_OBSERVATIONS):
+        stop = min(first + CHUNK_OBSERVATIONS, problem.n_observations)
+        out[first:stop] = _linearise_rows(
+            unknowns, problem, first, stop, jacobians=False, cameras=False, timing=_NO_TIMING
+        )[0]
+    return out
 
 
 def timing_columns(free: NDArray[np.bool_]) -> IntArray:
@@ -278,45 +422,46 @@ _NO_TIMING = np.empty(0, dtype=np.int64)
 
 
 def _linearise(
+    state: BundleState, problem: BundleProblem, *, timing: IntArray = _NO_TIMING
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Residuals (M, 2), camera Jacobians (M, 2, 13 + len(timing)) and placement Jacobians (M, 2, 5) of
+    the whole problem at once (the adjustment sums them chunk by chunk instead: :func:`_evaluate`)."""
+    unknowns = _Unknowns.of(state)
+    res, jc, jp = [], [], []
+    for first in range(0, problem.n_observations, CHUNK_OBSERVATIONS):
+        stop = min(first + CHUNK_OBSERVATIONS, problem.n_observations)
+        part, camera, placement = _linearise_rows(
+            unknowns, problem, first, stop, jacobians=True, cameras=True, timing=timing
+        )
+        assert camera is not None and placement is not None
+        res.append(part)
+        jc.append(camera[:, :, :-1])
+        jp.append(placement[:, :, :-1])
+    return np.concatenate(res), np.concatenate(jc), np.concatenate(jp)
+
+
+def _evaluate(
     state: BundleState,
     problem: BundleProblem,
-    *,
-    jacobians: bool = True,
-    cameras: bool = True,
-    timing: IntArray = _NO_TIMING,
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Residuals (M, 2), camera Jacobians (M, 2, 13 + len(timing); empty unless ``cameras``) and
-    placement Jacobians (M, 2, 5)."""
-    k, mm, pp, rotations, translations = _camera_arrays(state)
-    c = problem.camera
-    world, d_tau = _world_points(state, problem)
-    camera_rotations = rotations[c]
-    rotated = (camera_rotations @ world[..., None])[..., 0]
-    projection = project_with_jacobian_arrays(k[c], mm[c], pp[c], rotated + translations[c])
-    res = projection.uv - problem.uv
-    if not jacobians:
-        return res, np.empty(0), np.empty(0)
-    dp = projection.d_point  # (M, 2, 3)
-    dp_r = dp @ camera_rotations  # d uv / d world point
-    width = N_GEOMETRIC + timing.size
-    jc = np.empty((0, 2, width))
-    if cameras:
-        jc = np.empty((res.shape[0], 2, width))
-        jc[:, :, :N_INTRINSIC] = projection.d_intrinsics
-        jc[:, :, N_INTRINSIC : N_INTRINSIC + 3] = -(dp @ skew(rotated))
-        jc[:, :, N_INTRINSIC + 3 : N_GEOMETRIC] = dp
-        if timing.size:
-            if d_tau is None or problem.timing is None:
-                raise ValueError("timing parameters need the observations' timing")
-            along = (dp_r @ d_tau[..., None])[..., 0]  # d uv / d tau, (M, 2)
-            for i, column in enumerate(timing):
-                jc[:, :, N_GEOMETRIC + i] = -along if column == TIME_OFFSET else problem.timing.row[:, None] * along
-    basis = tangent_basis(state.wand_direction)[problem.placement]  # (M, 3, 2)
-    offsets = problem.wand.offsets[problem.point]
-    jp = np.empty((res.shape[0], 2, N_PLACEMENT_PARAMS))
-    jp[:, :, :3] = dp_r
-    jp[:, :, 3:] = offsets[:, None, None] * (dp_r @ basis)
-    return res, jc, jp
+    layout: BlockLayout,
+    timing: IntArray,
+    loss_scale: float | None,
+) -> tuple[FloatArray, NormalEquations]:
+    """(M, 2) residuals at ``state`` and the normal equations of the (Huber-weighted) problem there,
+    chunk by chunk."""
+    unknowns = _Unknowns.of(state)
+    res = np.empty((problem.n_observations, 2))
+    normal = empty_normal_equations(layout)
+    cameras = layout.width > 0
+    for chunk in layout.chunks:
+        part, jc, jp = _linearise_rows(
+            unknowns, problem, chunk.first, chunk.stop, jacobians=True, cameras=cameras, timing=timing
+        )
+        assert jp is not None
+        res[chunk.first : chunk.stop] = part
+        weights = None if loss_scale is None else _huber_weights(part, loss_scale)
+        accumulate(normal, layout, chunk, jc, jp, weights)
+    return res, normal
 
 
 def _apply_step(state: BundleState, delta_c: FloatArray, delta_p: FloatArray, timing: IntArray) -> BundleState:
@@ -336,117 +481,11 @@ def _apply_step(state: BundleState, delta_c: FloatArray, delta_p: FloatArray, ti
     return BundleState(tuple(models), tuple(poses), state.wand_a + delta_p[:, :3], direction, camera_timing)
 
 
-@dataclass(frozen=True, eq=False)
-class _Structure:
-    """Index structure of the normal equations and the Schur complement, computed once per adjustment.
-
-    A block is one (placement, camera) pair. Every sum over observations is the product of a sparse
-    matrix whose nonzeros are the Jacobian entries themselves (the Jacobian array is its data, in place)
-    with a dense Jacobian: one C loop over the nonzeros instead of a stack of tiny matrix products.
-    """
-
-    block_camera: IntArray  # (B,)
-    block_placement: IntArray  # (B,) non-decreasing
-    placement_block_starts: IntArray  # (P,) first block of each placement
-    block_to_camera: scipy.sparse.csr_matrix  # (C, B) sums blocks into their camera
-    schur_chunks: tuple[_SchurChunk, ...]  # placements with similar cameras, for S = U - Z Z^T
-    width: int  # camera parameters carried: 13 + timing ones
-    # CSC layouts of (rows x params) -> (params x rows) scatter matrices, data filled per iteration:
-    # row r (of the 2M residual rows) with parameter j goes to output row index[r * n + j].
-    by_block: NDArray[np.int32]  # (2M * 5,) 5 * block + j
-    by_placement: NDArray[np.int32]  # (2M * 5,) 5 * placement + j
-    by_camera: NDArray[np.int32]  # (2M * width,) width * camera + j
-
-
-@dataclass(frozen=True, eq=False)
-class _SchurChunk:
-    """Placements accumulated into the Schur complement together, and the cameras they are seen by.
-
-    Attributes:
-        n_placements: placements in the chunk (n).
-        blocks: (b,) their blocks.
-        position: (b,) each block's row in the chunk's dense (n * u, 5, K) array: placement-major.
-        cameras: (u,) the cameras seeing them, ascending.
-    """
-
-    n_placements: int
-    blocks: IntArray
-    position: IntArray
-    cameras: IntArray
-
-
 #: An adjustment stops when the cameras' next step is worth less than this fraction of a chi-square
 #: unit (sigma^2): every camera parameter within a few hundredths of its standard deviation of where
 #: the step would take it. Left alone, placements seen by two nearly parallel rays make a large rig
 #: creep by 1e-8 of its cost per iteration for tens of iterations without moving a camera.
 CAMERAS_SETTLED = 1e-3
-
-#: Placements per Schur chunk: small enough that a chunk's placements share most of their cameras
-#: once sorted by which cameras see them, large enough for one BLAS product to pay.
-_SCHUR_CHUNK = 128
-
-
-def _schur_chunks(block_camera: IntArray, block_placement: IntArray, n_cameras: int) -> tuple[_SchurChunk, ...]:
-    """Placements sorted by the set of cameras seeing them (lexicographically), cut into chunks."""
-    n_placements = int(block_placement[-1]) + 1
-    seen = np.zeros((n_placements, n_cameras), dtype=bool)
-    seen[block_placement, block_camera] = True
-    rank = np.empty(n_placements, dtype=np.int64)
-    rank[np.lexsort(seen[:, ::-1].T)] = np.arange(n_placements)
-    block_rank = rank[block_placement]
-    order = np.argsort(block_rank, kind="stable")
-    bounds = np.searchsorted(block_rank[order], np.arange(0, n_placements + _SCHUR_CHUNK, _SCHUR_CHUNK))
-    chunks = []
-    for i, (first, last) in enumerate(itertools.pairwise(bounds)):
-        if first == last:
-            continue
-        blocks = order[first:last]
-        cameras, local = np.unique(block_camera[blocks], return_inverse=True)
-        n = int(block_rank[blocks[-1]] - i * _SCHUR_CHUNK + 1)
-        chunks.append(_SchurChunk(n, blocks, (block_rank[blocks] - i * _SCHUR_CHUNK) * cameras.size + local, cameras))
-    return tuple(chunks)
-
-
-def _scatter(index: NDArray[np.int32], data: FloatArray, n_out: int) -> scipy.sparse.csc_matrix:
-    """(n_out, R) sparse matrix whose column r holds ``data[r]`` (R, n) at rows ``index[r * n : r * n + n]``."""
-    n_rows, n = data.shape
-    indptr = np.arange(0, n_rows * n + 1, n, dtype=np.int32)
-    matrix = scipy.sparse.csc_matrix((n_out, n_rows))
-    matrix.data, matrix.indices, matrix.indptr = data.reshape(-1), index, indptr  # trusted: no format check
-    return matrix
-
-
-def _spread(rows: IntArray, n: int) -> NDArray[np.int32]:
-    """(2M * n,) output rows ``n * rows[r] + j`` for each residual row r (two per observation) and j < n."""
-    per_row = np.repeat(rows, 2)
-    return (n * per_row[:, None] + np.arange(n)).reshape(-1).astype(np.int32)
-
-
-def _structure(problem: BundleProblem, width: int) -> _Structure:
-    """The index structure of ``problem`` with ``width`` camera parameters carried (0: placements only)."""
-    order_key = problem.placement * problem.n_cameras + problem.camera
-    if np.any(np.diff(order_key) < 0):
-        raise ValueError("observations must be sorted by placement, then camera")
-    keys, block_of_obs = np.unique(order_key, return_inverse=True)
-    block_camera = keys % problem.n_cameras
-    block_placement = keys // problem.n_cameras
-    if np.unique(block_placement).size != problem.n_placements:
-        raise CalibrationFailedError("a placement has no observation")
-    c, p, b = problem.n_cameras, problem.n_placements, keys.size
-    if 2 * problem.n_observations * max(width, N_PLACEMENT_PARAMS) >= np.iinfo(np.int32).max:
-        raise CalibrationFailedError(f"{problem.n_observations} observations: more than one adjustment can hold")
-    cameras = width > 0
-    return _Structure(
-        block_camera,
-        block_placement,
-        np.searchsorted(block_placement, np.arange(p)),
-        scipy.sparse.csr_matrix((np.ones(b), (block_camera, np.arange(b))), shape=(c, b)),
-        _schur_chunks(block_camera, block_placement, c) if cameras else (),
-        width,
-        _spread(block_of_obs, N_PLACEMENT_PARAMS if cameras else 0),
-        _spread(problem.placement, N_PLACEMENT_PARAMS),
-        _spread(problem.camera, width),
-    )
 
 
 def _huber_weights(res: FloatArray, loss_scale: float | None) -> FloatArray:
@@ -464,117 +503,6 @@ def robust_cost(res: FloatArray, loss_scale: float | None) -> float:
         return float(np.sum(squared))
     norm = np.sqrt(squared)
     return float(np.sum(np.where(norm <= loss_scale, squared, 2 * loss_scale * norm - loss_scale**2)))
-
-
-def _normal_equations(
-    res: FloatArray, jc: FloatArray, jp: FloatArray, weights: FloatArray, structure: _Structure, n_cameras: int
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
-    """U (C,K,K), V (P,5,5), W (B,K,5), gc (C,K), gp (P,5) of the weighted problem, g = -J^T W r (K = jc width)."""
-    if not np.all(weights == 1.0):
-        root = np.sqrt(weights)[:, None, None]
-        jc, jp, res = jc * root[: jc.shape[0]], jp * root, res * root[:, :, 0]
-    rows = 2 * res.shape[0]
-    jp_rows, res_rows = jp.reshape(rows, N_PLACEMENT_PARAMS), res.reshape(rows)
-    n_placements = int(structure.placement_block_starts.size)
-    to_placement = _scatter(structure.by_placement, jp_rows, N_PLACEMENT_PARAMS * n_placements)
-    v = (to_placement @ jp_rows).reshape(-1, N_PLACEMENT_PARAMS, N_PLACEMENT_PARAMS)
-    gp = -(to_placement @ res_rows).reshape(-1, N_PLACEMENT_PARAMS)
-    if jc.shape[0] == 0:  # placements only
-        return np.empty((0,)), v, np.empty((0,)), np.empty((0,)), gp
-    width = jc.shape[2]
-    jc_rows = jc.reshape(rows, width)
-    to_camera = _scatter(structure.by_camera, jc_rows, width * n_cameras)
-    u = (to_camera @ jc_rows).reshape(n_cameras, width, width)
-    gc = -(to_camera @ res_rows).reshape(n_cameras, width)
-    to_block = _scatter(structure.by_block, jp_rows, N_PLACEMENT_PARAMS * structure.block_camera.size)
-    w = (to_block @ jc_rows).reshape(-1, N_PLACEMENT_PARAMS, width).transpose(0, 2, 1)
-    return u, v, w, gc, gp
-
-
-def _inverse_and_root(v: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """V^-1 and a factor L with L L^T = V^-1 for (P, 5, 5) symmetric positive definite blocks."""
-    v_inv = np.linalg.inv(v)
-    v_inv = 0.5 * (v_inv + v_inv.transpose(0, 2, 1))
-    try:
-        return v_inv, np.asarray(np.linalg.cholesky(v_inv), dtype=np.float64)
-    except np.linalg.LinAlgError:  # numerically semi-definite: symmetric square root
-        values, vectors = np.linalg.eigh(v_inv)
-        return v_inv, vectors * np.sqrt(np.clip(values, 0.0, None))[:, None, :]
-
-
-def _reduced_system(
-    u: FloatArray,
-    v: FloatArray,
-    w: FloatArray,
-    gc: FloatArray,
-    gp: FloatArray,
-    structure: _Structure,
-    n_cameras: int,
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Schur complement S = U - W V^-1 W^T (dense, KC square), its right-hand side and V^-1.
-
-    With L L^T = V_j^-1 and Z_b = W_b L_j, S = U - Z Z^T where Z is the (KC x 5P) matrix of the
-    blocks Z_b: one BLAS product per chunk of placements, over the cameras that chunk's placements
-    are seen by (so cameras that share no placement cost nothing).
-    """
-    v_inv, root = _inverse_and_root(v)
-    z = w @ root[structure.block_placement]  # (B, K, 5)
-    width = u.shape[1]
-    size = n_cameras * width
-    by_block = np.zeros((n_cameras, n_cameras, width, width))  # camera-block layout: whole blocks per update
-    by_block[np.arange(n_cameras), np.arange(n_cameras)] = u
-    z_t = z.transpose(0, 2, 1)  # (B, 5, K)
-    for chunk in structure.schur_chunks:
-        n, u_local = chunk.n_placements, chunk.cameras.size
-        blocks = np.zeros((n * u_local, N_PLACEMENT_PARAMS, width))  # (placement, camera) major
-        blocks[chunk.position] = z_t[chunk.blocks]
-        dense = blocks.reshape(n, u_local, N_PLACEMENT_PARAMS, width).transpose(0, 2, 1, 3)
-        flat = dense.reshape(n * N_PLACEMENT_PARAMS, u_local * width)  # rows (placement, j), columns (camera, k)
-        product = (flat.T @ flat).reshape(u_local, width, u_local, width).transpose(0, 2, 1, 3)
-        by_block[chunk.cameras[:, None], chunk.cameras[None, :]] -= product
-    s = by_block.transpose(0, 2, 1, 3).reshape(size, size)
-    # rhs = gc - sum_b W_b V_j^-1 gp_j = gc - sum_b Z_b (L_j^T gp_j)
-    projected = (root.transpose(0, 2, 1) @ gp[..., None])[..., 0]  # (P, 5)
-    per_block = (z @ projected[structure.block_placement][..., None])[..., 0]  # (B, K)
-    rhs = (gc - structure.block_to_camera @ per_block).reshape(size)
-    return s, rhs, v_inv
-
-
-def _back_substitute(
-    delta_c: FloatArray, v_inv: FloatArray, w: FloatArray, gp: FloatArray, structure: _Structure
-) -> FloatArray:
-    wt_dc = (w.transpose(0, 2, 1) @ delta_c[structure.block_camera][..., None])[..., 0]  # (B, 5)
-    per_placement = np.add.reduceat(wt_dc, structure.placement_block_starts, axis=0)
-    return (v_inv @ (gp - per_placement)[..., None])[..., 0]
-
-
-def _scaling(blocks: FloatArray) -> FloatArray:
-    """(..., n) the Levenberg-Marquardt scaling D of (..., n, n) diagonal blocks: their diagonal, floored."""
-    diag = np.einsum("...ii->...i", blocks)
-    return np.maximum(diag, 1e-9 * max(float(np.max(diag, initial=0.0)), 1e-12))
-
-
-def _damp(blocks: FloatArray, lam: float) -> FloatArray:
-    """The blocks plus lam D (and a trace of D, so that zero rows stay solvable)."""
-    scaling = _scaling(blocks)
-    damped = blocks.copy()
-    idx = np.arange(blocks.shape[-1])
-    damped[..., idx, idx] += lam * scaling + 1e-12 * float(np.min(scaling, initial=1.0))
-    return damped
-
-
-def _solve_free(s: FloatArray, rhs: FloatArray, free: NDArray[np.bool_]) -> FloatArray:
-    delta = np.zeros_like(rhs)
-    if not free.any():
-        return delta
-    sub = s[np.ix_(free, free)]
-    try:
-        # numpy's LAPACK throughout: scipy's is a second BLAS thread pool, and the two contend
-        np.linalg.cholesky(sub)  # positive definite, else least squares
-        delta[free] = np.linalg.solve(sub, rhs[free])
-    except np.linalg.LinAlgError:
-        delta[free] = np.linalg.lstsq(sub, rhs[free], rcond=None)[0]
-    return delta
 
 
 def default_free_mask(n_cameras: int, reference: int = 0) -> NDArray[np.bool_]:
@@ -620,34 +548,39 @@ def bundle_adjust(
     columns = np.concatenate([np.arange(N_GEOMETRIC), timing])  # the camera parameters carried
     free_flat = free[:, columns].reshape(-1)
     cameras = bool(free_flat.any())
-    structure = _structure(problem, columns.size if cameras else 0)
+    layout = block_layout(
+        problem.camera,
+        problem.placement,
+        problem.point,
+        n_cameras,
+        problem.n_placements,
+        problem.wand.n_points,
+        columns.size if cameras else 0,
+    )
     lam = 1e-6
-    res, jc, jp = _linearise(state, problem, cameras=cameras, timing=timing)
+    res, normal = _evaluate(state, problem, layout, timing, loss_scale)
     if not np.all(np.isfinite(res)):
         raise CalibrationFailedError("the bundle adjustment starts from non-finite reprojections")
     cost = robust_cost(res, loss_scale)
     m, p = res.size, int(free_flat.sum()) + N_PLACEMENT_PARAMS * problem.n_placements
     dof = max(m - p, 1)
     iterations, converged = 0, False
-    normal = None  # the normal equations at the current state, once computed
     while iterations < max_iterations and not converged:
         iterations += 1
-        weights = _huber_weights(res, loss_scale)
-        normal = _normal_equations(res, jc, jp, weights, structure, n_cameras)
-        u, v, w, gc, gp = normal
         accepted = False
         for attempt in range(30):
+            step = damped(normal, lam)
             if cameras:
-                s, rhs, v_inv = _reduced_system(_damp(u, lam), _damp(v, lam), w, gc, gp, structure, n_cameras)
-                delta_c = _solve_free(s, rhs, free_flat).reshape(n_cameras, columns.size)
-                delta_p = _back_substitute(delta_c, v_inv, w, gp, structure)
+                s, rhs, v_inv = reduced_system(step, layout)
+                delta_c = solve_free(s, rhs, free_flat).reshape(n_cameras, columns.size)
+                delta_p = back_substitute(delta_c, v_inv, step, layout)
                 # the decrease the linearised problem promises: delta^T g + lambda delta^T D delta
-                predicted = float(np.sum(delta_c * gc)) + lam * float(np.sum(_scaling(u) * delta_c**2))
+                predicted = float(np.sum(delta_c * normal.gc)) + lam * float(np.sum(scaling(normal.u) * delta_c**2))
             else:  # placements only: independent 5x5 systems
                 delta_c = np.zeros((n_cameras, columns.size))
-                delta_p = np.asarray(np.linalg.solve(_damp(v, lam), gp[..., None])[..., 0], dtype=np.float64)
+                delta_p = np.asarray(np.linalg.solve(step.v, normal.gp[..., None])[..., 0], dtype=np.float64)
                 predicted = 0.0
-            predicted += float(np.sum(delta_p * gp)) + lam * float(np.sum(_scaling(v) * delta_p**2))
+            predicted += float(np.sum(delta_p * normal.gp)) + lam * float(np.sum(scaling(normal.v) * delta_p**2))
             if attempt == 0 and predicted < tolerance * cost:  # the undamped step is not worth taking: converged
                 accepted = converged = True
                 break
@@ -661,8 +594,8 @@ def bundle_adjust(
             except ModelError:  # e.g. k1 <= 0: not a camera, reject the step
                 lam *= 10.0
                 continue
-            # Jacobians come with the trial residuals: steps are rarely rejected near a solution.
-            new_res, new_jc, new_jp = _linearise(candidate, problem, cameras=cameras, timing=timing)
+            # The normal equations come with the trial residuals: steps are rarely rejected near a solution.
+            new_res, new_normal = _evaluate(candidate, problem, layout, timing, loss_scale)
             new_cost = robust_cost(new_res, loss_scale) if np.all(np.isfinite(new_res)) else np.inf
             if new_cost < cost:
                 accepted = True
@@ -674,9 +607,8 @@ def bundle_adjust(
                     relative_decrease,
                     lam,
                 )
-                state, cost, normal = candidate, new_cost, None
+                state, cost, res, normal = candidate, new_cost, new_res, new_normal
                 lam = max(lam / 10.0, 1e-12)
-                res, jc, jp = new_res, new_jc, new_jp
                 converged = relative_decrease < tolerance
                 break
             lam *= 10.0
@@ -686,11 +618,8 @@ def bundle_adjust(
     sigma = float(np.sqrt(np.sum(weights[:, None] * res**2) / dof))
     size = n_cameras * N_CAMERA_PARAMS
     covariance = np.zeros((size, size))
-    if cameras:  # stopped before a step: the iteration's normal equations are the state's
-        u, v, w, gc, gp = (
-            normal if normal is not None else _normal_equations(res, jc, jp, weights, structure, n_cameras)
-        )
-        s, _, _ = _reduced_system(u, _damp(v, 0.0), w, gc, gp, structure, n_cameras)
+    if cameras:  # the normal equations are always those of the final state
+        s, _, _ = reduced_system(normal._replace(v=damp(normal.v, 0.0)), layout)
         carried = (np.arange(n_cameras)[:, None] * N_CAMERA_PARAMS + columns[None, :]).reshape(-1)[free_flat]
         covariance[np.ix_(carried, carried)] = np.linalg.pinv(s[np.ix_(free_flat, free_flat)], hermitian=True)
         covariance *= sigma**2
