@@ -37,6 +37,8 @@ from wand_calib_ros.core.camera_model import (
     N_INTRINSIC,
     N_RADIAL,
     CameraModel,
+    project_arrays,
+    project_with_jacobian_arrays,
 )
 from wand_calib_ros.core.errors import CalibrationFailedError, ModelError
 from wand_calib_ros.core.geometry import Pose, rotation_from_rotvec, tangent_basis
@@ -247,9 +249,9 @@ class BundleResult:
         return self.camera_covariance[block, block]
 
 
-#: Columns of :class:`_Unknowns`' camera table: k (5), dk (5), m (2), principal point (2), rotation (9, row-major),
+#: Columns of :class:`_Unknowns`' camera table: k (5), m (2), principal point (2), rotation (9, row-major),
 #: translation (3), time offset and readout (2).
-_K, _DK, _M, _PP, _ROT, _T, _TIMING = 0, 5, 10, 12, 14, 23, 26
+_K, _M, _PP, _ROT, _T, _TIMING = 0, 5, 7, 9, 18, 21
 #: Columns of its placement table: A (3), the direction (3), its tangent basis e1 (3) and e2 (3).
 _A, _DIRECTION, _E1, _E2 = 0, 3, 6, 9
 
@@ -259,8 +261,8 @@ class _Unknowns:
     """The state as two tables the linearisation gathers rows from, one gather per chunk.
 
     Attributes:
-        cameras: (C, 28) per camera k, dk = k * (1, 3, 5, 7, 9) (the coefficients of dr/dtheta), m,
-            principal point, rotation (row-major), translation, time offset and readout time.
+        cameras: (C, 23) per camera k, m, principal point, rotation (row-major), translation, time
+            offset and readout time.
         placements: (P, 12) per placement A, the unit direction A -> C and its tangent basis e1, e2.
     """
 
@@ -273,7 +275,6 @@ class _Unknowns:
         cameras = np.concatenate(
             [
                 k,
-                k * np.array([1.0, 3.0, 5.0, 7.0, 9.0]),
                 np.stack([m.m for m in state.models]),
                 np.stack([m.principal_point for m in state.models]),
                 np.stack([p.rotation.reshape(9) for p in state.poses]),
@@ -302,14 +303,14 @@ def _linearise_rows(
     (n, 2, 5 + 1), each with the residuals as last column (:func:`accumulate` sums [J | r]^T [J | r]).
 
     Written on component arrays (n,) of a chunk small enough to stay in cache (see
-    :mod:`~wand_calib_ros.core.normal_equations`): the projection and its derivatives are those of
-    :func:`~wand_calib_ros.core.camera_model.project_with_jacobian_arrays`; the rotation columns are
+    :mod:`~wand_calib_ros.core.normal_equations`); the projection and its derivatives come from
+    :func:`~wand_calib_ros.core.camera_model.project_with_jacobian_arrays`, the rotation columns are
     ``d uv / d rotvec = -d_point [R X]x`` (R <- exp([d]x) R), row by row the cross product ``R X x
-    d_point_row``.
+    d_point_row``; the placement's ``d_point R`` and ``offset d_point R e``.
     """
     c = problem.camera[first:stop]
     pl = problem.placement[first:stop]
-    cam = np.take(unknowns.cameras, c, axis=0).T  # (28, n)
+    cam = np.take(unknowns.cameras, c, axis=0).T  # (23, n)
     placed = np.take(unknowns.placements, pl, axis=0).T  # (12, n)
     offsets = problem.wand.offsets[problem.point[first:stop]]
     world = placed[_A : _A + 3] + offsets * placed[_DIRECTION : _DIRECTION + 3]  # (3, n) reference frame
@@ -322,52 +323,26 @@ def _linearise_rows(
         half = 0.5 * tau * tau
         world = world + tau * (velocity + half / 3.0 * jerk) + half * acceleration
         along_time = velocity + tau * acceleration + half * jerk  # d world / d tau
-    rot = cam[_ROT : _ROT + 9]
-    q0 = rot[0] * world[0] + rot[1] * world[1] + rot[2] * world[2]  # R X
-    q1 = rot[3] * world[0] + rot[4] * world[1] + rot[5] * world[2]
-    q2 = rot[6] * world[0] + rot[7] * world[1] + rot[8] * world[2]
-    x, y, z = q0 + cam[_T], q1 + cam[_T + 1], q2 + cam[_T + 2]
-    rho = np.hypot(x, y)
-    theta = np.arctan2(rho, z)
-    tiny = rho <= 1e-12 * np.abs(z)
-    if tiny.any():  # on the optical axis: phi = 0, theta / rho -> 1 / z
-        safe = np.where(tiny, 1.0, rho)
-        cos_phi, sin_phi = np.where(tiny, 1.0, x / safe), np.where(tiny, 0.0, y / safe)
-        theta_over_rho = np.where(tiny, 1.0 / np.where(z == 0, 1.0, z), theta / safe)
-    else:
-        inverse = 1.0 / rho
-        cos_phi, sin_phi, theta_over_rho = x * inverse, y * inverse, theta * inverse
-    k = cam[_K : _K + 5]
-    t2 = theta * theta
-    r_over_theta = k[0] + t2 * (k[1] + t2 * (k[2] + t2 * (k[3] + t2 * k[4])))
-    r = r_over_theta * theta
-    mu, mv = cam[_M], cam[_M + 1]
-    uv = problem.uv[first:stop]
     n = stop - first
-    res = np.empty((n, 2))
-    res[:, 0] = mu * r * cos_phi + cam[_PP] - uv[:, 0]
-    res[:, 1] = mv * r * sin_phi + cam[_PP + 1] - uv[:, 1]
+    rot = cam[_ROT : _ROT + 9]
+    rotated = np.empty((n, 3))  # R X
+    for i in range(3):
+        rotated[:, i] = rot[3 * i] * world[0] + rot[3 * i + 1] * world[1] + rot[3 * i + 2] * world[2]
+    intrinsics = cam[_K : _K + N_RADIAL].T, cam[_M : _M + 2].T, cam[_PP : _PP + 2].T
     if not jacobians:
-        return res, None, None
-    dk = cam[_DK : _DK + 5]
-    dr = dk[0] + t2 * (dk[1] + t2 * (dk[2] + t2 * (dk[3] + t2 * dk[4])))
-    d2 = rho * rho + z * z
-    b = r_over_theta * theta_over_rho  # r / rho
-    with np.errstate(divide="ignore", invalid="ignore"):
-        a = np.where(d2 > 0, dr * z / d2, b)  # dr/dtheta * dtheta/drho
-        dz = np.where(d2 > 0, -dr / d2, 0.0)
-    a_minus_b = a - b
-    mixed = a_minus_b * cos_phi * sin_phi
-    d_point = (  # d(u, v) / d(x, y, z), camera frame
-        (mu * (b + a_minus_b * cos_phi * cos_phi), mu * mixed, mu * dz * x),
-        (mv * mixed, mv * (b + a_minus_b * sin_phi * sin_phi), mv * dz * y),
-    )
+        return project_arrays(*intrinsics, rotated + cam[_T : _T + 3].T) - problem.uv[first:stop], None, None
+    projection = project_with_jacobian_arrays(*intrinsics, rotated + cam[_T : _T + 3].T)
+    res = projection.uv - problem.uv[first:stop]
+    q0, q1, q2 = rotated.T
+    d_point = projection.d_point.transpose(1, 2, 0)  # (2, 3, n): d(u, v) / d(x, y, z), camera frame
     e1, e2 = placed[_E1 : _E1 + 3], placed[_E2 : _E2 + 3]
     width = N_GEOMETRIC + timing.size
     jc = np.empty((n, 2, width + 1)) if cameras else None
     jp = np.empty((n, 2, N_PLACEMENT_PARAMS + 1))
     jp[:, :, N_PLACEMENT_PARAMS] = res
     if jc is not None:
+        jc[:, :, :N_INTRINSIC] = projection.d_intrinsics
+        jc[:, :, N_INTRINSIC + 3 : N_GEOMETRIC] = projection.d_point  # translation
         jc[:, :, width] = res
     for i, (p0, p1, p2) in enumerate(d_point):
         w0 = p0 * rot[0] + p1 * rot[3] + p2 * rot[6]  # d uv_i / d world point: d_point R
@@ -378,15 +353,9 @@ def _linearise_rows(
         jp[:, i, 4] = offsets * (w0 * e2[0] + w1 * e2[1] + w2 * e2[2])
         if jc is None:
             continue
-        power = (mu * cos_phi if i == 0 else mv * sin_phi) * theta
-        for j in range(N_RADIAL):  # d / d k_j: m cos(phi) theta^(2j + 1)
-            jc[:, i, j] = power
-            power = power * t2
-        jc[:, i, 5], jc[:, i, 6] = (1.0, 0.0) if i == 0 else (0.0, 1.0)
-        jc[:, i, 7] = q1 * p2 - q2 * p1
-        jc[:, i, 8] = q2 * p0 - q0 * p2
-        jc[:, i, 9] = q0 * p1 - q1 * p0
-        jc[:, i, 10], jc[:, i, 11], jc[:, i, 12] = p0, p1, p2
+        jc[:, i, N_INTRINSIC] = q1 * p2 - q2 * p1  # rotation
+        jc[:, i, N_INTRINSIC + 1] = q2 * p0 - q0 * p2
+        jc[:, i, N_INTRINSIC + 2] = q0 * p1 - q1 * p0
         if timing.size:
             if along_time is None or problem.timing is None:
                 raise ValueError("timing parameters need the observations' timing")

@@ -259,6 +259,16 @@ def project(model: CameraModel, points: FloatArray) -> FloatArray:
     return np.stack([u, v], axis=-1)
 
 
+def project_arrays(k: FloatArray, m: FloatArray, principal_point: FloatArray, points: FloatArray) -> FloatArray:
+    """(N, 2) pixels of (N, 3) camera-frame points, one set of intrinsics per point ((N, 5), (N, 2), (N, 2))."""
+    theta, _, cos_phi, sin_phi, _ = _angles(points)
+    r = radius(k.T, theta)
+    uv = np.empty((theta.shape[0], 2))
+    uv[:, 0] = m[:, 0] * r * cos_phi + principal_point[:, 0]
+    uv[:, 1] = m[:, 1] * r * sin_phi + principal_point[:, 1]
+    return uv
+
+
 class ProjectionJacobian(NamedTuple):
     """Projection with its exact derivatives.
 
@@ -283,6 +293,9 @@ def project_with_jacobian_arrays(
 ) -> ProjectionJacobian:
     """Vectorised projection with Jacobians, one set of intrinsics per point.
 
+    Written on component arrays (N,): it is the inner loop of the bundle adjustment, called on
+    chunks of a few thousand points.
+
     Args:
         k: (N, 5) or (1, 5) radial coefficients.
         m: (N, 2) or (1, 2) pixel densities.
@@ -290,33 +303,48 @@ def project_with_jacobian_arrays(
         points: (N, 3) camera-frame points.
     """
     x, y, z = _split_points(points)
-    theta, rho, cos_phi, sin_phi, theta_over_rho = _angles(points)
-    kT = k.T
-    r_over_theta = radius_over_theta(kT, theta)
+    n = x.shape[0]
+    rho = np.hypot(x, y)
+    theta = np.arctan2(rho, z)
+    tiny = rho <= 1e-12 * np.abs(z)
+    if tiny.any():  # on the optical axis: phi = 0, theta / rho -> 1 / z
+        safe = np.where(tiny, 1.0, rho)
+        cos_phi, sin_phi = np.where(tiny, 1.0, x / safe), np.where(tiny, 0.0, y / safe)
+        theta_over_rho = np.where(tiny, 1.0 / np.where(z == 0, 1.0, z), theta / safe)
+    else:
+        inverse = 1.0 / rho
+        cos_phi, sin_phi, theta_over_rho = x * inverse, y * inverse, theta * inverse
+    k1, k2, k3, k4, k5 = k.T
+    t2 = theta * theta
+    r_over_theta = k1 + t2 * (k2 + t2 * (k3 + t2 * (k4 + t2 * k5)))
     r = r_over_theta * theta
-    dr = radius_derivative(kT, theta)
+    dr = k1 + t2 * (3.0 * k2 + t2 * (5.0 * k3 + t2 * (7.0 * k4 + t2 * (9.0 * k5))))
     d2 = rho * rho + z * z
     b = r_over_theta * theta_over_rho  # r / rho
     with np.errstate(divide="ignore", invalid="ignore"):
         a = np.where(d2 > 0, dr * z / d2, b)  # dr/dtheta * dtheta/drho
         dz_common = np.where(d2 > 0, -dr / d2, 0.0)
     a_minus_b = a - b
-    mu, mv = m[:, 0], m[:, 1]
-    n = theta.shape[0]
+    mu, mv = m.T
+    mixed = a_minus_b * cos_phi * sin_phi
     d_point = np.empty((n, 2, 3))
     d_point[:, 0, 0] = mu * (b + a_minus_b * cos_phi * cos_phi)
-    d_point[:, 0, 1] = mu * a_minus_b * cos_phi * sin_phi
+    d_point[:, 0, 1] = mu * mixed
     d_point[:, 0, 2] = mu * dz_common * x
-    d_point[:, 1, 0] = mv * a_minus_b * cos_phi * sin_phi
+    d_point[:, 1, 0] = mv * mixed
     d_point[:, 1, 1] = mv * (b + a_minus_b * sin_phi * sin_phi)
     d_point[:, 1, 2] = mv * dz_common * y
-    powers = _odd_powers(theta)  # (N, 5)
-    d_intrinsics = np.zeros((n, 2, N_INTRINSIC))
-    d_intrinsics[:, 0, :N_RADIAL] = (mu * cos_phi)[:, None] * powers
-    d_intrinsics[:, 1, :N_RADIAL] = (mv * sin_phi)[:, None] * powers
-    d_intrinsics[:, 0, 5] = 1.0
-    d_intrinsics[:, 1, 6] = 1.0
-    uv = np.stack([mu * r * cos_phi + principal_point[:, 0], mv * r * sin_phi + principal_point[:, 1]], -1)
+    d_intrinsics = np.empty((n, 2, N_INTRINSIC))
+    for row, radial in enumerate((mu * cos_phi, mv * sin_phi)):
+        power = radial * theta
+        for j in range(N_RADIAL):  # d / d k_j: m cos(phi) theta^(2j + 1) (sin for v)
+            d_intrinsics[:, row, j] = power
+            power = power * t2
+    d_intrinsics[:, 0, 5:] = (1.0, 0.0)
+    d_intrinsics[:, 1, 5:] = (0.0, 1.0)
+    uv = np.empty((n, 2))
+    uv[:, 0] = mu * r * cos_phi + principal_point[:, 0]
+    uv[:, 1] = mv * r * sin_phi + principal_point[:, 1]
     return ProjectionJacobian(uv, d_point, d_intrinsics)
 
 
