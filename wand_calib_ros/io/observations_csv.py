@@ -101,14 +101,22 @@ def _cells_per_line_are(raw: bytes, cells: int) -> bool:
     ends = np.flatnonzero(data == ord("\n"))
     if data.size and data[-1] != ord("\n"):
         ends = np.append(ends, data.size)
-    commas = np.concatenate([[0], np.cumsum(data == ord(","))])
-    per_line = np.diff(commas[np.concatenate([[0], ends])])
-    return bool(np.all(per_line == cells - 1))
+    commas_before_end = np.searchsorted(np.flatnonzero(data == ord(",")), ends)
+    return bool(np.all(np.diff(commas_before_end, prepend=0) == cells - 1))
 
 
-def _index_of(values: NDArray[np.str_], names: tuple[str, ...]) -> NDArray[np.int64] | None:
-    """(N,) index of each value in ``names``; None when a value is not among them."""
-    table = np.array(names)
+def _frame_rows(frame: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """The distinct frame ids, ascending, and each row's index among them (rows in frame order: no sort)."""
+    if np.all(frame[1:] >= frame[:-1]):
+        new = np.r_[True, frame[1:] != frame[:-1]]
+        return frame[new], np.cumsum(new) - 1
+    ids, rows = np.unique(frame, return_inverse=True)
+    return ids, rows
+
+
+def _index_of(values: NDArray[np.str_] | NDArray[np.bytes_], names: tuple[str, ...]) -> NDArray[np.int64] | None:
+    """(N,) index of each value (str, or ASCII bytes) in ``names``; None when a value is not among them."""
+    table = np.array([name.encode() for name in names] if values.dtype.kind == "S" else names)
     order = np.argsort(table)
     found = np.minimum(np.searchsorted(table, values, sorter=order), len(names) - 1)
     index = order[found]
@@ -132,10 +140,13 @@ def _parse_plain(
         return None
     longest = 1 + (max(map(len, known)) if known else 64)  # a longer name shows as this long: not known
     fields = [*COLUMNS, *([STAMP] if STAMP in header else [])]
-    kinds = {"frame": "i8", "camera": f"U{longest}", "point": "U2", "u": "f8", "v": "f8", STAMP: "f8"}
+    text_kind = "S" if text.isascii() else "U"  # bytes compare and sort faster than str
+    kinds = {"frame": "i8", "camera": f"{text_kind}{longest}", "point": f"{text_kind}2", "u": "f8", "v": "f8"}
+    kinds[STAMP] = "f8"
     try:
         table = np.loadtxt(
-            io.StringIO(text),
+            io.BytesIO(raw),  # numpy's reader decodes bytes faster than it reads a str
+            encoding="utf-8",
             delimiter=",",
             skiprows=1,
             comments=None,
@@ -159,23 +170,19 @@ def _parse_plain(
         found, first = np.unique(camera_text, return_index=True)
         if max(map(len, found)) >= longest:
             return None
-        names = tuple(str(n) for n in found[np.argsort(first)])  # in order of first appearance
+        names = tuple(str(n, "ascii") if isinstance(n, bytes) else str(n) for n in found[np.argsort(first)])
     camera = _index_of(camera_text, names)
     point = _index_of(table["point"], labels)
     if camera is None or point is None:  # a camera the rig lacks, a label other than A, B, C
         return None
-    for c, name in enumerate(names):
-        size = sizes.get(name)
-        if size is None:
-            continue
-        mine = uv_rows[camera == c]
-        low, high = -0.5 - IMAGE_MARGIN_PX, np.array(size) - 0.5 + IMAGE_MARGIN_PX
-        if mine.size and not (np.all(mine >= low) and np.all(mine <= high)):
+    if sizes:  # every point within its image's margin (cameras without a size: anywhere)
+        high = np.array([sizes.get(name, (np.inf, np.inf)) for name in names], dtype=np.float64)[camera]
+        if not (np.all(uv_rows >= -0.5 - IMAGE_MARGIN_PX) and np.all(uv_rows <= high - 0.5 + IMAGE_MARGIN_PX)):
             return None
-    frame_ids, frame_row = np.unique(frame, return_inverse=True)
+    frame_ids, frame_row = _frame_rows(frame)
     n_cameras = len(names)
     key = (frame_row * n_cameras + camera) * len(labels) + point
-    if np.unique(key).size != key.size:  # a point twice
+    if np.any(np.bincount(key, minlength=frame_ids.size * n_cameras * len(labels)) > 1):  # a point twice
         return None
     uv = np.full((frame_ids.size, n_cameras, len(labels), 2), np.nan)
     uv[frame_row, camera, point] = uv_rows
