@@ -217,6 +217,12 @@ def _parser() -> argparse.ArgumentParser:
         metavar="POSITIONS",
         help="another wand: its markers' positions along it in mm, comma-separated from 0 (e.g. 0,120,250,400,600)",
     )
+    sim.add_argument(
+        "--led-cone-deg",
+        type=float,
+        metavar="DEG",
+        help="half-angle of the LEDs' emission cone (scenario default if omitted; 180: seen from everywhere)",
+    )
     sim.add_argument("--true-focal", type=float, help="paper scenario: true focal length in mm (default 2.0)")
     sim.add_argument(
         "--principal-point",
@@ -384,6 +390,10 @@ def _simulate(args: argparse.Namespace) -> int:
     scenario = factory(**kwargs)
     if args.wand_mm is not None:
         scenario = dataclasses.replace(scenario, wand=_wand_positions(args.wand_mm))
+    if args.led_cone_deg is not None:
+        if not 0 < args.led_cone_deg <= 180:
+            raise WandCalibError(f"--led-cone-deg must be in (0, 180], got {args.led_cone_deg:g}")
+        scenario = dataclasses.replace(scenario, led_cone_deg=args.led_cone_deg)
     rng = np.random.default_rng(args.seed)
     timing: dict[str, dict[str, float]] = {}
     if args.take is not None:

@@ -185,8 +185,9 @@ def initialise_pair(
         )
     screening = spread_subset(n, options.screening_placements)
     s0, s1 = uv0[screening], uv1[screening]
+    spread = spread_subset(n, options.pair_placements)  # the pair's bundle adjustment draws on these
     trials: list[LensTrial] = []
-    tried: dict[tuple[str, str], tuple[WandFit, NDArray[np.bool_]] | None] = {}
+    tried: dict[tuple[str, str], tuple[WandFit, NDArray[np.int64]] | None] = {}
 
     def attempt(start0: Start, start1: Start) -> float:
         """Steps 2-3 (screening) for one pair of starts; returns its wand-length RMS (inf on failure)."""
@@ -215,8 +216,9 @@ def initialise_pair(
             else:
                 trials.append(LensTrial(names, fit.rms_mm))
                 log.info("lens start %s: wand-length RMS %.3f mm", "/".join(names), fit.rms_mm)
-                # Placements of the whole recording that agree with this start's epipolar geometry.
-                tried[names] = (fit, _epipolar_agreement(models, step2.essential, uv0, uv1, options))
+                # The spread placements that agree with this start's epipolar geometry.
+                agree = _epipolar_agreement(models, step2.essential, uv0[spread], uv1[spread], options)
+                tried[names] = (fit, spread[agree])
         outcome = tried[names]
         return np.inf if outcome is None else outcome[0].rms_mm
 
@@ -232,10 +234,9 @@ def initialise_pair(
         raise DegenerateDataError(
             f"cameras '{specs[0].name}' and '{specs[1].name}': no lens start gives a relative pose ({reasons})"
         )
-    screened, agree_all = best
+    screened, use = best
     # The winner's Step 3 (on the screening placements) seeds a bundle adjustment of the pair
     # on a larger spread of the placements that agree with its epipolar geometry.
-    use = np.intersect1d(spread_subset(n, options.pair_placements), np.flatnonzero(agree_all))
     models, pose = _pair_bundle(screened, uv0[use], uv1[use], wand)
     return PairInitialisation(models, pose, screened, names, tuple(trials))
 
