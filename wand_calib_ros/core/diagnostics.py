@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wand_calib_ros.core.camera_model import project, unproject
-from wand_calib_ros.core.geometry import triangulate
+from wand_calib_ros.core.geometry import ray_sums, ray_terms, solve_ray_sums
 from wand_calib_ros.core.result import CalibrationResult, ClockOffset
 from wand_calib_ros.core.rig import WandObservations, spread_subset
 
@@ -52,15 +52,24 @@ def clock_offsets(result: CalibrationResult, observations: WandObservations) -> 
     rows = rows[spread_subset(rows.size, MAX_FRAMES)]
     uv = obs.uv[rows]
     velocity = (obs.uv[rows + 1] - obs.uv[rows - 1]) / 2.0
-    bearings = np.stack([unproject(models[c], uv[:, c]) for c in range(len(names))], axis=2)  # (F, K, C, 3)
-    rotations = np.stack([p.rotation for p in poses])
-    translations = np.stack([p.translation for p in poses])
+    n_frames, n_cameras, n_markers = uv.shape[:3]
+    # Every marker's rays, summed once; each camera's leave-one-out point drops its own ray's terms.
+    seen = [np.nonzero(np.isfinite(uv[:, c, :, 0]) & np.isfinite(uv[:, c, :, 1])) for c in range(n_cameras)]
+    point = [frame * n_markers + marker for frame, marker in seen]
+    rays = [unproject(models[c], uv[frame, c, marker]) @ poses[c].rotation for c, (frame, marker) in enumerate(seen)]
+    centres = [np.broadcast_to(p.center, (r.shape[0], 3)) for p, r in zip(poses, rays, strict=True)]
+    count, lhs, rhs = ray_sums(
+        np.concatenate(point), n_frames * n_markers, np.concatenate(rays), np.concatenate(centres)
+    )
     out = []
     for c, name in enumerate(names):
         mine = np.flatnonzero(np.any(np.isfinite(uv[:, c, :, 0]), axis=1))  # the frames camera c sees
-        others = bearings[mine].copy()
-        others[:, :, c] = np.nan
-        points = triangulate(others.reshape(-1, len(names), 3), rotations, translations).reshape(mine.size, -1, 3)
+        own_lhs, own_rhs = ray_terms(rays[c], centres[c])
+        others = count.copy(), lhs.copy(), rhs.copy()
+        others[0][point[c]] -= 1.0
+        others[1][point[c]] -= own_lhs
+        others[2][point[c]] -= own_rhs
+        points = solve_ray_sums(*others).reshape(n_frames, n_markers, 3)[mine]
         residual = project(models[c], poses[c].apply(points)) - uv[mine, c]  # (F_c, K, 2)
         ok = np.all(np.isfinite(residual), axis=-1) & np.all(np.isfinite(velocity[mine, c]), axis=-1)
         r, v = residual[ok], velocity[mine, c][ok]

@@ -187,6 +187,17 @@ def triangulate_rays(point: IntArray, n_points: int, rays: FloatArray, centres: 
     Returns:
         (n_points, 3) the points, mm; NaN where fewer than two rays or (nearly) parallel ones.
     """
+    return solve_ray_sums(*ray_sums(point, n_points, rays, centres))
+
+
+def ray_sums(
+    point: IntArray, n_points: int, rays: FloatArray, centres: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Each point's normal equations ``sum_v (I - w w^T) X = sum_v (I - w w^T) c`` (see :func:`triangulate_rays`).
+
+    Returns:
+        (n_points,) rays per point, (n_points, 3, 3) the left-hand sides and (n_points, 3) the right-hand sides.
+    """
     count = np.bincount(point, minlength=n_points).astype(np.float64)
     # lhs = count * I - sum w w^T ; rhs = sum c - sum w (w . c): sums over each point's rays
     lhs = np.empty((n_points, 3, 3))
@@ -196,8 +207,19 @@ def triangulate_rays(point: IntArray, n_points: int, rays: FloatArray, centres: 
             lhs[:, i, j] = lhs[:, j, i] = (count if i == j else 0.0) - summed
     along = rays * np.sum(rays * centres, axis=1)[:, None]  # w (w . c)
     rhs = np.stack([np.bincount(point, centres[:, i] - along[:, i], minlength=n_points) for i in range(3)], axis=1)
+    return count, lhs, rhs.astype(np.float64)
+
+
+def ray_terms(rays: FloatArray, centres: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """(M, 3, 3) ``I - w w^T`` and (M, 3) ``(I - w w^T) c`` of single rays: what each adds to :func:`ray_sums`."""
+    projector = np.eye(3) - rays[:, :, None] * rays[:, None, :]
+    return projector, centres - rays * np.sum(rays * centres, axis=1)[:, None]
+
+
+def solve_ray_sums(count: FloatArray, lhs: FloatArray, rhs: FloatArray) -> FloatArray:
+    """(N, 3) the points of :func:`ray_sums`' normal equations; NaN where fewer than two rays or (nearly)
+    parallel ones (a determinant below 1e-12 of (trace / 3)^3)."""
     adjugate, det = _adjugate_sym3(lhs)
-    # A tiny determinant relative to (trace/3)^3 means (nearly) parallel rays.
     ok = (count >= 2) & (det > 1e-12 * (np.trace(lhs, axis1=1, axis2=2) / 3.0) ** 3)
     with np.errstate(divide="ignore", invalid="ignore"):
         points = np.einsum("nij,nj->ni", adjugate, rhs) / det[:, None]
