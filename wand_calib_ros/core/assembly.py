@@ -85,14 +85,15 @@ def coverage_warnings(
 
 
 def max_off_axis(result: BundleResult, problem: BundleProblem) -> FloatArray:
-    """(C,) largest off-axis angle (rad) each camera observes at the solution."""
+    """(C,) largest off-axis angle (rad) each camera observes at the solution (0 for a camera without views)."""
     state = result.state
     points = state.points(problem.wand)[problem.placement, problem.point]
+    rotations = np.stack([pose.rotation for pose in state.poses])[problem.camera]
+    translations = np.stack([pose.translation for pose in state.poses])[problem.camera]
+    in_cam = np.einsum("mij,mj->mi", rotations, points) + translations
+    angles = np.arctan2(np.hypot(in_cam[:, 0], in_cam[:, 1]), in_cam[:, 2])
     out = np.zeros(problem.n_cameras)
-    for c, pose in enumerate(state.poses):
-        in_cam = pose.apply(points[problem.camera == c])
-        if in_cam.size:
-            out[c] = np.max(np.arctan2(np.hypot(in_cam[:, 0], in_cam[:, 1]), in_cam[:, 2]))
+    np.maximum.at(out, problem.camera, angles)
     return out
 
 
@@ -113,13 +114,18 @@ def assemble(
     state = result.state
     max_theta = max_off_axis(result, problem)
     free = free_mask(problem.n_cameras, reference, fixed)
+    n_cameras = problem.n_cameras
+    counts = np.bincount(problem.camera, minlength=n_cameras)
+    squares = np.bincount(problem.camera, np.sum(result.residuals**2, axis=1), minlength=n_cameras)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rms_px = np.sqrt(squares / (2 * counts))  # over u and v; NaN for a camera without points
+    blocks = np.unique(problem.placement * n_cameras + problem.camera)  # (placement, camera) pairs seen
+    view_counts = np.bincount(blocks % n_cameras, minlength=n_cameras)
     cameras = []
     for c, spec in enumerate(rig.cameras):
-        mine = problem.camera == c
-        rms = float(np.sqrt(np.mean(result.residuals[mine] ** 2))) if mine.any() else float("nan")
         std = {name: float(result.camera_std[c, i]) for i, name in enumerate(CAMERA_PARAM_NAMES) if free[c, i]}
         warnings.extend(coverage_warnings(spec, state.models[c], max_theta[c], result, c, uv[:, c]))
-        views = int(np.unique(problem.placement[mine]).size)
+        views = int(view_counts[c])
         if rejected_views[c]:
             warnings.append(
                 f"{spec.name}: {rejected_views[c]} of {views + rejected_views[c]} views rejected as outliers "
@@ -130,8 +136,8 @@ def assemble(
                 spec.name,
                 state.models[c],
                 state.poses[c],
-                rms,
-                int(mine.sum()),
+                float(rms_px[c]),
+                int(counts[c]),
                 std,
                 float(np.degrees(max_theta[c])),
                 initial_projections[c],

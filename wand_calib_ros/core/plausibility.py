@@ -143,8 +143,11 @@ def _check_segment_ratio(wand: WandSpec, uv: FloatArray) -> None:
 def _distinct_views(uv: FloatArray, measured: NDArray[np.bool_]) -> int:
     """How many of the (F, C) ``measured`` views put the wand's B in different VIEW_CELL_PX cells."""
     frames, cameras = np.nonzero(measured)
-    cells = np.floor(uv[frames, cameras, 1] / VIEW_CELL_PX).astype(np.int64)
-    return int(np.unique(np.column_stack([cameras, cells]), axis=0).shape[0])
+    cells = np.floor(uv[frames, cameras, 1] / VIEW_CELL_PX).astype(np.int64)  # (N, 2): B's cell in u and v
+    n_cameras = uv.shape[1]
+    span = int(np.max(np.abs(cells), initial=0)) + 1  # one integer per (camera, cell u, cell v)
+    keys = (cells[:, 0] * (2 * span + 1) + cells[:, 1]) * n_cameras + cameras
+    return int(np.unique(keys).size)
 
 
 def check_result(rig: RigSpec, result: CalibrationResult) -> None:
