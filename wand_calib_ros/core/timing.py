@@ -22,7 +22,6 @@ import logging
 from dataclasses import dataclass, replace
 
 import numpy as np
-import scipy.special
 from numpy.typing import NDArray
 
 from wand_calib_ros.core.bundle_adjustment import (
@@ -32,6 +31,7 @@ from wand_calib_ros.core.bundle_adjustment import (
     BundleResult,
     PlacementTiming,
 )
+from wand_calib_ros.core.chi_square import chi_square_quantile
 from wand_calib_ros.core.errors import TimingError
 from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.core.rig import RigSpec, WandObservations
@@ -388,7 +388,7 @@ def significant(values: FloatArray, covariance: FloatArray, level: float = SIGNI
     if values.size == 0:
         return False
     statistic = float(values @ np.linalg.pinv(covariance, hermitian=True) @ values)
-    return statistic > float(scipy.special.chdtri(values.size, 1.0 - level))  # the chi-square quantile
+    return statistic > chi_square_quantile(level, values.size)
 
 
 @dataclass(frozen=True, eq=False)
