@@ -4,7 +4,8 @@ With the current intrinsics (k1, k2, u0, v0 of both cameras; m fixed) and the
 relative pose (Rodrigues vector, T), every placement is triangulated linearly
 and compared with the wand: g1 = L1 - |AB|, g2 = L2 - |BC|, g3 = L - |AC|
 (paper eqs. object1-object3; a two-marker wand has g = L - |AB| only). The 14
-unknowns are found with MINPACK's Levenberg-Marquardt.
+unknowns are found by a Levenberg-Marquardt with Marquardt's scaling (the Jacobian's
+column norms, as MINPACK's ``lmder`` scales them) and Nielsen's damping update.
 """
 
 from __future__ import annotations
@@ -14,7 +15,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import least_squares
 
 from wand_calib_ros.core.camera_model import CameraModel, unproject, unproject_with_jacobian
 from wand_calib_ros.core.errors import CalibrationFailedError
@@ -191,19 +191,58 @@ def optimise_wand_lengths(
         ]
     )
     problem = _WandProblem(models, uv0, uv1, wand)
-    solution = least_squares(
-        problem.residuals,
-        x0,
-        jac=problem.jacobian,
-        method="lm",
-        x_scale="jac",
-        max_nfev=max_evaluations,
-        ftol=tolerance,
-        xtol=tolerance,
-    )
-    log.debug("step 3: %d evaluations, status %d", solution.nfev, solution.status)
-    if solution.x[0] <= 0 or solution.x[4] <= 0:
+    x = _levenberg_marquardt(problem, x0, max_evaluations=max_evaluations, tolerance=tolerance)
+    if x[0] <= 0 or x[4] <= 0:
         raise CalibrationFailedError("Step 3 diverged (a focal length became negative): the data do not fix the scale")
-    fitted, fitted_pose = _unpack(solution.x, models)
+    fitted, fitted_pose = _unpack(x, models)
     errors = wand_length_errors(reconstruct_wands(fitted, fitted_pose, uv0, uv1), wand)
     return WandFit(fitted, fitted_pose, errors)
+
+
+def _levenberg_marquardt(
+    problem: _WandProblem, x0: FloatArray, *, max_evaluations: int, tolerance: float
+) -> FloatArray:
+    """The least-squares solution of ``problem`` from ``x0`` (dense, a few parameters).
+
+    Damping ``mu D^2`` with D the largest column norms of the Jacobian seen so far (MINPACK's
+    scaling, so that parameters in mm, rad and px weigh alike); mu falls tenfold after a step that
+    does what the linearisation promised (so that the last steps are Gauss-Newton's and converge
+    quadratically) and grows after a rejected one. Stops after ``max_evaluations`` residual evaluations, or when a step
+    decreases the cost by less than ``tolerance`` of it (and promised no more), or when a rejected
+    step changed the scaled parameters by less than ``tolerance`` relatively (MINPACK's ftol and xtol).
+    """
+    x = np.asarray(x0, dtype=np.float64).copy()
+    r, jac = problem.residuals(x), problem.jacobian(x)
+    cost = float(r @ r)
+    scale = np.zeros_like(x)
+    mu, growth = 0.0, 2.0
+    for _ in range(max_evaluations - 1):
+        norms = np.linalg.norm(jac, axis=0)
+        scale = np.maximum(scale, np.where(norms > 0, norms, 1.0))
+        normal, gradient = jac.T @ jac, jac.T @ r
+        if mu == 0.0:  # start with a damping of 1e-3 of the largest curvature, as Marquardt's
+            mu = 1e-3 * float(np.max(np.diag(normal)) / np.max(scale**2))
+        try:
+            step = np.linalg.solve(normal + mu * np.diag(scale**2), -gradient)
+        except np.linalg.LinAlgError:
+            mu, growth = mu * growth, growth * 2.0
+            continue
+        candidate = x + step
+        r_new = problem.residuals(candidate)
+        new_cost = float(r_new @ r_new)
+        predicted = -float(2.0 * step @ gradient + step @ normal @ step)  # decrease of |r|^2, linearised
+        actual = cost - new_cost
+        if actual > 0 and predicted > 0:
+            x, r, jac = candidate, r_new, problem.jacobian(candidate)
+            gain = actual / predicted
+            mu *= 0.1 if gain > 0.75 else 1.0 if gain > 0.25 else 2.0
+            growth = 2.0
+            small = actual <= tolerance * cost and predicted <= tolerance * cost
+            cost = new_cost
+            if small:
+                break
+        elif np.linalg.norm(scale * step) <= tolerance * (np.linalg.norm(scale * x) + tolerance):
+            break  # not even a step this small decreases the cost: converged to rounding
+        else:
+            mu, growth = mu * growth, growth * 2.0
+    return x
