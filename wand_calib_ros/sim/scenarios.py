@@ -13,10 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial.transform import Rotation
 
 from wand_calib_ros.core.camera_model import CameraModel, project
-from wand_calib_ros.core.geometry import Pose
+from wand_calib_ros.core.geometry import Pose, rotation_from_rotvec
 from wand_calib_ros.core.intrinsics_init import PROJECTIONS
 from wand_calib_ros.core.rig import CameraSpec, RigSpec, WandObservations, WandSpec
 
@@ -101,7 +100,11 @@ def equisolid_taylor(focal_mm: float) -> FloatArray:
 
 
 def _euler_pose(euler_deg: tuple[float, float, float], translation: tuple[float, float, float]) -> Pose:
-    return Pose(Rotation.from_euler("xyz", euler_deg, degrees=True).as_matrix(), np.array(translation))
+    """The pose turned about the fixed x, y, then z axes by ``euler_deg`` (R = Rz Ry Rx)."""
+    rotation = np.eye(3)
+    for axis, angle in enumerate(np.radians(euler_deg)):
+        rotation = rotation_from_rotvec(angle * np.eye(3)[axis]) @ rotation
+    return Pose(rotation, np.array(translation))
 
 
 def paper_fisheye_scenario(
