@@ -15,12 +15,13 @@ from wand_calib_ros.core.bundle_adjustment import (
     _evaluate,
     _huber_weights,
     _linearise,
+    _placements_held_where_worse,
     bundle_adjust,
     default_free_mask,
     residuals,
 )
 from wand_calib_ros.core.geometry import Pose
-from wand_calib_ros.core.normal_equations import block_layout, reduced_system
+from wand_calib_ros.core.normal_equations import SCHUR_WASTE, block_layout, reduced_system
 from wand_calib_ros.sim.scenarios import paper_fisheye_scenario, simulate
 
 
@@ -180,3 +181,41 @@ def test_noise_estimate_and_parameter_uncertainty_are_consistent() -> None:
         sigmas.append(result.sigma)
     assert abs(np.mean(sigmas) - 1.0) < 0.03
     assert 0.6 < np.std(estimates) / np.mean(stds) < 1.5
+
+
+def test_a_placement_whose_step_raises_its_cost_is_held() -> None:
+    # Every placement stepped onto the truth but one, thrown 300 mm off:
+    # that one alone is held where it was.
+    _, _, truth, problem = _setup(0.0, 40, 11, n_cameras=3)
+    rng = np.random.default_rng(12)
+    before = BundleState(
+        truth.models, truth.poses, truth.wand_a + rng.normal(scale=2.0, size=truth.wand_a.shape), truth.wand_direction
+    )
+    thrown = truth.wand_a.copy()
+    thrown[7] += 300.0
+    candidate = BundleState(truth.models, truth.poses, thrown, truth.wand_direction)
+    worse = _placements_held_where_worse(before, candidate, problem, residuals(candidate, problem), None)
+    assert np.flatnonzero(worse).tolist() == [7]
+
+
+def test_schur_chunks_keep_apart_placements_of_cameras_that_share_none() -> None:
+    # Two rings of four cameras, each ring seeing its own 300 placements by two or three of its
+    # cameras: no chunk mixes the rings, and no chunk's dense product costs more than SCHUR_WASTE
+    # times its placements' own blocks.
+    rng = np.random.default_rng(3)
+    camera, placement = [], []
+    for p in range(600):
+        ring = 4 * (p % 2)
+        for c in np.sort(rng.choice(4, size=rng.integers(2, 4), replace=False)) + ring:
+            camera += [c] * 3
+            placement += [p] * 3
+    camera_array, placement_array = np.array(camera), np.array(placement)
+    point = np.tile(np.arange(3), camera_array.size // 3)
+    layout = block_layout(camera_array, placement_array, point, 8, 600, 3, 13)
+    own = np.bincount(layout.block_placement) ** 2
+    assert sum(chunk.placements.size for chunk in layout.schur_chunks) == 600
+    for chunk in layout.schur_chunks:
+        assert np.all(chunk.cameras < 4) or np.all(chunk.cameras >= 4)
+        assert chunk.placements.size * chunk.cameras.size**2 <= SCHUR_WASTE * own[chunk.placements].sum()
+        assert np.array_equal(chunk.cameras[chunk.local_camera], layout.block_camera[chunk.blocks])
+        assert np.array_equal(chunk.placements[chunk.local_placement], layout.block_placement[chunk.blocks])

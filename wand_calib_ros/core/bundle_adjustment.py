@@ -465,13 +465,39 @@ def _huber_weights(res: FloatArray, loss_scale: float | None) -> FloatArray:
     return np.where(norm <= loss_scale, 1.0, loss_scale / np.maximum(norm, 1e-300))
 
 
-def robust_cost(res: FloatArray, loss_scale: float | None) -> float:
-    """Sum of the Huber loss of the 2D residual norms (sum of squares when loss_scale is None)."""
+def _observation_costs(res: FloatArray, loss_scale: float | None) -> FloatArray:
+    """(M,) the Huber loss of each observation's 2D residual norm (its square when loss_scale is None)."""
     squared = np.sum(res**2, axis=1)
     if loss_scale is None:
-        return float(np.sum(squared))
+        return squared
     norm = np.sqrt(squared)
-    return float(np.sum(np.where(norm <= loss_scale, squared, 2 * loss_scale * norm - loss_scale**2)))
+    return np.where(norm <= loss_scale, squared, 2 * loss_scale * norm - loss_scale**2)
+
+
+def robust_cost(res: FloatArray, loss_scale: float | None) -> float:
+    """Sum of the Huber loss of the 2D residual norms (sum of squares when loss_scale is None)."""
+    return float(np.sum(_observation_costs(res, loss_scale)))
+
+
+def _placements_held_where_worse(
+    state: BundleState, candidate: BundleState, problem: BundleProblem, res: FloatArray, loss_scale: float | None
+) -> NDArray[np.bool_]:
+    """(P,) the placements whose own cost ``candidate``'s step raised (against ``state``'s values with
+    ``candidate``'s cameras).
+
+    The cameras' step is shared, the placements' steps are each their own: a step the linearisation
+    got wrong is often wrong only for a few poorly conditioned placements (seen by nearly parallel
+    rays), whose linearised steps run far off. Given the cameras, each placement's cost depends on
+    that placement alone, so each can keep whichever of its two values costs less.
+
+    Args:
+        res: (M, 2) the residuals at ``candidate``.
+    """
+    held = BundleState(candidate.models, candidate.poses, state.wand_a, state.wand_direction, candidate.timing)
+    n = problem.n_placements
+    stepped = np.bincount(problem.placement, _observation_costs(res, loss_scale), minlength=n)
+    kept = np.bincount(problem.placement, _observation_costs(residuals(held, problem), loss_scale), minlength=n)
+    return ~(stepped <= kept)  # NaN costs count as worse
 
 
 def default_free_mask(n_cameras: int, reference: int = 0) -> NDArray[np.bool_]:
@@ -566,6 +592,18 @@ def bundle_adjust(
             # The normal equations come with the trial residuals: steps are rarely rejected near a solution.
             new_res, new_normal = _evaluate(candidate, problem, layout, timing, loss_scale)
             new_cost = robust_cost(new_res, loss_scale) if np.all(np.isfinite(new_res)) else np.inf
+            if not new_cost < cost:  # before damping every step: hold the placements the step made worse
+                worse = _placements_held_where_worse(state, candidate, problem, new_res, loss_scale)
+                if worse.any():
+                    candidate = BundleState(
+                        candidate.models,
+                        candidate.poses,
+                        np.where(worse[:, None], state.wand_a, candidate.wand_a),
+                        np.where(worse[:, None], state.wand_direction, candidate.wand_direction),
+                        candidate.timing,
+                    )
+                    new_res, new_normal = _evaluate(candidate, problem, layout, timing, loss_scale)
+                    new_cost = robust_cost(new_res, loss_scale) if np.all(np.isfinite(new_res)) else np.inf
             if new_cost < cost:
                 accepted = True
                 relative_decrease = (cost - new_cost) / max(cost, 1e-300)

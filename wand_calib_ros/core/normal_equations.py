@@ -20,7 +20,6 @@ camera's rows are one BLAS product per camera on the chunk's rows gathered by ca
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -36,9 +35,11 @@ IntArray = NDArray[np.int64]
 N_PLACEMENT_PARAMS = 5
 #: Observations per chunk of the linearisation: its arrays (a few hundred kB each) stay in cache.
 CHUNK_OBSERVATIONS = 4096
-#: Placements per Schur chunk: small enough that a chunk's placements share most of their cameras
-#: once sorted by which cameras see them, large enough for one BLAS product to pay.
+#: Placements per Schur chunk at most: small enough that a chunk's placements share most of their
+#: cameras once sorted by which cameras see them, large enough for one BLAS product to pay.
 SCHUR_PLACEMENTS = 128
+#: A Schur chunk's dense product may cost at most this many times what its placements' own blocks do.
+SCHUR_WASTE = 3.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -189,23 +190,47 @@ def block_layout(
 def _schur_chunks(
     block_camera: IntArray, block_placement: IntArray, n_cameras: int, n_placements: int
 ) -> tuple[SchurChunk, ...]:
-    """Placements sorted by the set of cameras seeing them (lexicographically), cut into chunks."""
+    """Placements sorted by the set of cameras seeing them (lexicographically), cut into chunks.
+
+    A chunk's dense product costs its placements times the square of the cameras its placements are
+    seen by together; a chunk is closed before that exceeds SCHUR_WASTE times the sum of its
+    placements' own squares (large rigs: a ring's placements apart from the next ring's) or it holds
+    SCHUR_PLACEMENTS placements.
+    """
     seen = np.zeros((n_placements, n_cameras), dtype=bool)
     seen[block_placement, block_camera] = True
     by_rank = np.lexsort(seen[:, ::-1].T)
+    masks = [int.from_bytes(row.tobytes(), "little") for row in np.packbits(seen[by_rank], axis=1, bitorder="little")]
+    counts = seen.sum(axis=1)[by_rank].tolist()
+    chunk_of_rank = np.empty(n_placements, dtype=np.int64)
+    chunk, union, size, own = 0, 0, 0, 0
+    for position, (mask, count) in enumerate(zip(masks, counts, strict=True)):
+        joined = union | mask
+        if size and (size == SCHUR_PLACEMENTS or (size + 1) * joined.bit_count() ** 2 > SCHUR_WASTE * (own + count**2)):
+            chunk, joined, size, own = chunk + 1, mask, 0, 0
+        chunk_of_rank[position] = chunk
+        union, size, own = joined, size + 1, own + count**2
     rank = np.empty(n_placements, dtype=np.int64)
     rank[by_rank] = np.arange(n_placements)
-    block_rank = rank[block_placement]
-    order = np.argsort(block_rank, kind="stable")
-    bounds = np.searchsorted(block_rank[order], np.arange(0, n_placements + SCHUR_PLACEMENTS, SCHUR_PLACEMENTS))
+    first_rank = np.searchsorted(chunk_of_rank, np.arange(chunk + 2))  # each chunk's first rank
+    block_chunk = chunk_of_rank[rank[block_placement]]
+    order = np.argsort(block_chunk, kind="stable")
+    bounds = np.searchsorted(block_chunk[order], np.arange(chunk + 2))
+    # each block's camera among its chunk's cameras: distinct (chunk, camera) keys, ascending
+    keys, local = np.unique(block_chunk[order] * n_cameras + block_camera[order], return_inverse=True)
+    key_bounds = np.searchsorted(keys // n_cameras, np.arange(chunk + 2))
     chunks = []
-    for i, (first, last) in enumerate(itertools.pairwise(bounds)):
-        if first == last:
-            continue
-        blocks = order[first:last]
-        cameras, local_camera = np.unique(block_camera[blocks], return_inverse=True)
-        placements = by_rank[i * SCHUR_PLACEMENTS : (i + 1) * SCHUR_PLACEMENTS]
-        chunks.append(SchurChunk(placements, blocks, block_rank[blocks] - i * SCHUR_PLACEMENTS, local_camera, cameras))
+    for i in range(chunk + 1):
+        blocks = order[bounds[i] : bounds[i + 1]]
+        chunks.append(
+            SchurChunk(
+                by_rank[first_rank[i] : first_rank[i + 1]],
+                blocks,
+                rank[block_placement[blocks]] - first_rank[i],
+                local[bounds[i] : bounds[i + 1]] - key_bounds[i],
+                keys[key_bounds[i] : key_bounds[i + 1]] % n_cameras,
+            )
+        )
     return tuple(chunks)
 
 
@@ -348,19 +373,23 @@ def scaling(blocks: FloatArray) -> FloatArray:
     return np.maximum(diag, 1e-9 * max(float(np.max(diag, initial=0.0)), 1e-12))
 
 
-def damp(blocks: FloatArray, lam: float) -> FloatArray:
-    """The blocks plus lam D (and a trace of D, so that zero rows stay solvable)."""
+def damp(blocks: FloatArray, lam: float | FloatArray) -> FloatArray:
+    """The (..., n, n) blocks plus lam D (and a trace of D, so that zero rows stay solvable); ``lam`` a
+    number or one per block (...)."""
     scale = scaling(blocks)
     damped = blocks.copy()
     idx = np.arange(blocks.shape[-1])
-    damped[..., idx, idx] += lam * scale + 1e-12 * float(np.min(scale, initial=1.0))
+    damped[..., idx, idx] += np.asarray(lam)[..., None] * scale + 1e-12 * float(np.min(scale, initial=1.0))
     return damped
 
 
-def damped(normal: NormalEquations, lam: float) -> NormalEquations:
-    """The normal equations with U and V damped by ``lam`` (W and the gradients shared)."""
+def damped(normal: NormalEquations, lam: float, placement_lam: FloatArray | None = None) -> NormalEquations:
+    """The normal equations with U damped by ``lam`` and V by ``placement_lam`` (P,) (default ``lam``);
+    W and the gradients shared."""
     u = damp(normal.u, lam) if normal.u.size else normal.u
-    return NormalEquations(u, damp(normal.v, lam), normal.w, normal.gc, normal.gp)
+    return NormalEquations(
+        u, damp(normal.v, lam if placement_lam is None else placement_lam), normal.w, normal.gc, normal.gp
+    )
 
 
 def solve_free(s: FloatArray, rhs: FloatArray, free: NDArray[np.bool_]) -> FloatArray:
