@@ -119,7 +119,7 @@ def refine_calibration(
     require(keep.size, min_placements, f"reconstruct to the wand length within {threshold:.1f} mm")
     # Coarse to fine: outliers and the distortion model are settled on a spread subset; the
     # other placements join through the re-admission below and the final adjustment uses all.
-    keep = keep[spread_subset(keep.size, COARSE_PLACEMENTS)]
+    keep = coarse_subset(keep, len(uv))
 
     # 1. Robust adjustment (Huber), then views with a point off by more than VIEW_GATE_SIGMAS are rejected.
     # k3..k5 stay at zero here: the robust pass only has to find the outliers, and the
@@ -183,6 +183,22 @@ def refine_calibration(
         rejected_views,
         warnings,
         clocks,
+    )
+
+
+def coarse_subset(keep: NDArray[np.int64], n_placements: int) -> NDArray[np.int64]:
+    """The placements ``keep`` (of ``n_placements``) that outliers and the model order are decided on.
+
+    The placements evenly spread over the whole recording that the gate kept: which they are does not
+    shift when the gate (whose threshold comes from the starting cameras) keeps a placement more or
+    less, so starts a little apart settle on the same data. Should the gate have kept fewer than half
+    of them, COARSE_PLACEMENTS spread over the kept ones instead.
+    """
+    spread = np.intersect1d(keep, spread_subset(n_placements, COARSE_PLACEMENTS))
+    return (
+        spread
+        if 2 * spread.size >= min(COARSE_PLACEMENTS, n_placements)
+        else keep[spread_subset(keep.size, COARSE_PLACEMENTS)]
     )
 
 
