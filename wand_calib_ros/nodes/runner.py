@@ -118,10 +118,16 @@ def use_large_image_transport(environ: MutableMapping[str, str]) -> None:
     environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(LARGE_IMAGES_PROFILE)
 
 
+#: What rclpy's ``__del__`` of a half-built object complains of: an executor's ``_sigint_gc``, a
+#: guard condition's ``__gc`` (the one the executor was building when the signal came).
+_HALF_BUILT = ("_sigint_gc", "_GuardCondition__gc")
+
+
 def _quiet_half_built_executors(unraisable: Any) -> None:
-    """sys.unraisablehook: drop rclpy's AttributeError from ``Executor.__del__`` of an executor whose
-    ``__init__`` failed because a signal had just shut the context down (an rclpy bug)."""
-    if isinstance(unraisable.exc_value, AttributeError) and "_sigint_gc" in str(unraisable.exc_value):
+    """sys.unraisablehook: drop rclpy's AttributeError from ``__del__`` of an executor (or of the signal
+    guard condition it was building) whose ``__init__`` failed because a signal had just shut the
+    context down (an rclpy bug)."""
+    if isinstance(unraisable.exc_value, AttributeError) and any(n in str(unraisable.exc_value) for n in _HALF_BUILT):
         return
     sys.__unraisablehook__(unraisable)
 
