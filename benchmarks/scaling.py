@@ -1,7 +1,11 @@
 """How ``wand-calib calibrate`` scales: cameras x placements -> time and peak memory, and its accuracy.
 
-Run: .venv/bin/python benchmarks/scaling.py [--cases mocap16:2500 mocap16:10000 stage64:12500 ...]
+Run: .venv/bin/python benchmarks/scaling.py [--cases mocap16:2500 mocap16:10000:180 stage64:12500 ...]
      .venv/bin/python benchmarks/scaling.py --cases mocap16:10000 --seeds 1 2 3 --baseline /path/to/checkout
+
+A case is ``scenario:placements[:cone]``; ``cone`` is the LEDs' emission half-angle in degrees
+(``simulate --led-cone-deg``; 180: LEDs seen from everywhere, as a motion-capture wand's
+diffused LEDs are: on mocap16 every camera then sees most placements, 452k rows for 10,000).
 
 Each case is simulated (``wand-calib simulate``, 1 px noise, the given seeds) into a temporary folder,
 then calibrated by ``wand-calib calibrate`` started as a process (CSV reading and process start
@@ -30,7 +34,15 @@ import numpy as np
 from wand_calib_ros.core.metrics import camera_errors, rereference
 from wand_calib_ros.io.result_yaml import read_result
 
-DEFAULT_CASES = ("mocap16:2500", "mocap16:5000", "mocap16:10000", "stage64:12500", "stage64:25000", "stage64:50000")
+DEFAULT_CASES = (
+    "mocap16:2500",
+    "mocap16:5000",
+    "mocap16:10000",
+    "mocap16:10000:180",
+    "stage64:12500",
+    "stage64:25000",
+    "stage64:50000",
+)
 ERRORS = ("focal px", "principal point px", "E_r deg", "E_t")
 
 
@@ -75,14 +87,15 @@ def main() -> None:
     parser.add_argument("--seeds", nargs="+", type=int, default=[1])
     parser.add_argument("--baseline", type=Path, help="another checkout to compare the accuracy with")
     args = parser.parse_args()
-    print(f"{'case':<16} {'cameras':>7} {'rows':>9} {'time s':>8} {'peak MB':>8}  errors (RMS over seeds {args.seeds})")
+    print(f"{'case':<18} {'cameras':>7} {'rows':>9} {'time s':>8} {'peak MB':>8}  errors (RMS over seeds {args.seeds})")
     for case in args.cases:
-        scenario, placements = case.split(":")
+        scenario, placements, *cone = case.split(":")
         times, peaks, mine, theirs, rows, n_cameras = [], [], [], [], 0, 0
         for seed in args.seeds:
             with tempfile.TemporaryDirectory() as tmp:
                 folder = Path(tmp)
                 command = ["simulate", scenario, "--seed", str(seed), "--noise", "1.0", "--placements", placements]
+                command += ["--led-cone-deg", cone[0]] if cone else []
                 subprocess.run(
                     [sys.executable, "-m", "wand_calib_ros.cli", "-q", *command, "--out", str(folder)],
                     check=True,
@@ -99,11 +112,11 @@ def main() -> None:
                     theirs.append(_errors(folder / "baseline.yaml", folder / "truth.yaml"))
         ours = _rms(mine)
         errors = ", ".join(f"{key} {np.sqrt(np.mean(ours[key] ** 2)):.4g}" for key in ERRORS)
-        print(f"{case:<16} {n_cameras:>7} {rows:>9} {np.median(times):>8.2f} {max(peaks):>8.0f}  {errors}", flush=True)
+        print(f"{case:<18} {n_cameras:>7} {rows:>9} {np.median(times):>8.2f} {max(peaks):>8.0f}  {errors}", flush=True)
         if theirs:
             base = _rms(theirs)
             ratios = ", ".join(f"{key} {np.max(ours[key] / np.maximum(base[key], 1e-300)):.3f}x" for key in ERRORS)
-            print(f"{'':<16} worst camera against the baseline: {ratios}", flush=True)
+            print(f"{'':<18} worst camera against the baseline: {ratios}", flush=True)
 
 
 if __name__ == "__main__":
