@@ -8,11 +8,12 @@ import numpy as np
 import pytest
 from rigs import errors_against_truth, fixed_of, in_truth_frame, scenario_data, truth_bundle
 
+from wand_calib_ros.core import multi_camera
 from wand_calib_ros.core.errors import DegenerateDataError, InsufficientDataError
 from wand_calib_ros.core.metrics import heldout_wand_rms, rereference
 from wand_calib_ros.core.pipeline import calibrate
 from wand_calib_ros.core.rig import WandObservations
-from wand_calib_ros.core.vision_graph import DisconnectedRigError
+from wand_calib_ros.core.vision_graph import DisconnectedRigError, build_vision_graph
 from wand_calib_ros.sim.outliers import corrupt
 from wand_calib_ros.sim.scenarios import (
     Scenario,
@@ -138,3 +139,30 @@ def test_camera_seeing_little_of_its_image_is_warned_about() -> None:
     data = simulate(scenario, 0.5, np.random.default_rng(5))
     result = calibrate(scenario.rig, data.observations)
     assert any(w.startswith("cam0: the wand covered only") for w in result.warnings), result.warnings
+
+
+def test_a_pair_that_moves_a_started_camera_far_is_redone_and_never_replaces_its_start(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    # On a ring of six, every pair started from earlier pairs' cameras comes out with the started
+    # camera's focal length 40 % long (a pair gone astray): each such pair is calibrated again from
+    # every lens start, and no camera's start takes the strayed focal length.
+    scenario, data, _ = scenario_data("ring6", 1)
+    real = multi_camera.initialise_pair
+    calls: list[bool] = []
+
+    def strayed(specs, uv0, uv1, wand, options, *, known=(None, None)):  # type: ignore[no-untyped-def]
+        init = real(specs, uv0, uv1, wand, options, known=known)
+        calls.append(known[0] is not None)
+        if known[0] is None:
+            return init
+        vector = init.models[0].intrinsic_vector()
+        vector[0] *= 1.4
+        return replace(init, models=(init.models[0].with_intrinsic_vector(vector), init.models[1]))
+
+    monkeypatch.setattr(multi_camera, "initialise_pair", strayed)
+    complete = data.observations.complete
+    graph = build_vision_graph(scenario.rig.camera_names, complete)
+    init = multi_camera.initialise_rig(scenario.rig, data.observations.uv, graph)
+    assert calls.count(True) == len(graph.edges) - 1  # every pair after the first started from a known camera ...
+    assert calls.count(False) == len(graph.edges)  # ... and was redone from every lens start
+    for model, camera in zip(init.models, scenario.cameras, strict=True):
+        assert abs(model.k[0] / camera.model.k[0] - 1.0) < 0.1

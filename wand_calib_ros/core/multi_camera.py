@@ -7,6 +7,13 @@ intrinsics come from the calibrated pair in which it shares the most
 placements; a camera already calibrated in an earlier pair starts its later
 pairs from those intrinsics instead of re-trying every lens projection, and a
 camera with the same data sheet as a calibrated one inherits its projection.
+
+A pair that moves such a camera's focal length by more than JUMP of it has
+gone astray (narrow lenses far from the wand leave focal length and distance
+nearly interchangeable): it is calibrated again from every lens start, and a
+camera's start is only ever replaced by a pair's estimate that agrees with it.
+Without this, one pair gone astray at the reference camera corrupted every
+later pair started from it (a 64-camera stage at 12,500 placements).
 """
 
 from __future__ import annotations
@@ -28,6 +35,15 @@ from wand_calib_ros.core.vision_graph import VisionGraph
 
 FloatArray = NDArray[np.float64]
 log = logging.getLogger(__name__)
+
+#: A pair's focal length for a camera that had a start, relative to that start's: beyond this change
+#: the pair is redone from every lens start, and it never replaces the start.
+JUMP = 0.1
+
+
+def _jump(model: CameraModel, start: tuple[str, CameraModel] | None) -> float:
+    """Relative change of the focal length from a camera's start (0 without one)."""
+    return 0.0 if start is None else abs(float(model.k[0] / start[1].k[0]) - 1.0)
 
 
 @dataclass(frozen=True, eq=False)
@@ -93,6 +109,9 @@ def initialise_rig(
                 options,
                 known=(starts[parent], starts[child]),
             )
+            jump = max(_jump(init.models[i], starts[c]) for i, c in enumerate((parent, child)))
+            if jump > JUMP:
+                raise DegenerateDataError(f"it moved a started camera's focal length by {100 * jump:.0f} %")
         except DegenerateDataError as error:  # the starts carried over from earlier pairs do not fit this one
             log.info("pair %s-%s from the earlier starts failed (%s): every lens start instead",
                      rig.cameras[parent].name, rig.cameras[child].name, error)  # fmt: skip
@@ -104,7 +123,7 @@ def initialise_rig(
         assert parent_pose is not None  # edges are ordered parents first
         poses[child] = init.pose.compose(parent_pose)
         for camera, model, projection in zip((parent, child), init.models, init.projections, strict=True):
-            if int(both.sum()) > support[camera]:
+            if int(both.sum()) > support[camera] and _jump(model, starts[camera]) <= JUMP:
                 starts[camera] = (projection, model)
                 support[camera] = int(both.sum())
     models = tuple(s[1] for s in starts if s is not None)
