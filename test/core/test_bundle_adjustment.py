@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from wand_calib_ros.core.bundle_adjustment import (
     N_CAMERA_PARAMS,
@@ -194,8 +195,12 @@ def test_a_placement_whose_step_raises_its_cost_is_held() -> None:
     thrown = truth.wand_a.copy()
     thrown[7] += 300.0
     candidate = BundleState(truth.models, truth.poses, thrown, truth.wand_direction)
-    worse = _placements_held_where_worse(before, candidate, problem, residuals(candidate, problem), None)
+    worse, held_cost = _placements_held_where_worse(before, candidate, problem, residuals(candidate, problem), None)
     assert np.flatnonzero(worse).tolist() == [7]
+    mixed = BundleState(
+        truth.models, truth.poses, np.where(worse[:, None], before.wand_a, thrown), truth.wand_direction
+    )
+    assert held_cost == pytest.approx(float(np.sum(residuals(mixed, problem) ** 2)))
 
 
 def test_schur_chunks_keep_apart_placements_of_cameras_that_share_none() -> None:

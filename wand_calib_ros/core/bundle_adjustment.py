@@ -481,9 +481,9 @@ def robust_cost(res: FloatArray, loss_scale: float | None) -> float:
 
 def _placements_held_where_worse(
     state: BundleState, candidate: BundleState, problem: BundleProblem, res: FloatArray, loss_scale: float | None
-) -> NDArray[np.bool_]:
+) -> tuple[NDArray[np.bool_], float]:
     """(P,) the placements whose own cost ``candidate``'s step raised (against ``state``'s values with
-    ``candidate``'s cameras).
+    ``candidate``'s cameras), and the cost with those held.
 
     The cameras' step is shared, the placements' steps are each their own: a step the linearisation
     got wrong is often wrong only for a few poorly conditioned placements (seen by nearly parallel
@@ -497,7 +497,8 @@ def _placements_held_where_worse(
     n = problem.n_placements
     stepped = np.bincount(problem.placement, _observation_costs(res, loss_scale), minlength=n)
     kept = np.bincount(problem.placement, _observation_costs(residuals(held, problem), loss_scale), minlength=n)
-    return ~(stepped <= kept)  # NaN costs count as worse
+    worse = ~(stepped <= kept)  # NaN costs count as worse
+    return worse, float(np.sum(np.where(worse, kept, stepped)))
 
 
 def default_free_mask(n_cameras: int, reference: int = 0) -> NDArray[np.bool_]:
@@ -593,8 +594,8 @@ def bundle_adjust(
             new_res, new_normal = _evaluate(candidate, problem, layout, timing, loss_scale)
             new_cost = robust_cost(new_res, loss_scale) if np.all(np.isfinite(new_res)) else np.inf
             if not new_cost < cost:  # before damping every step: hold the placements the step made worse
-                worse = _placements_held_where_worse(state, candidate, problem, new_res, loss_scale)
-                if worse.any():
+                worse, held_cost = _placements_held_where_worse(state, candidate, problem, new_res, loss_scale)
+                if worse.any() and held_cost < cost:
                     candidate = BundleState(
                         candidate.models,
                         candidate.poses,
