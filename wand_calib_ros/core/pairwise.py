@@ -11,7 +11,7 @@ consistent, since Step 3 matches wand lengths only.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -222,11 +222,15 @@ def initialise_pair(
         outcome = tried[names]
         return np.inf if outcome is None else outcome[0].rms_mm
 
-    # Each camera's candidates are tried with the other camera at its best start so far
-    # (first camera 1's, then camera 0's): every plausible projection of each camera goes
-    # through Steps 2-3, in |C0| + |C1| - 1 runs instead of |C0| x |C1|.
-    best1 = min(starts1, key=lambda start: attempt(starts0[0], start))
-    best0 = min(starts0, key=lambda start: attempt(start, best1))
+    if replace(specs[1], name=specs[0].name) == specs[0] and known == (None, None):
+        # Two cameras of one data sheet carry the same kind of lens: each projection on both.
+        best0, best1 = min(zip(starts0, starts1, strict=True), key=lambda starts: attempt(*starts))
+    else:
+        # Each camera's candidates are tried with the other camera at its best start so far
+        # (first camera 1's, then camera 0's): every plausible projection of each camera goes
+        # through Steps 2-3, in |C0| + |C1| - 1 runs instead of |C0| x |C1|.
+        best1 = min(starts1, key=lambda start: attempt(starts0[0], start))
+        best0 = min(starts0, key=lambda start: attempt(start, best1))
     names = (best0[0], best1[0])
     best = tried[names]
     if best is None:
