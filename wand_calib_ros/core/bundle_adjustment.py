@@ -455,6 +455,9 @@ def _apply_step(state: BundleState, delta_c: FloatArray, delta_p: FloatArray, ti
 #: the step would take it. Left alone, placements seen by two nearly parallel rays make a large rig
 #: creep by 1e-8 of its cost per iteration for tens of iterations without moving a camera.
 CAMERAS_SETTLED = 1e-3
+#: What passes that only decide outliers or test the timing settle at: every camera parameter within
+#: about a third of its standard deviation of the optimum (the passes after them finish the job).
+DECIDING_SETTLED = 0.1
 
 
 def _huber_weights(res: FloatArray, loss_scale: float | None) -> FloatArray:
@@ -517,6 +520,7 @@ def bundle_adjust(
     loss_scale: float | None = None,
     max_iterations: int = 100,
     tolerance: float = 1e-8,
+    settled: float = CAMERAS_SETTLED,
 ) -> BundleResult:
     """Sparse Levenberg-Marquardt over all unknowns (paper's bundle adjustment).
 
@@ -535,6 +539,9 @@ def bundle_adjust(
             the cameras' step is worth less than :data:`CAMERAS_SETTLED` (on a 64-camera rig after
             3 iterations instead of 14, every camera parameter within 0.005 of its standard
             deviation of where the 14 took it).
+        settled: stop when the cameras' step is worth less than this fraction of a chi-square unit
+            (:data:`CAMERAS_SETTLED`; passes that only decide outliers or a test settle at
+            :data:`DECIDING_SETTLED`).
 
     Returns:
         The optimised state, residuals and parameter uncertainties.
@@ -580,7 +587,7 @@ def bundle_adjust(
             if attempt == 0 and predicted < tolerance * cost:  # the undamped step is not worth taking: converged
                 accepted = converged = True
                 break
-            if attempt == 0 and cameras and float(delta_c.reshape(-1) @ rhs) < CAMERAS_SETTLED * cost / dof:
+            if attempt == 0 and cameras and float(delta_c.reshape(-1) @ rhs) < settled * cost / dof:
                 # the cameras' step (their marginal: the placements follow) is worth less than
                 # CAMERAS_SETTLED of a chi-square unit: what is left moves poorly seen placements only
                 accepted = converged = True

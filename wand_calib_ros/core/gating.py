@@ -9,6 +9,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wand_calib_ros.core.bundle_adjustment import (
+    DECIDING_SETTLED,
     BundleProblem,
     BundleResult,
     BundleState,
@@ -120,7 +121,9 @@ def robust_adjustment(
     """
     sigma = robust_sigma(residuals(state, problem))
     # Only outliers are decided here: a loose tolerance is enough, the least-squares passes finish the job.
-    result = bundle_adjust(state, problem, free, loss_scale=HUBER_SIGMAS * sigma, tolerance=1e-5)
+    result = bundle_adjust(
+        state, problem, free, loss_scale=HUBER_SIGMAS * sigma, tolerance=1e-5, settled=DECIDING_SETTLED
+    )
     m, p = result.dof
     return result, robust_sigma(result.residuals) * np.sqrt(m / max(m - p, 1))
 

@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 
 from wand_calib_ros.core.assembly import assemble
 from wand_calib_ros.core.bundle_adjustment import (
+    DECIDING_SETTLED,
     N_GEOMETRIC,
     BundleProblem,
     BundleResult,
@@ -240,7 +241,7 @@ def _robust_pass(
         while timing.any():
             test_free = free.copy()
             test_free[:, N_GEOMETRIC:] = timing
-            fit = bundle_adjust(tested, problem, test_free, tolerance=1e-5)
+            fit = bundle_adjust(tested, problem, test_free, tolerance=1e-5, settled=DECIDING_SETTLED)
             kept = reduce_timing(clocks, fit, timing)
             if np.array_equal(kept, timing):
                 break
