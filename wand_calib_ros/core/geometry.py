@@ -296,10 +296,15 @@ def spherical_angles(directions: FloatArray) -> tuple[FloatArray, FloatArray]:
 
 
 def tangent_basis(directions: FloatArray) -> FloatArray:
-    """(N, 3, 2) orthonormal bases of the planes perpendicular to unit vectors."""
+    """(N, 3, 2) orthonormal bases of the planes perpendicular to unit vectors: e1 = n x h / |n x h| with
+    h the x axis (the y axis where n is within 26 degrees of x), e2 = n x e1."""
     n = np.asarray(directions, dtype=np.float64)
-    helper = np.where(np.abs(n[..., :1]) < 0.9, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
-    e1 = np.cross(n, helper)
-    e1 /= np.linalg.norm(e1, axis=-1, keepdims=True)
-    e2 = np.cross(n, e1)
+    x, y, z = n[..., 0], n[..., 1], n[..., 2]
+    near_x = np.abs(x) >= 0.9
+    zero = np.zeros_like(x)
+    # n x (1, 0, 0) = (0, z, -y); n x (0, 1, 0) = (-z, 0, x)
+    e1 = np.stack([np.where(near_x, -z, zero), np.where(near_x, zero, z), np.where(near_x, x, -y)], axis=-1)
+    e1 /= np.sqrt(np.sum(e1 * e1, axis=-1, keepdims=True))
+    a, b, c = e1[..., 0], e1[..., 1], e1[..., 2]
+    e2 = np.stack([y * c - z * b, z * a - x * c, x * b - y * a], axis=-1)
     return np.stack([e1, e2], axis=-1)

@@ -226,8 +226,10 @@ def fit_motion(
     dt = t[index] - t[:, None]
     use = inside & (offsets != 0)[None, :] & finite[index] & finite[:, None] & (np.abs(dt) <= neighbours + 1.5)
     weight = use.astype(np.float64)
-    factorial = np.cumprod(np.r_[1.0, np.arange(1, degree + 1)])
-    design = dt[..., None] ** np.arange(degree + 1) / factorial  # (P, W, D): position, velocity, acceleration, ...
+    design = np.empty((*dt.shape, degree + 1))  # (P, W, D): dt^k / k!, position, velocity, acceleration, ...
+    design[..., 0] = 1.0
+    for k in range(1, degree + 1):
+        design[..., k] = design[..., k - 1] * dt / k
     window = np.nan_to_num(values[index])  # (P, W, K)
     weighted = (design * weight[..., None]).transpose(0, 2, 1)  # (P, D, W)
     normal, rhs = weighted @ design, weighted @ window  # batched BLAS
