@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from wand_calib_ros.core.bundle_adjustment import (
     N_CAMERA_PARAMS,
@@ -14,9 +13,9 @@ from wand_calib_ros.core.bundle_adjustment import (
     PlacementTiming,
     _apply_step,
     _evaluate,
+    _hold_worse_placements,
     _huber_weights,
     _linearise,
-    _placements_held_where_worse,
     bundle_adjust,
     default_free_mask,
     residuals,
@@ -185,8 +184,8 @@ def test_noise_estimate_and_parameter_uncertainty_are_consistent() -> None:
 
 
 def test_a_placement_whose_step_raises_its_cost_is_held() -> None:
-    # Every placement stepped onto the truth but one, thrown 300 mm off:
-    # that one alone is held where it was.
+    # Every placement stepped onto the truth but one, thrown 300 mm off: that one alone is held where
+    # it was; and nothing is held when holding would not beat the cost before the step.
     _, _, truth, problem = _setup(0.0, 40, 11, n_cameras=3)
     rng = np.random.default_rng(12)
     before = BundleState(
@@ -195,12 +194,13 @@ def test_a_placement_whose_step_raises_its_cost_is_held() -> None:
     thrown = truth.wand_a.copy()
     thrown[7] += 300.0
     candidate = BundleState(truth.models, truth.poses, thrown, truth.wand_direction)
-    worse, held_cost = _placements_held_where_worse(before, candidate, problem, residuals(candidate, problem), None)
-    assert np.flatnonzero(worse).tolist() == [7]
-    mixed = BundleState(
-        truth.models, truth.poses, np.where(worse[:, None], before.wand_a, thrown), truth.wand_direction
-    )
-    assert held_cost == pytest.approx(float(np.sum(residuals(mixed, problem) ** 2)))
+    res = residuals(candidate, problem)
+    held = _hold_worse_placements(before, candidate, problem, res, None, np.inf)
+    assert held is not None
+    moved = np.flatnonzero(np.any(held.wand_a != candidate.wand_a, axis=1))
+    assert moved.tolist() == [7] and np.array_equal(held.wand_a[7], before.wand_a[7])
+    assert _hold_worse_placements(before, candidate, problem, res, None, 0.0) is None
+    assert _hold_worse_placements(before, truth, problem, residuals(truth, problem), None, np.inf) is None
 
 
 def test_schur_chunks_keep_apart_placements_of_cameras_that_share_none() -> None:

@@ -482,11 +482,16 @@ def robust_cost(res: FloatArray, loss_scale: float | None) -> float:
     return float(np.sum(_observation_costs(res, loss_scale)))
 
 
-def _placements_held_where_worse(
-    state: BundleState, candidate: BundleState, problem: BundleProblem, res: FloatArray, loss_scale: float | None
-) -> tuple[NDArray[np.bool_], float]:
-    """(P,) the placements whose own cost ``candidate``'s step raised (against ``state``'s values with
-    ``candidate``'s cameras), and the cost with those held.
+def _hold_worse_placements(
+    state: BundleState,
+    candidate: BundleState,
+    problem: BundleProblem,
+    res: FloatArray,
+    loss_scale: float | None,
+    cost: float,
+) -> BundleState | None:
+    """``candidate`` with the placements whose own cost its step raised held where ``state`` had them;
+    None when that would not cost less than ``cost`` (nothing to hold, or the cameras' step is wrong).
 
     The cameras' step is shared, the placements' steps are each their own: a step the linearisation
     got wrong is often wrong only for a few poorly conditioned placements (seen by nearly parallel
@@ -501,7 +506,15 @@ def _placements_held_where_worse(
     stepped = np.bincount(problem.placement, _observation_costs(res, loss_scale), minlength=n)
     kept = np.bincount(problem.placement, _observation_costs(residuals(held, problem), loss_scale), minlength=n)
     worse = ~(stepped <= kept)  # NaN costs count as worse
-    return worse, float(np.sum(np.where(worse, kept, stepped)))
+    if not worse.any() or not float(np.sum(np.where(worse, kept, stepped))) < cost:
+        return None
+    return BundleState(
+        candidate.models,
+        candidate.poses,
+        np.where(worse[:, None], state.wand_a, candidate.wand_a),
+        np.where(worse[:, None], state.wand_direction, candidate.wand_direction),
+        candidate.timing,
+    )
 
 
 def default_free_mask(n_cameras: int, reference: int = 0) -> NDArray[np.bool_]:
@@ -589,7 +602,7 @@ def bundle_adjust(
                 break
             if attempt == 0 and cameras and float(delta_c.reshape(-1) @ rhs) < settled * cost / dof:
                 # the cameras' step (their marginal: the placements follow) is worth less than
-                # CAMERAS_SETTLED of a chi-square unit: what is left moves poorly seen placements only
+                # ``settled`` of a chi-square unit: what is left moves poorly seen placements only
                 accepted = converged = True
                 break
             try:
@@ -600,16 +613,10 @@ def bundle_adjust(
             # The normal equations come with the trial residuals: steps are rarely rejected near a solution.
             new_res, new_normal = _evaluate(candidate, problem, layout, timing, loss_scale)
             new_cost = robust_cost(new_res, loss_scale) if np.all(np.isfinite(new_res)) else np.inf
-            if not new_cost < cost:  # before damping every step: hold the placements the step made worse
-                worse, held_cost = _placements_held_where_worse(state, candidate, problem, new_res, loss_scale)
-                if worse.any() and held_cost < cost:
-                    candidate = BundleState(
-                        candidate.models,
-                        candidate.poses,
-                        np.where(worse[:, None], state.wand_a, candidate.wand_a),
-                        np.where(worse[:, None], state.wand_direction, candidate.wand_direction),
-                        candidate.timing,
-                    )
+            if not new_cost < cost:  # before damping every step: the placements the step made worse held
+                held = _hold_worse_placements(state, candidate, problem, new_res, loss_scale, cost)
+                if held is not None:
+                    candidate = held
                     new_res, new_normal = _evaluate(candidate, problem, layout, timing, loss_scale)
                     new_cost = robust_cost(new_res, loss_scale) if np.all(np.isfinite(new_res)) else np.inf
             if new_cost < cost:
