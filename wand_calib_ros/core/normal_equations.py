@@ -14,8 +14,10 @@ and the placements are eliminated by the Schur complement ``S = U - W_ V^-1 W_^T
 Observations are sorted by placement, then camera, and processed in chunks of whole placements small
 enough for a chunk's arrays to stay in the processor's cache: the Jacobians of one chunk are summed
 into U, V, W_ and the gradients as soon as they are computed, and never held for the whole problem.
-Sums over a placement's or a block's rows are ``np.add.reduceat`` over contiguous rows; sums over a
-camera's rows are one BLAS product per camera on the chunk's rows gathered by camera.
+A block's rows (two per marker slot, zero for a marker not seen) make one small matrix: its W_ and
+its share of V are one batched product over the chunk's blocks, V summed over each placement's
+blocks (``np.add.reduceat``); U and the camera gradient are one BLAS product per camera on the
+chunk's blocks gathered by camera.
 """
 
 from __future__ import annotations
