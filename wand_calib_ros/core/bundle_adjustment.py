@@ -331,7 +331,7 @@ def _linearise_rows(
     intrinsics = cam[_K : _K + N_RADIAL].T, cam[_M : _M + 2].T, cam[_PP : _PP + 2].T
     if not jacobians:
         return project_arrays(*intrinsics, rotated + cam[_T : _T + 3].T) - problem.uv[first:stop], None, None
-    projection = project_with_jacobian_arrays(*intrinsics, rotated + cam[_T : _T + 3].T)
+    projection = project_with_jacobian_arrays(*intrinsics, rotated + cam[_T : _T + 3].T, intrinsics=cameras)
     res = projection.uv - problem.uv[first:stop]
     q0, q1, q2 = rotated.T
     d_point = projection.d_point.transpose(1, 2, 0)  # (2, 3, n): d(u, v) / d(x, y, z), camera frame
@@ -455,6 +455,8 @@ def _apply_step(state: BundleState, delta_c: FloatArray, delta_p: FloatArray, ti
 #: the step would take it. Left alone, placements seen by two nearly parallel rays make a large rig
 #: creep by 1e-8 of its cost per iteration for tens of iterations without moving a camera.
 CAMERAS_SETTLED = 1e-3
+#: Below this damping an iteration first tries the undamped (Gauss-Newton) step.
+UNDAMPED = 1e-8
 #: What passes that only decide outliers or test the timing settle at: every camera parameter within
 #: about a third of its standard deviation of the optimum (the passes after them finish the job).
 DECIDING_SETTLED = 0.1
@@ -581,29 +583,33 @@ def bundle_adjust(
     m, p = res.size, int(free_flat.sum()) + N_PLACEMENT_PARAMS * problem.n_placements
     dof = max(m - p, 1)
     iterations, converged = 0, False
+    covariance_system: FloatArray | None = None  # the undamped reduced system at the final state, once known
     while iterations < max_iterations and not converged:
         iterations += 1
         accepted = False
         for attempt in range(30):
-            step = damped(normal, lam)
+            # Near a solution (lam fallen below UNDAMPED) the first try is Gauss-Newton's step: its
+            # system is the one the covariance needs, kept should it end the adjustment.
+            used = 0.0 if attempt == 0 and lam <= UNDAMPED else lam
+            step = normal._replace(v=damp(normal.v, 0.0)) if used == 0.0 else damped(normal, used)
             if cameras:
                 s, rhs, v_inv = reduced_system(step, layout)
                 delta_c = solve_free(s, rhs, free_flat).reshape(n_cameras, columns.size)
                 delta_p = back_substitute(delta_c, v_inv, step, layout)
                 # the decrease the linearised problem promises: delta^T g + lambda delta^T D delta
-                predicted = float(np.sum(delta_c * normal.gc)) + lam * float(np.sum(scaling(normal.u) * delta_c**2))
+                predicted = float(np.sum(delta_c * normal.gc)) + used * float(np.sum(scaling(normal.u) * delta_c**2))
             else:  # placements only: independent 5x5 systems
                 delta_c = np.zeros((n_cameras, columns.size))
                 delta_p = np.asarray(np.linalg.solve(step.v, normal.gp[..., None])[..., 0], dtype=np.float64)
                 predicted = 0.0
-            predicted += float(np.sum(delta_p * normal.gp)) + lam * float(np.sum(scaling(normal.v) * delta_p**2))
-            if attempt == 0 and predicted < tolerance * cost:  # the undamped step is not worth taking: converged
+            predicted += float(np.sum(delta_p * normal.gp)) + used * float(np.sum(scaling(normal.v) * delta_p**2))
+            settle = attempt == 0 and cameras and float(delta_c.reshape(-1) @ rhs) < settled * cost / dof
+            if attempt == 0 and (predicted < tolerance * cost or settle):
+                # the step is not worth taking, or the cameras' step (their marginal: the placements
+                # follow) is worth less than ``settled`` of a chi-square unit: what is left moves
+                # poorly seen placements only
                 accepted = converged = True
-                break
-            if attempt == 0 and cameras and float(delta_c.reshape(-1) @ rhs) < settled * cost / dof:
-                # the cameras' step (their marginal: the placements follow) is worth less than
-                # ``settled`` of a chi-square unit: what is left moves poorly seen placements only
-                accepted = converged = True
+                covariance_system = s if cameras and used == 0.0 else None
                 break
             try:
                 candidate = _apply_step(state, delta_c, delta_p, timing)
@@ -641,7 +647,9 @@ def bundle_adjust(
     size = n_cameras * N_CAMERA_PARAMS
     covariance = np.zeros((size, size))
     if cameras:  # the normal equations are always those of the final state
-        s, _, _ = reduced_system(normal._replace(v=damp(normal.v, 0.0)), layout)
+        if covariance_system is None:
+            covariance_system, _, _ = reduced_system(normal._replace(v=damp(normal.v, 0.0)), layout)
+        s = covariance_system
         carried = (np.arange(n_cameras)[:, None] * N_CAMERA_PARAMS + columns[None, :]).reshape(-1)[free_flat]
         covariance[np.ix_(carried, carried)] = np.linalg.pinv(s[np.ix_(free_flat, free_flat)], hermitian=True)
         covariance *= sigma**2

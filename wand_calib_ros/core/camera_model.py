@@ -289,7 +289,7 @@ def project_with_jacobian(model: CameraModel, points: FloatArray) -> ProjectionJ
 
 
 def project_with_jacobian_arrays(
-    k: FloatArray, m: FloatArray, principal_point: FloatArray, points: FloatArray
+    k: FloatArray, m: FloatArray, principal_point: FloatArray, points: FloatArray, *, intrinsics: bool = True
 ) -> ProjectionJacobian:
     """Vectorised projection with Jacobians, one set of intrinsics per point.
 
@@ -301,6 +301,8 @@ def project_with_jacobian_arrays(
         m: (N, 2) or (1, 2) pixel densities.
         principal_point: (N, 2) or (1, 2).
         points: (N, 3) camera-frame points.
+        intrinsics: also the derivatives with respect to the intrinsics (else ``d_intrinsics`` is
+            (N, 2, 0): the placements alone are adjusted).
     """
     x, y, z = _split_points(points)
     n = x.shape[0]
@@ -334,6 +336,11 @@ def project_with_jacobian_arrays(
     d_point[:, 1, 0] = mv * mixed
     d_point[:, 1, 1] = mv * (b + a_minus_b * sin_phi * sin_phi)
     d_point[:, 1, 2] = mv * dz_common * y
+    uv = np.empty((n, 2))
+    uv[:, 0] = mu * r * cos_phi + principal_point[:, 0]
+    uv[:, 1] = mv * r * sin_phi + principal_point[:, 1]
+    if not intrinsics:
+        return ProjectionJacobian(uv, d_point, np.empty((n, 2, 0)))
     d_intrinsics = np.empty((n, 2, N_INTRINSIC))
     for row, radial in enumerate((mu * cos_phi, mv * sin_phi)):
         power = radial * theta
@@ -342,9 +349,6 @@ def project_with_jacobian_arrays(
             power = power * t2
     d_intrinsics[:, 0, 5:] = (1.0, 0.0)
     d_intrinsics[:, 1, 5:] = (0.0, 1.0)
-    uv = np.empty((n, 2))
-    uv[:, 0] = mu * r * cos_phi + principal_point[:, 0]
-    uv[:, 1] = mv * r * sin_phi + principal_point[:, 1]
     return ProjectionJacobian(uv, d_point, d_intrinsics)
 
 
