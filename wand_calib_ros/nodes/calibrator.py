@@ -198,10 +198,13 @@ class CalibratorNode(Node):
             return response
         try:
             outcome: list[tuple[bool, str]] = []
-            worker = threading.Thread(target=self._solve, args=(service, work, outcome), name=service, daemon=True)
+            done = threading.Event()
+            worker = threading.Thread(
+                target=self._solve, args=(service, work, outcome, done), name=service, daemon=True
+            )
             self._worker = worker
             worker.start()
-            while worker.is_alive() and not self._stopping.wait(0.05):
+            while not done.wait(0.05) and not self._stopping.is_set():  # the answer as soon as it is done
                 pass
             worker.join(timeout=0.0 if self._stopping.is_set() else None)
             response.success, response.message = outcome[0] if outcome else (False, STOPPED)
@@ -239,12 +242,21 @@ class CalibratorNode(Node):
         else:
             self.get_logger().warning(f"{source}: {message}")
 
-    def _solve(self, service: str, work: Callable[[], tuple[bool, str]], outcome: list[tuple[bool, str]]) -> None:
+    def _solve(
+        self,
+        service: str,
+        work: Callable[[], tuple[bool, str]],
+        outcome: list[tuple[bool, str]],
+        done: threading.Event | None = None,
+    ) -> None:
         try:
             outcome.append(work())
         except Exception as error:  # a bug: still answer, so the caller does not wait forever
             self.get_logger().error(f"{service}: unexpected error\n{traceback.format_exc()}")
             outcome.append((False, f"unexpected error (please report): {error!r}"))
+        finally:
+            if done is not None:
+                done.set()
 
     @property
     def working(self) -> bool:
