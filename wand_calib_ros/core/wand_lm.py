@@ -5,7 +5,8 @@ relative pose (Rodrigues vector, T), every placement is triangulated linearly
 and compared with the wand: g1 = L1 - |AB|, g2 = L2 - |BC|, g3 = L - |AC|
 (paper eqs. object1-object3; a two-marker wand has g = L - |AB| only). The 14
 unknowns are found by a Levenberg-Marquardt with Marquardt's scaling (the Jacobian's
-column norms, as MINPACK's ``lmder`` scales them) and Nielsen's damping update.
+column norms, as MINPACK's ``lmder`` scales them): our own, so that a calibration's start
+imports no scipy.optimize.
 """
 
 from __future__ import annotations
@@ -207,9 +208,10 @@ def _levenberg_marquardt(
     Damping ``mu D^2`` with D the largest column norms of the Jacobian seen so far (MINPACK's
     scaling, so that parameters in mm, rad and px weigh alike); mu falls tenfold after a step that
     does what the linearisation promised (so that the last steps are Gauss-Newton's and converge
-    quadratically) and grows after a rejected one. Stops after ``max_evaluations`` residual evaluations, or when a step
-    decreases the cost by less than ``tolerance`` of it (and promised no more), or when a rejected
-    step changed the scaled parameters by less than ``tolerance`` relatively (MINPACK's ftol and xtol).
+    quadratically) and grows after a rejected one. Stops after ``max_evaluations`` residual
+    evaluations, or when a step decreases the cost by less than ``tolerance`` of it (and promised no
+    more), or when a rejected step changed the scaled parameters by less than ``tolerance``
+    relatively (MINPACK's ftol and xtol).
     """
     x = np.asarray(x0, dtype=np.float64).copy()
     r, jac = problem.residuals(x), problem.jacobian(x)
