@@ -234,6 +234,8 @@ def _angles(points: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, Flo
     rho = np.hypot(x, y)
     theta = np.arctan2(rho, z)
     tiny = rho <= 1e-12 * np.maximum(np.abs(z), 1e-300)
+    if not tiny.any():  # the common case, in the bundle adjustment's inner loop: no axis points
+        return theta, rho, x / rho, y / rho, theta / rho
     safe_rho = np.where(tiny, 1.0, rho)
     cos_phi = np.where(tiny, 1.0, x / safe_rho)
     sin_phi = np.where(tiny, 0.0, y / safe_rho)
@@ -252,15 +254,15 @@ def project(model: CameraModel, points: FloatArray) -> FloatArray:
     Returns:
         (..., 2) pixel coordinates u, v.
     """
-    theta, _, cos_phi, sin_phi, _ = _angles(points)
-    r = radius(model.k, theta)
-    u = model.m[0] * r * cos_phi + model.principal_point[0]
-    v = model.m[1] * r * sin_phi + model.principal_point[1]
-    return np.stack([u, v], axis=-1)
+    points = np.asarray(points, dtype=np.float64)
+    _split_points(points)  # the shape checked
+    one = model.k[None, :], model.m[None, :], model.principal_point[None, :]
+    return project_arrays(*one, points.reshape(-1, 3)).reshape(*points.shape[:-1], 2)
 
 
 def project_arrays(k: FloatArray, m: FloatArray, principal_point: FloatArray, points: FloatArray) -> FloatArray:
-    """(N, 2) pixels of (N, 3) camera-frame points, one set of intrinsics per point ((N, 5), (N, 2), (N, 2))."""
+    """(N, 2) pixels of (N, 3) camera-frame points, one set of intrinsics per point ((N, 5), (N, 2), (N, 2);
+    or (1, .) for one camera)."""
     theta, _, cos_phi, sin_phi, _ = _angles(points)
     r = radius(k.T, theta)
     uv = np.empty((theta.shape[0], 2))
@@ -306,21 +308,11 @@ def project_with_jacobian_arrays(
     """
     x, y, z = _split_points(points)
     n = x.shape[0]
-    rho = np.hypot(x, y)
-    theta = np.arctan2(rho, z)
-    tiny = rho <= 1e-12 * np.abs(z)
-    if tiny.any():  # on the optical axis: phi = 0, theta / rho -> 1 / z
-        safe = np.where(tiny, 1.0, rho)
-        cos_phi, sin_phi = np.where(tiny, 1.0, x / safe), np.where(tiny, 0.0, y / safe)
-        theta_over_rho = np.where(tiny, 1.0 / np.where(z == 0, 1.0, z), theta / safe)
-    else:
-        inverse = 1.0 / rho
-        cos_phi, sin_phi, theta_over_rho = x * inverse, y * inverse, theta * inverse
-    k1, k2, k3, k4, k5 = k.T
-    t2 = theta * theta
-    r_over_theta = k1 + t2 * (k2 + t2 * (k3 + t2 * (k4 + t2 * k5)))
+    theta, rho, cos_phi, sin_phi, theta_over_rho = _angles(points)
+    r_over_theta = radius_over_theta(k.T, theta)
     r = r_over_theta * theta
-    dr = k1 + t2 * (3.0 * k2 + t2 * (5.0 * k3 + t2 * (7.0 * k4 + t2 * (9.0 * k5))))
+    dr = radius_derivative(k.T, theta)
+    t2 = theta * theta
     d2 = rho * rho + z * z
     b = r_over_theta * theta_over_rho  # r / rho
     with np.errstate(divide="ignore", invalid="ignore"):
