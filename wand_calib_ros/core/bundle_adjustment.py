@@ -21,8 +21,9 @@ time, held fixed during one adjustment).
 The solver is a Levenberg-Marquardt with exact Jacobians that eliminates the
 independent 5-dof placement blocks by a Schur complement, so each iteration only
 solves a system of size 13 (plus the timing parameters in use) x cameras.
-Observation arrays are flat and sorted by placement (the structure the Schur
-complement needs is computed once).
+Observation arrays are flat and sorted by placement; they are linearised and summed into the
+normal equations chunk by chunk (:mod:`~wand_calib_ros.core.normal_equations`, whose layout is
+computed once per adjustment).
 """
 
 from __future__ import annotations
@@ -50,12 +51,12 @@ from wand_calib_ros.core.normal_equations import (
     accumulate,
     back_substitute,
     block_layout,
-    damp,
     damped,
     empty_normal_equations,
     reduced_system,
     scaling,
     solve_free,
+    undamped,
 )
 from wand_calib_ros.core.rig import WandSpec
 
@@ -593,7 +594,7 @@ def bundle_adjust(
             # Near a solution the first try is Gauss-Newton's step: its system is the one the
             # covariance needs, kept should it end the adjustment.
             used = 0.0 if attempt == 0 and trusted else lam
-            step = normal._replace(v=damp(normal.v, 0.0)) if used == 0.0 else damped(normal, used)
+            step = undamped(normal) if used == 0.0 else damped(normal, used)
             if cameras:
                 s, rhs, v_inv = reduced_system(step, layout)
                 delta_c = solve_free(s, rhs, free_flat).reshape(n_cameras, columns.size)
@@ -660,7 +661,7 @@ def bundle_adjust(
     covariance = np.zeros((size, size))
     if cameras:  # the normal equations are always those of the final state
         if covariance_system is None:
-            covariance_system, _, _ = reduced_system(normal._replace(v=damp(normal.v, 0.0)), layout)
+            covariance_system, _, _ = reduced_system(undamped(normal), layout)
         s = covariance_system
         carried = (np.arange(n_cameras)[:, None] * N_CAMERA_PARAMS + columns[None, :]).reshape(-1)[free_flat]
         covariance[np.ix_(carried, carried)] = np.linalg.pinv(s[np.ix_(free_flat, free_flat)], hermitian=True)

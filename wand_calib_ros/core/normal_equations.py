@@ -375,23 +375,25 @@ def scaling(blocks: FloatArray) -> FloatArray:
     return np.maximum(diag, 1e-9 * max(float(np.max(diag, initial=0.0)), 1e-12))
 
 
-def damp(blocks: FloatArray, lam: float | FloatArray) -> FloatArray:
-    """The (..., n, n) blocks plus lam D (and a trace of D, so that zero rows stay solvable); ``lam`` a
-    number or one per block (...)."""
+def damp(blocks: FloatArray, lam: float) -> FloatArray:
+    """The blocks plus lam D (and a trace of D, so that zero rows stay solvable)."""
     scale = scaling(blocks)
     damped = blocks.copy()
     idx = np.arange(blocks.shape[-1])
-    damped[..., idx, idx] += np.asarray(lam)[..., None] * scale + 1e-12 * float(np.min(scale, initial=1.0))
+    damped[..., idx, idx] += lam * scale + 1e-12 * float(np.min(scale, initial=1.0))
     return damped
 
 
-def damped(normal: NormalEquations, lam: float, placement_lam: FloatArray | None = None) -> NormalEquations:
-    """The normal equations with U damped by ``lam`` and V by ``placement_lam`` (P,) (default ``lam``);
-    W and the gradients shared."""
+def damped(normal: NormalEquations, lam: float) -> NormalEquations:
+    """The normal equations with U and V damped by ``lam`` (W and the gradients shared)."""
     u = damp(normal.u, lam) if normal.u.size else normal.u
-    return NormalEquations(
-        u, damp(normal.v, lam if placement_lam is None else placement_lam), normal.w, normal.gc, normal.gp
-    )
+    return NormalEquations(u, damp(normal.v, lam), normal.w, normal.gc, normal.gp)
+
+
+def undamped(normal: NormalEquations) -> NormalEquations:
+    """The normal equations as they are but for V's trace of D (zero rows stay solvable): Gauss-Newton's
+    system, and the one the covariance comes from."""
+    return normal._replace(v=damp(normal.v, 0.0))
 
 
 def solve_free(s: FloatArray, rhs: FloatArray, free: NDArray[np.bool_]) -> FloatArray:
