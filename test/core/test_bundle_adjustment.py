@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from wand_calib_ros.core.bundle_adjustment import (
@@ -18,6 +20,8 @@ from wand_calib_ros.core.bundle_adjustment import (
     _linearise,
     bundle_adjust,
     default_free_mask,
+    move_cameras,
+    released_step,
     residuals,
 )
 from wand_calib_ros.core.geometry import Pose
@@ -224,3 +228,39 @@ def test_schur_chunks_keep_apart_placements_of_cameras_that_share_none() -> None
         assert chunk.placements.size * chunk.cameras.size**2 <= SCHUR_WASTE * own[chunk.placements].sum()
         assert np.array_equal(chunk.cameras[chunk.local_camera], layout.block_camera[chunk.blocks])
         assert np.array_equal(chunk.placements[chunk.local_placement], layout.block_placement[chunk.blocks])
+
+
+def test_the_released_step_is_the_adjustment_of_the_larger_model_and_moves_reach_the_smaller() -> None:
+    # From a low-order adjustment's own normal equations: k3..k5 released (one Gauss-Newton step) land
+    # where adjusting them does, with its covariance; moving k3 to zero lands where adjusting without it does.
+    scenario, data, truth, _ = _setup(1.0, 400, 4, n_cameras=3)
+    problem = BundleProblem.from_dense(scenario.wand, data.observations.uv)
+    low = default_free_mask(3)
+    low[:, 2:5] = False
+    models = tuple(m.with_intrinsic_vector(np.r_[m.k[:2], 0, 0, 0, m.principal_point]) for m in truth.models)
+    tight = {"tolerance": 1e-14, "settled": 1e-9}  # converged beyond the linearisation's own error
+    start = BundleState(models, truth.poses, truth.wand_a, truth.wand_direction)
+    adjusted = bundle_adjust(start, problem, low, **tight)
+    full = default_free_mask(3)
+    delta, covariance = released_step(adjusted, full)
+    exact = bundle_adjust(adjusted.state, problem, full, **tight)
+    for c in range(3):
+        stepped = adjusted.state.models[c].intrinsic_vector() + delta[c, :7]
+        error = (stepped - exact.state.models[c].intrinsic_vector()) / exact.camera_std[c, :7]
+        assert np.max(np.abs(error)) < 0.1, (c, error)  # 0.03 here: plenty for a test at 2 sigma
+    std = np.sqrt(np.diag(covariance)).reshape(3, N_CAMERA_PARAMS)
+    assert np.allclose(std[full], exact.camera_std[full], rtol=0.01)
+
+    without_k5 = full.copy()
+    without_k5[:, 4] = False
+    moves = np.zeros_like(delta)
+    moves[:, 4] = -np.array([m.k[4] for m in exact.state.models])
+    step, _ = released_step(exact, without_k5, moves)
+    start = move_cameras(exact.state, step)
+    assert all(m.k[4] == 0.0 for m in start.models) and np.array_equal(start.wand_a, exact.state.wand_a)
+    zeroed = tuple(m.with_intrinsic_vector(np.r_[m.k[:4], 0.0, m.principal_point]) for m in exact.state.models)
+    cold = bundle_adjust(replace(exact.state, models=zeroed), problem, without_k5, **tight)
+    for c in range(3):
+        std = cold.camera_std[c, :7].clip(1e-300)
+        error = (start.models[c].intrinsic_vector() - cold.state.models[c].intrinsic_vector()) / std
+        assert np.max(np.abs(error[[0, 1, 2, 3, 5, 6]])) < 0.1, (c, error)

@@ -219,6 +219,22 @@ class BundleState:
 
 
 @dataclass(frozen=True, eq=False)
+class CameraSystem:
+    """The cameras' normal equations at an adjusted state, the placements eliminated (Schur complement).
+
+    Attributes:
+        columns: (K,) the camera parameters carried per camera (indices into :data:`CAMERA_PARAM_NAMES`),
+            fixed ones included: every geometric parameter and the timing ones in use.
+        matrix: (C K, C K) S, camera-major, unscaled (the covariance is sigma^2 S^-1 over the free ones).
+        rhs: (C K,) its right-hand side: the Gauss-Newton step solves ``S delta = rhs``.
+    """
+
+    columns: IntArray
+    matrix: FloatArray
+    rhs: FloatArray
+
+
+@dataclass(frozen=True, eq=False)
 class BundleResult:
     """Outcome of a bundle adjustment.
 
@@ -232,6 +248,7 @@ class BundleResult:
         camera_covariance: (C*15, C*15) covariance of all camera parameters (0 rows/cols for fixed).
         sigma: estimated pixel noise sqrt(sum r^2 / (m - p)), px.
         dof: (m, p) residual scalars and free parameters.
+        system: the cameras' normal equations at ``state`` (None: no camera parameter was free).
     """
 
     state: BundleState
@@ -242,6 +259,7 @@ class BundleResult:
     camera_covariance: FloatArray
     sigma: float
     dof: tuple[int, int]
+    system: CameraSystem | None = None
 
     def camera_block(self, camera: int, parameters: slice) -> FloatArray:
         """The covariance of some of one camera's parameters (a slice of :data:`CAMERA_PARAM_NAMES`)."""
@@ -586,7 +604,7 @@ def bundle_adjust(
     m, p = res.size, int(free_flat.sum()) + N_PLACEMENT_PARAMS * problem.n_placements
     dof = max(m - p, 1)
     iterations, converged = 0, False
-    covariance_system: FloatArray | None = None  # the undamped reduced system at the final state, once known
+    final: CameraSystem | None = None  # the undamped reduced system at the final state, once known
     while iterations < max_iterations and not converged:
         iterations += 1
         accepted = False
@@ -612,7 +630,7 @@ def bundle_adjust(
                 # follow) is worth less than ``settled`` of a chi-square unit: what is left moves
                 # poorly seen placements only
                 accepted = converged = True
-                covariance_system = s if cameras and used == 0.0 else None
+                final = CameraSystem(columns, s, rhs) if cameras and used == 0.0 else None
                 break
             try:
                 candidate = _apply_step(state, delta_c, delta_p, timing)
@@ -657,14 +675,58 @@ def bundle_adjust(
             converged = True  # no decrease possible: at a minimum to machine precision
     weights = _huber_weights(res, loss_scale)
     sigma = float(np.sqrt(np.sum(weights[:, None] * res**2) / dof))
-    size = n_cameras * N_CAMERA_PARAMS
-    covariance = np.zeros((size, size))
-    if cameras:  # the normal equations are always those of the final state
-        if covariance_system is None:
-            covariance_system, _, _ = reduced_system(undamped(normal), layout)
-        s = covariance_system
-        carried = (np.arange(n_cameras)[:, None] * N_CAMERA_PARAMS + columns[None, :]).reshape(-1)[free_flat]
-        covariance[np.ix_(carried, carried)] = np.linalg.pinv(s[np.ix_(free_flat, free_flat)], hermitian=True)
-        covariance *= sigma**2
+    if cameras and final is None:  # the normal equations are always those of the final state
+        s, rhs, _ = reduced_system(undamped(normal), layout)
+        final = CameraSystem(columns, s, rhs)
+    covariance = _covariance(final, free, sigma) if final is not None else np.zeros((n_cameras * N_CAMERA_PARAMS,) * 2)
     camera_std = np.sqrt(np.clip(np.diag(covariance), 0.0, None)).reshape(n_cameras, N_CAMERA_PARAMS)
-    return BundleResult(state, res, iterations, converged, camera_std, covariance, sigma, (m, p))
+    return BundleResult(state, res, iterations, converged, camera_std, covariance, sigma, (m, p), final)
+
+
+def _covariance(system: CameraSystem, free: NDArray[np.bool_], sigma: float) -> FloatArray:
+    """(C*15, C*15) sigma^2 S^-1 over the ``free`` (C, 15) camera parameters (0 rows and columns elsewhere)."""
+    n_cameras = free.shape[0]
+    free_flat = free[:, system.columns].reshape(-1)
+    carried = (np.arange(n_cameras)[:, None] * N_CAMERA_PARAMS + system.columns[None, :]).reshape(-1)[free_flat]
+    covariance = np.zeros((n_cameras * N_CAMERA_PARAMS,) * 2)
+    covariance[np.ix_(carried, carried)] = np.linalg.pinv(system.matrix[np.ix_(free_flat, free_flat)], hermitian=True)
+    return covariance * sigma**2
+
+
+def released_step(
+    result: BundleResult, free: NDArray[np.bool_], moves: FloatArray | None = None
+) -> tuple[FloatArray, FloatArray]:
+    """The linearised estimate of another model from an adjustment's own normal equations: the
+    Gauss-Newton step from its state with the camera parameters ``free`` estimated (e.g. distortion
+    terms it held at zero released) and the others moved by ``moves``, and the covariance of the free
+    ones. No new linearisation: the placements follow implicitly (Schur complement).
+
+    Args:
+        result: an adjustment with camera parameters free (its :attr:`BundleResult.system`).
+        free: (C, 15) the parameters to estimate; timing ones only where the adjustment carried them.
+        moves: (C, 15) the steps of the parameters not free (e.g. a term fixed at zero: minus its
+            value); None: they stay.
+
+    Returns:
+        (C, 15) the step and (C*15, C*15) the covariance sigma^2 S^-1 over the free parameters.
+    """
+    system = result.system
+    if system is None:
+        raise ValueError("the adjustment estimated no camera parameter: it has no camera system")
+    if free[:, np.setdiff1d(np.arange(N_CAMERA_PARAMS), system.columns)].any():
+        raise ValueError("a timing parameter the adjustment did not carry cannot be released")
+    n_cameras, columns = free.shape[0], system.columns
+    free_flat = free[:, columns].reshape(-1)
+    fixed_step = np.zeros(free_flat.size) if moves is None else np.where(free_flat, 0.0, moves[:, columns].reshape(-1))
+    step = fixed_step + solve_free(system.matrix, system.rhs - system.matrix @ fixed_step, free_flat)
+    delta = np.zeros((n_cameras, N_CAMERA_PARAMS))
+    delta[:, columns] = step.reshape(n_cameras, columns.size)
+    return delta, _covariance(system, free, result.sigma)
+
+
+def move_cameras(state: BundleState, delta: FloatArray) -> BundleState:
+    """``state`` with the cameras moved by the (C, 15) step ``delta`` (timing steps only where the state
+    has timing), the placements where they are."""
+    columns = np.arange(N_GEOMETRIC if state.timing is None else N_CAMERA_PARAMS)
+    no_placement_step = np.zeros((state.wand_a.shape[0], N_PLACEMENT_PARAMS))
+    return _apply_step(state, delta[:, columns], no_placement_step, columns[N_GEOMETRIC:])

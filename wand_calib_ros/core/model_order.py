@@ -10,15 +10,19 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wand_calib_ros.core.bundle_adjustment import (
+    N_CAMERA_PARAMS,
     N_GEOMETRIC,
     BundleProblem,
     BundleResult,
     BundleState,
     bundle_adjust,
     default_free_mask,
+    move_cameras,
+    released_step,
 )
 from wand_calib_ros.core.camera_model import (
     N_INTRINSIC,
+    N_RADIAL,
     CameraModel,
     turns_over_in_image,
 )
@@ -101,9 +105,11 @@ def adjust_with_model_selection(
         models = list(result.state.models)
         for c, spec in enumerate(rig.cameras):
             if not fixed.held[c]:  # given intrinsics held fixed have no model order to decide
-                per_camera[c], models[c] = reduce_radial(spec, result, c, per_camera[c])
+                covariance = result.camera_block(c, slice(0, N_INTRINSIC))
+                per_camera[c], models[c] = reduce_radial(spec, models[c], covariance, per_camera[c])
         timing = reduce_timing(clocks, result, fixed.timing)
         if tuple(per_camera) == fixed.per_camera and np.array_equal(timing, fixed.timing):
+            log.info("model order on %d placements: %s", len(uv), _orders_text(rig, fixed))
             return result, fixed
         state = result.state
         values = state.camera_timing.copy()
@@ -112,32 +118,102 @@ def adjust_with_model_selection(
         start = BundleState(zero_fixed(tuple(models), fixed), state.poses, state.wand_a, state.wand_direction, values)
 
 
+def decide_on_all_placements(
+    rig: RigSpec, result: BundleResult, fixed: FixedParameters, reference: int, coarse_placements: int
+) -> tuple[FixedParameters, BundleState] | None:
+    """The radial model order decided again on all the placements an adjustment used, from its own
+    normal equations (no new adjustment), keeping the effect size the coarse decision demanded.
+
+    :func:`adjust_with_model_selection` decides on a coarse subset, where a term near the threshold is
+    kept or dropped by the luck of the subset drawn: which cameras keep k4 (or lose k3) changes from
+    one subset to the next. Here k3..k5 are released on the final normal equations
+    (:func:`released_step`), and the same sequential tests keep a term that would be SIGNIFICANCE
+    sigma on ``coarse_placements`` placements: ``|k| / std(k) >= SIGNIFICANCE * sqrt(P /
+    coarse_placements)`` on all P. The decision is the coarse rule's on average, without the subset's
+    sampling noise.
+
+    Returns:
+        The new decision and the adjustment's state moved to its linearised solution (the terms
+        dropped at zero), where a new adjustment finds its cameras settled; None when the order stands.
+    """
+    n_cameras, n_placements = len(rig.cameras), result.state.wand_a.shape[0]
+    significance = SIGNIFICANCE * np.sqrt(max(n_placements / coarse_placements, 1.0))
+    release = free_mask(n_cameras, reference, fixed)
+    release[~fixed.held, 2:N_RADIAL] = True  # k3..k5
+    delta, covariance = released_step(result, release)
+    values = np.array([model.intrinsic_vector() for model in result.state.models])  # (C, 7)
+    per_camera = list(fixed.per_camera)
+    for c, spec in enumerate(rig.cameras):
+        if fixed.held[c]:
+            continue
+        block = slice(c * N_CAMERA_PARAMS, c * N_CAMERA_PARAMS + N_INTRINSIC)
+        try:
+            released = result.state.models[c].with_intrinsic_vector(values[c] + delta[c, :N_INTRINSIC])
+        except ModelError:  # the linearised step leaves the camera model: no evidence to change the order
+            continue
+        decided, _ = reduce_radial(spec, released, covariance[block, block], (), significance)
+        if set(decided) != set(per_camera[c]):
+            per_camera[c] = decided
+    if per_camera == list(fixed.per_camera):
+        return None
+    decision = FixedParameters(tuple(per_camera), fixed.timing, fixed.held)
+    log.info("model order on all %d placements: %s", n_placements, _orders_text(rig, decision))
+    moves = np.zeros_like(delta)  # radial terms fixed now go to zero (those fixed before are)
+    moves[:, 2:N_RADIAL] = -values[:, 2:N_RADIAL]
+    moves[fixed.held] = 0.0
+    step, _ = released_step(result, free_mask(n_cameras, reference, decision), moves)
+    return decision, move_cameras(result.state, step)
+
+
+def _orders_text(rig: RigSpec, fixed: FixedParameters) -> str:
+    """The radial terms fixed at zero, cameras grouped: 'k4, k5 fixed at 0 (14 cameras); k5 (cam01, cam04)'."""
+    groups: dict[tuple[int, ...], list[str]] = {}
+    for spec, order, held in zip(rig.cameras, fixed.per_camera, fixed.held, strict=True):
+        if not held:
+            groups.setdefault(tuple(sorted(order)), []).append(spec.name)
+    parts = []
+    for order, names in sorted(groups.items(), key=lambda item: -len(item[1])):
+        terms = ", ".join(f"k{i + 1}" for i in order) or "none"
+        who = f"{len(names)} cameras" if len(names) > 3 else ", ".join(names)
+        parts.append(f"{terms} ({who})")
+    return "radial terms fixed at 0: " + "; ".join(parts)
+
+
 def reduce_radial(
-    spec: CameraSpec, result: BundleResult, camera: int, fixed: tuple[int, ...]
+    spec: CameraSpec,
+    model: CameraModel,
+    covariance: FloatArray,
+    fixed: tuple[int, ...],
+    significance: float = SIGNIFICANCE,
 ) -> tuple[tuple[int, ...], CameraModel]:
     """Sequential Wald tests on k5, k4, k3 of one camera (see adjust_with_model_selection).
+
+    Args:
+        model: the camera's estimate; ``covariance`` (7, 7) that of its intrinsic vector.
+        fixed: the radial indices already fixed at zero.
+        significance: a term is kept from ``significance`` standard deviations on.
 
     Returns:
         The camera's fixed radial indices and its intrinsics moved to the conditional estimate.
     """
-    model = result.state.models[camera]
     estimate = model.intrinsic_vector()
-    covariance = result.camera_block(camera, slice(0, 7)).copy()
+    covariance = covariance.copy()
     fixed_now = list(fixed)
     for highest in (4, 3, 2):
         if highest in fixed_now:
             continue
         variance = covariance[highest, highest]
-        significance = abs(estimate[highest]) / np.sqrt(variance) if variance > 0 else 0.0
+        z = abs(estimate[highest]) / np.sqrt(variance) if variance > 0 else 0.0
         current = model.with_intrinsic_vector(estimate)
         if turns_over_in_image(current, spec.max_view_angle):
-            log.info("%s: r(theta) turns over inside the image with k%d free: fixed to 0", spec.name, highest + 1)
-        elif significance < SIGNIFICANCE:
-            log.info(
-                "%s: k%d = %.3g is not significant (%.1f sigma): fixed to 0",
+            log.debug("%s: r(theta) turns over inside the image with k%d free: fixed to 0", spec.name, highest + 1)
+        elif z < significance:
+            log.debug(
+                "%s: k%d = %.3g is %.1f sigma, under %.1f: fixed to 0",
                 spec.name,
                 highest + 1,
                 estimate[highest],
+                z,
                 significance,
             )
         else:

@@ -50,7 +50,12 @@ from wand_calib_ros.core.gating import (
     subset_state,
 )
 from wand_calib_ros.core.geometry import Pose, wand_directions
-from wand_calib_ros.core.model_order import adjust_with_model_selection, free_mask, held_intrinsics
+from wand_calib_ros.core.model_order import (
+    adjust_with_model_selection,
+    decide_on_all_placements,
+    free_mask,
+    held_intrinsics,
+)
 from wand_calib_ros.core.placements import fit_placements, triangulate_placements
 from wand_calib_ros.core.result import CalibrationResult, LensTrial
 from wand_calib_ros.core.rig import RigSpec, WandSpec, spread_subset
@@ -143,6 +148,7 @@ def refine_calibration(
     free = free_mask(n_cameras, reference, fixed)
 
     # 3. Placements set aside so far come back with their clean views if they fit the solution.
+    decided_on = used.size
     aside = np.setdiff1d(np.flatnonzero(clocks.placeable(len(uv))), used)
     admitted, admitted_uv, admitted_state = readmit(rig, uv[aside], result, clocks.placements(aside))
     if admitted.any():
@@ -158,6 +164,12 @@ def refine_calibration(
             result.state.timing,
         )
         result, clocks = _final_adjustment(rig, uv, uv_used, used, state, clocks, free)
+        # 4. The model order checked on all of them, and adjusted again should that change it.
+        decided = decide_on_all_placements(rig, result, fixed, reference, decided_on)
+        if decided is not None:
+            fixed, state = decided
+            free = free_mask(n_cameras, reference, fixed)
+            result, clocks = _final_adjustment(rig, uv, uv_used, used, state, clocks, free)
     check_geometry(result.state.points(wand))
     check_camera_views(rig, uv, uv_used)
     check_uncertainty(rig, result)
