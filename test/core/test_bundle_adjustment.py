@@ -12,6 +12,7 @@ from wand_calib_ros.core.bundle_adjustment import (
     TIME_OFFSET,
     BundleProblem,
     BundleState,
+    CameraSystem,
     PlacementTiming,
     _apply_step,
     _evaluate,
@@ -20,8 +21,6 @@ from wand_calib_ros.core.bundle_adjustment import (
     _linearise,
     bundle_adjust,
     default_free_mask,
-    move_cameras,
-    released_step,
     residuals,
 )
 from wand_calib_ros.core.geometry import Pose
@@ -230,9 +229,10 @@ def test_schur_chunks_keep_apart_placements_of_cameras_that_share_none() -> None
         assert np.array_equal(chunk.placements[chunk.local_placement], layout.block_placement[chunk.blocks])
 
 
-def test_the_released_step_is_the_adjustment_of_the_larger_model_and_moves_reach_the_smaller() -> None:
+def test_the_released_step_is_the_adjustment_of_the_larger_model_and_a_choice_starts_at_the_smaller() -> None:
     # From a low-order adjustment's own normal equations: k3..k5 released (one Gauss-Newton step) land
-    # where adjusting them does, with its covariance; moving k3 to zero lands where adjusting without it does.
+    # where adjusting them does, with its covariance. A choice at the start that fixes k5 at zero has
+    # the adjustment land where adjusting without k5 does.
     scenario, data, truth, _ = _setup(1.0, 400, 4, n_cameras=3)
     problem = BundleProblem.from_dense(scenario.wand, data.observations.uv)
     low = default_free_mask(3)
@@ -241,26 +241,35 @@ def test_the_released_step_is_the_adjustment_of_the_larger_model_and_moves_reach
     tight = {"tolerance": 1e-14, "settled": 1e-9}  # converged beyond the linearisation's own error
     start = BundleState(models, truth.poses, truth.wand_a, truth.wand_direction)
     adjusted = bundle_adjust(start, problem, low, **tight)
+    assert adjusted.system is not None
     full = default_free_mask(3)
-    delta, covariance = released_step(adjusted, full)
+    delta = adjusted.system.step(full)
     exact = bundle_adjust(adjusted.state, problem, full, **tight)
     for c in range(3):
         stepped = adjusted.state.models[c].intrinsic_vector() + delta[c, :7]
         error = (stepped - exact.state.models[c].intrinsic_vector()) / exact.camera_std[c, :7]
         assert np.max(np.abs(error)) < 0.1, (c, error)  # 0.03 here: plenty for a test at 2 sigma
-    std = np.sqrt(np.diag(covariance)).reshape(3, N_CAMERA_PARAMS)
+    std = np.sqrt(np.diag(adjusted.system.covariance(full, adjusted.sigma))).reshape(3, N_CAMERA_PARAMS)
     assert np.allclose(std[full], exact.camera_std[full], rtol=0.01)
 
     without_k5 = full.copy()
     without_k5[:, 4] = False
-    moves = np.zeros_like(delta)
-    moves[:, 4] = -np.array([m.k[4] for m in exact.state.models])
-    step, _ = released_step(exact, without_k5, moves)
-    start = move_cameras(exact.state, step)
-    assert all(m.k[4] == 0.0 for m in start.models) and np.array_equal(start.wand_a, exact.state.wand_a)
+    seen = []
+
+    def choose(state: BundleState, system: CameraSystem, sigma: float) -> tuple[np.ndarray, np.ndarray]:
+        seen.append(sigma)
+        moves = np.zeros((3, N_CAMERA_PARAMS))
+        moves[:, 4] = -np.array([m.k[4] for m in state.models])
+        return without_k5, moves
+
+    chosen = bundle_adjust(exact.state, problem, full, choose=choose, **tight)
     zeroed = tuple(m.with_intrinsic_vector(np.r_[m.k[:4], 0.0, m.principal_point]) for m in exact.state.models)
     cold = bundle_adjust(replace(exact.state, models=zeroed), problem, without_k5, **tight)
+    assert len(seen) == 1 and abs(seen[0] - exact.sigma) < 1e-9
+    assert all(m.k[4] == 0.0 for m in chosen.state.models)
+    assert chosen.dof == cold.dof and np.allclose(chosen.camera_std, cold.camera_std, rtol=1e-3)
     for c in range(3):
-        std = cold.camera_std[c, :7].clip(1e-300)
-        error = (start.models[c].intrinsic_vector() - cold.state.models[c].intrinsic_vector()) / std
-        assert np.max(np.abs(error[[0, 1, 2, 3, 5, 6]])) < 0.1, (c, error)
+        error = (chosen.state.models[c].intrinsic_vector() - cold.state.models[c].intrinsic_vector()) / cold.camera_std[
+            c, :7
+        ].clip(1e-300)
+        assert np.max(np.abs(error[[0, 1, 2, 3, 5, 6]])) < 0.01, (c, error)

@@ -8,7 +8,7 @@ from rigs import scenario_data
 from wand_calib_ros.core.bundle_adjustment import BundleProblem, BundleResult, BundleState, bundle_adjust
 from wand_calib_ros.core.model_order import (
     FixedParameters,
-    decide_on_all_placements,
+    OrderOnAllPlacements,
     free_mask,
     reduce_radial,
     zero_fixed,
@@ -38,6 +38,7 @@ def test_the_decision_on_all_placements_is_the_sequential_test_of_the_full_adjus
     # the Wald tests on an adjustment with all of them free do, at 2 sqrt(P / coarse) sigma.
     rig, _, _, full = _adjusted(((),) * 16)
     _, _, fixed, low = _adjusted(((3, 4),) * 16)
+    assert low.system is not None
     decisions = []
     for coarse in (PLACEMENTS, PLACEMENTS // 4, PLACEMENTS // 16):
         significance = 2.0 * np.sqrt(PLACEMENTS / coarse)
@@ -45,19 +46,20 @@ def test_the_decision_on_all_placements_is_the_sequential_test_of_the_full_adjus
             reduce_radial(spec, full.state.models[c], full.camera_block(c, slice(0, 7)), (), significance)[0]
             for c, spec in enumerate(rig.cameras)
         )
-        decided = decide_on_all_placements(rig, low, fixed, 0, coarse)
-        got = decided[0].per_camera if decided is not None else fixed.per_camera
-        assert _orders(got) == _orders(expected), coarse
-        decisions.append(_orders(got))
+        order = OrderOnAllPlacements(rig, fixed, 0, coarse)
+        choice = order(low.state, low.system, low.sigma)
+        assert order.decision is not None and (choice is None) == (order.decision is fixed)
+        assert _orders(order.decision.per_camera) == _orders(expected), coarse
+        decisions.append(_orders(order.decision.per_camera))
     assert decisions[0] != decisions[2]  # not vacuous: k3 goes as the threshold rises
 
 
-def test_a_term_dropped_by_the_coarse_draw_comes_back_and_the_new_order_starts_settled() -> None:
+def test_a_term_dropped_by_the_coarse_draw_comes_back_in_the_final_adjustment() -> None:
     rig, problem, wrong, adjusted = _adjusted(((3, 4), (3, 4), (2, 3, 4)) + ((3, 4),) * 13)  # camera 2 lost k3
-    decided = decide_on_all_placements(rig, adjusted, wrong, 0, PLACEMENTS)
-    assert decided is not None
-    fixed, start = decided
-    assert 2 not in fixed.per_camera[2]
-    result = bundle_adjust(start, problem, free_mask(len(rig.cameras), 0, fixed))
-    assert result.iterations <= 2  # the start is the new model's linearised solution
-    assert decide_on_all_placements(rig, result, fixed, 0, PLACEMENTS) is None  # the order the data confirm stands
+    order = OrderOnAllPlacements(rig, wrong, 0, PLACEMENTS)
+    result = bundle_adjust(adjusted.state, problem, free_mask(len(rig.cameras), 0, wrong), choose=order)
+    assert order.decision is not None and 2 not in order.decision.per_camera[2]
+    assert result.camera_std[2, 2] > 0 and result.state.models[2].k[2] != 0.0  # k3 estimated
+    assert result.iterations <= 2  # from the new order's linearised solution
+    again = OrderOnAllPlacements(rig, order.decision, 0, PLACEMENTS)
+    assert result.system is not None and again(result.state, result.system, result.sigma) is None  # it stands

@@ -29,6 +29,7 @@ computed once per adjustment).
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -232,6 +233,41 @@ class CameraSystem:
     columns: IntArray
     matrix: FloatArray
     rhs: FloatArray
+
+    def step(self, free: NDArray[np.bool_], moves: FloatArray | None = None) -> FloatArray:
+        """(C, 15) the Gauss-Newton step with the camera parameters ``free`` (C, 15) estimated and the
+        others moved by ``moves`` (C, 15; e.g. a term fixed at zero: minus its value; None: they stay).
+
+        With other parameters free than the adjustment's (e.g. distortion terms it held at zero
+        released), this is the linearised estimate of that other model: no new linearisation, the
+        placements follow implicitly. Timing parameters only where the system carries them.
+        """
+        if free[:, np.setdiff1d(np.arange(N_CAMERA_PARAMS), self.columns)].any():
+            raise ValueError("a timing parameter the adjustment did not carry cannot be estimated")
+        n_cameras = free.shape[0]
+        free_flat = free[:, self.columns].reshape(-1)
+        fixed = (
+            np.zeros(free_flat.size) if moves is None else np.where(free_flat, 0.0, moves[:, self.columns].reshape(-1))
+        )
+        step = fixed + solve_free(self.matrix, self.rhs - self.matrix @ fixed, free_flat)
+        delta = np.zeros((n_cameras, N_CAMERA_PARAMS))
+        delta[:, self.columns] = step.reshape(n_cameras, self.columns.size)
+        return delta
+
+    def covariance(self, free: NDArray[np.bool_], sigma: float) -> FloatArray:
+        """(C*15, C*15) sigma^2 S^-1 over the ``free`` (C, 15) camera parameters (0 rows and columns elsewhere)."""
+        n_cameras = free.shape[0]
+        free_flat = free[:, self.columns].reshape(-1)
+        carried = (np.arange(n_cameras)[:, None] * N_CAMERA_PARAMS + self.columns[None, :]).reshape(-1)[free_flat]
+        covariance = np.zeros((n_cameras * N_CAMERA_PARAMS,) * 2)
+        covariance[np.ix_(carried, carried)] = np.linalg.pinv(self.matrix[np.ix_(free_flat, free_flat)], hermitian=True)
+        return covariance * sigma**2
+
+
+#: A choice of the parameters to estimate made on the normal equations at an adjustment's start (see
+#: :func:`bundle_adjust`): called with the start, its cameras' system and its noise estimate (px), it
+#: returns the (C, 15) parameters to estimate and the (C, 15) steps of those it fixes, or None.
+ChooseFree = Callable[["BundleState", CameraSystem, float], "tuple[NDArray[np.bool_], FloatArray] | None"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -557,6 +593,7 @@ def bundle_adjust(
     max_iterations: int = 100,
     tolerance: float = 1e-8,
     settled: float = CAMERAS_SETTLED,
+    choose: ChooseFree | None = None,
 ) -> BundleResult:
     """Sparse Levenberg-Marquardt over all unknowns (paper's bundle adjustment).
 
@@ -578,6 +615,11 @@ def bundle_adjust(
         settled: stop when the cameras' step is worth less than this fraction of a chi-square unit
             (:data:`CAMERAS_SETTLED`; passes that only decide outliers or a test settle at
             :data:`DECIDING_SETTLED`).
+        choose: decides on the normal equations at the start which camera parameters to estimate
+            (e.g. the model order on all placements, :class:`~wand_calib_ros.core.model_order.OrderOnAllPlacements`),
+            the timing ones as ``free`` has them. When it changes them, the adjustment starts from the
+            new choice's linearised solution (cameras and placements), so its first linearisation
+            serves the choice too.
 
     Returns:
         The optimised state, residuals and parameter uncertainties.
@@ -603,6 +645,27 @@ def bundle_adjust(
     cost = robust_cost(res, loss_scale)
     m, p = res.size, int(free_flat.sum()) + N_PLACEMENT_PARAMS * problem.n_placements
     dof = max(m - p, 1)
+    if choose is not None and cameras:
+        gauss_newton = undamped(normal)
+        s, rhs, v_inv = reduced_system(gauss_newton, layout)
+        choice = choose(state, CameraSystem(columns, s, rhs), _sigma(res, loss_scale, dof))
+        if choice is not None:
+            free, moves = choice
+            if not np.array_equal(timing_columns(free), timing):
+                raise ValueError("a choice of the parameters to estimate cannot change the timing ones carried")
+            free_flat = free[:, columns].reshape(-1)
+            p = int(free_flat.sum()) + N_PLACEMENT_PARAMS * problem.n_placements
+            dof = max(m - p, 1)
+            delta_c = CameraSystem(columns, s, rhs).step(free, moves)[:, columns]
+            delta_p = back_substitute(delta_c, v_inv, gauss_newton, layout)
+            state = _apply_step(state, delta_c, delta_p, timing)
+            del gauss_newton, normal  # before the next ones are summed: the peak memory holds one W
+            res, normal = _evaluate(state, problem, layout, timing, loss_scale)
+            cost = robust_cost(res, loss_scale) if np.all(np.isfinite(res)) else np.inf
+            if not np.isfinite(cost):
+                raise CalibrationFailedError("the bundle adjustment's chosen start has non-finite reprojections")
+        else:
+            del gauss_newton  # it shares W with ``normal``, which the first accepted step replaces
     iterations, converged = 0, False
     final: CameraSystem | None = None  # the undamped reduced system at the final state, once known
     while iterations < max_iterations and not converged:
@@ -673,60 +736,15 @@ def bundle_adjust(
             trusted = False
         if not accepted:
             converged = True  # no decrease possible: at a minimum to machine precision
-    weights = _huber_weights(res, loss_scale)
-    sigma = float(np.sqrt(np.sum(weights[:, None] * res**2) / dof))
+    sigma = _sigma(res, loss_scale, dof)
     if cameras and final is None:  # the normal equations are always those of the final state
         s, rhs, _ = reduced_system(undamped(normal), layout)
         final = CameraSystem(columns, s, rhs)
-    covariance = _covariance(final, free, sigma) if final is not None else np.zeros((n_cameras * N_CAMERA_PARAMS,) * 2)
+    covariance = final.covariance(free, sigma) if final is not None else np.zeros((n_cameras * N_CAMERA_PARAMS,) * 2)
     camera_std = np.sqrt(np.clip(np.diag(covariance), 0.0, None)).reshape(n_cameras, N_CAMERA_PARAMS)
     return BundleResult(state, res, iterations, converged, camera_std, covariance, sigma, (m, p), final)
 
 
-def _covariance(system: CameraSystem, free: NDArray[np.bool_], sigma: float) -> FloatArray:
-    """(C*15, C*15) sigma^2 S^-1 over the ``free`` (C, 15) camera parameters (0 rows and columns elsewhere)."""
-    n_cameras = free.shape[0]
-    free_flat = free[:, system.columns].reshape(-1)
-    carried = (np.arange(n_cameras)[:, None] * N_CAMERA_PARAMS + system.columns[None, :]).reshape(-1)[free_flat]
-    covariance = np.zeros((n_cameras * N_CAMERA_PARAMS,) * 2)
-    covariance[np.ix_(carried, carried)] = np.linalg.pinv(system.matrix[np.ix_(free_flat, free_flat)], hermitian=True)
-    return covariance * sigma**2
-
-
-def released_step(
-    result: BundleResult, free: NDArray[np.bool_], moves: FloatArray | None = None
-) -> tuple[FloatArray, FloatArray]:
-    """The linearised estimate of another model from an adjustment's own normal equations: the
-    Gauss-Newton step from its state with the camera parameters ``free`` estimated (e.g. distortion
-    terms it held at zero released) and the others moved by ``moves``, and the covariance of the free
-    ones. No new linearisation: the placements follow implicitly (Schur complement).
-
-    Args:
-        result: an adjustment with camera parameters free (its :attr:`BundleResult.system`).
-        free: (C, 15) the parameters to estimate; timing ones only where the adjustment carried them.
-        moves: (C, 15) the steps of the parameters not free (e.g. a term fixed at zero: minus its
-            value); None: they stay.
-
-    Returns:
-        (C, 15) the step and (C*15, C*15) the covariance sigma^2 S^-1 over the free parameters.
-    """
-    system = result.system
-    if system is None:
-        raise ValueError("the adjustment estimated no camera parameter: it has no camera system")
-    if free[:, np.setdiff1d(np.arange(N_CAMERA_PARAMS), system.columns)].any():
-        raise ValueError("a timing parameter the adjustment did not carry cannot be released")
-    n_cameras, columns = free.shape[0], system.columns
-    free_flat = free[:, columns].reshape(-1)
-    fixed_step = np.zeros(free_flat.size) if moves is None else np.where(free_flat, 0.0, moves[:, columns].reshape(-1))
-    step = fixed_step + solve_free(system.matrix, system.rhs - system.matrix @ fixed_step, free_flat)
-    delta = np.zeros((n_cameras, N_CAMERA_PARAMS))
-    delta[:, columns] = step.reshape(n_cameras, columns.size)
-    return delta, _covariance(system, free, result.sigma)
-
-
-def move_cameras(state: BundleState, delta: FloatArray) -> BundleState:
-    """``state`` with the cameras moved by the (C, 15) step ``delta`` (timing steps only where the state
-    has timing), the placements where they are."""
-    columns = np.arange(N_GEOMETRIC if state.timing is None else N_CAMERA_PARAMS)
-    no_placement_step = np.zeros((state.wand_a.shape[0], N_PLACEMENT_PARAMS))
-    return _apply_step(state, delta[:, columns], no_placement_step, columns[N_GEOMETRIC:])
+def _sigma(res: FloatArray, loss_scale: float | None, dof: int) -> float:
+    """The pixel noise estimate from (M, 2) residuals: sqrt(sum w r^2 / dof), Huber weights w."""
+    return float(np.sqrt(np.sum(_huber_weights(res, loss_scale)[:, None] * res**2) / dof))

@@ -1,5 +1,6 @@
 """The distortion model's order and the timing parameters the data support: adjust, drop what is not
-significant (sequential Wald tests on k5, k4, k3; the timing's own tests), re-adjust."""
+significant (sequential Wald tests on k5, k4, k3; the timing's own tests), re-adjust; on a coarse subset
+of the placements, then the model order again on all of them at the final adjustment's start."""
 
 from __future__ import annotations
 
@@ -15,10 +16,9 @@ from wand_calib_ros.core.bundle_adjustment import (
     BundleProblem,
     BundleResult,
     BundleState,
+    CameraSystem,
     bundle_adjust,
     default_free_mask,
-    move_cameras,
-    released_step,
 )
 from wand_calib_ros.core.camera_model import (
     N_INTRINSIC,
@@ -118,51 +118,64 @@ def adjust_with_model_selection(
         start = BundleState(zero_fixed(tuple(models), fixed), state.poses, state.wand_a, state.wand_direction, values)
 
 
-def decide_on_all_placements(
-    rig: RigSpec, result: BundleResult, fixed: FixedParameters, reference: int, coarse_placements: int
-) -> tuple[FixedParameters, BundleState] | None:
-    """The radial model order decided again on all the placements an adjustment used, from its own
-    normal equations (no new adjustment), keeping the effect size the coarse decision demanded.
+@dataclass(eq=False)
+class OrderOnAllPlacements:
+    """The radial model order decided again on all placements, at the start of the final adjustment
+    (a :data:`~wand_calib_ros.core.bundle_adjustment.ChooseFree` for :func:`bundle_adjust`, on its
+    first linearisation), keeping the effect size the coarse decision demanded.
 
     :func:`adjust_with_model_selection` decides on a coarse subset, where a term near the threshold is
     kept or dropped by the luck of the subset drawn: which cameras keep k4 (or lose k3) changes from
-    one subset to the next. Here k3..k5 are released on the final normal equations
-    (:func:`released_step`), and the same sequential tests keep a term that would be SIGNIFICANCE
-    sigma on ``coarse_placements`` placements: ``|k| / std(k) >= SIGNIFICANCE * sqrt(P /
-    coarse_placements)`` on all P. The decision is the coarse rule's on average, without the subset's
-    sampling noise.
+    one subset to the next. Here k3..k5 are released on the normal equations of all placements
+    (:meth:`CameraSystem.step`: the linearised estimate of the full model) and the same sequential
+    tests keep a term that would be SIGNIFICANCE sigma on ``coarse_placements`` placements:
+    ``|k| / std(k) >= SIGNIFICANCE * sqrt(P / coarse_placements)`` on all P. The decision is the coarse
+    rule's on average, without the subset's sampling noise.
 
-    Returns:
-        The new decision and the adjustment's state moved to its linearised solution (the terms
-        dropped at zero), where a new adjustment finds its cameras settled; None when the order stands.
+    Attributes:
+        rig, fixed, reference: the rig, the coarse decision, the reference camera.
+        coarse_placements: how many placements the coarse decision was made on.
+        decision: set once called: the order on all placements (``fixed`` when it stands).
     """
-    n_cameras, n_placements = len(rig.cameras), result.state.wand_a.shape[0]
-    significance = SIGNIFICANCE * np.sqrt(max(n_placements / coarse_placements, 1.0))
-    release = free_mask(n_cameras, reference, fixed)
-    release[~fixed.held, 2:N_RADIAL] = True  # k3..k5
-    delta, covariance = released_step(result, release)
-    values = np.array([model.intrinsic_vector() for model in result.state.models])  # (C, 7)
-    per_camera = list(fixed.per_camera)
-    for c, spec in enumerate(rig.cameras):
-        if fixed.held[c]:
-            continue
-        block = slice(c * N_CAMERA_PARAMS, c * N_CAMERA_PARAMS + N_INTRINSIC)
-        try:
-            released = result.state.models[c].with_intrinsic_vector(values[c] + delta[c, :N_INTRINSIC])
-        except ModelError:  # the linearised step leaves the camera model: no evidence to change the order
-            continue
-        decided, _ = reduce_radial(spec, released, covariance[block, block], (), significance)
-        if set(decided) != set(per_camera[c]):
-            per_camera[c] = decided
-    if per_camera == list(fixed.per_camera):
-        return None
-    decision = FixedParameters(tuple(per_camera), fixed.timing, fixed.held)
-    log.info("model order on all %d placements: %s", n_placements, _orders_text(rig, decision))
-    moves = np.zeros_like(delta)  # radial terms fixed now go to zero (those fixed before are)
-    moves[:, 2:N_RADIAL] = -values[:, 2:N_RADIAL]
-    moves[fixed.held] = 0.0
-    step, _ = released_step(result, free_mask(n_cameras, reference, decision), moves)
-    return decision, move_cameras(result.state, step)
+
+    rig: RigSpec
+    fixed: FixedParameters
+    reference: int
+    coarse_placements: int
+    decision: FixedParameters | None = None
+
+    def __call__(
+        self, state: BundleState, system: CameraSystem, sigma: float
+    ) -> tuple[NDArray[np.bool_], FloatArray] | None:
+        """The parameters to estimate and the steps of the radial terms fixed now; None: the order stands."""
+        fixed, n_cameras, n_placements = self.fixed, len(self.rig.cameras), state.wand_a.shape[0]
+        significance = SIGNIFICANCE * np.sqrt(max(n_placements / self.coarse_placements, 1.0))
+        release = free_mask(n_cameras, self.reference, fixed)
+        release[~fixed.held, 2:N_RADIAL] = True  # k3..k5
+        delta = system.step(release)
+        covariance = system.covariance(release, sigma)
+        values = np.array([model.intrinsic_vector() for model in state.models])  # (C, 7)
+        per_camera = list(fixed.per_camera)
+        for c, spec in enumerate(self.rig.cameras):
+            if fixed.held[c]:
+                continue
+            block = slice(c * N_CAMERA_PARAMS, c * N_CAMERA_PARAMS + N_INTRINSIC)
+            try:
+                released = state.models[c].with_intrinsic_vector(values[c] + delta[c, :N_INTRINSIC])
+            except ModelError:  # the linearised step leaves the camera model: no evidence to change the order
+                continue
+            decided, _ = reduce_radial(spec, released, covariance[block, block], (), significance)
+            if set(decided) != set(per_camera[c]):  # (the order the tests fix them in aside)
+                per_camera[c] = decided
+        if per_camera == list(fixed.per_camera):
+            self.decision = fixed
+            return None
+        self.decision = FixedParameters(tuple(per_camera), fixed.timing, fixed.held)
+        log.info("model order on all %d placements: %s", n_placements, _orders_text(self.rig, self.decision))
+        moves = np.zeros_like(delta)  # radial terms fixed now go to zero (those fixed before are)
+        moves[:, 2:N_RADIAL] = -values[:, 2:N_RADIAL]
+        moves[fixed.held] = 0.0
+        return free_mask(n_cameras, self.reference, self.decision), moves
 
 
 def _orders_text(rig: RigSpec, fixed: FixedParameters) -> str:

@@ -51,8 +51,8 @@ from wand_calib_ros.core.gating import (
 )
 from wand_calib_ros.core.geometry import Pose, wand_directions
 from wand_calib_ros.core.model_order import (
+    OrderOnAllPlacements,
     adjust_with_model_selection,
-    decide_on_all_placements,
     free_mask,
     held_intrinsics,
 )
@@ -163,13 +163,10 @@ def refine_calibration(
             np.concatenate([result.state.wand_direction, admitted_state.wand_direction]),
             result.state.timing,
         )
-        result, clocks = _final_adjustment(rig, uv, uv_used, used, state, clocks, free)
-        # 4. The model order checked on all of them, and adjusted again should that change it.
-        decided = decide_on_all_placements(rig, result, fixed, reference, decided_on)
-        if decided is not None:
-            fixed, state = decided
-            free = free_mask(n_cameras, reference, fixed)
-            result, clocks = _final_adjustment(rig, uv, uv_used, used, state, clocks, free)
+        # 4. The final adjustment of them all, the model order decided again on all on its way.
+        order = OrderOnAllPlacements(rig, fixed, reference, decided_on)
+        result, clocks = _final_adjustment(rig, uv, uv_used, used, state, clocks, free, order)
+        fixed = order.decision or fixed
     check_geometry(result.state.points(wand))
     check_camera_views(rig, uv, uv_used)
     check_uncertainty(rig, result)
@@ -281,10 +278,12 @@ def _final_adjustment(
     state: BundleState,
     clocks: ClockModel,
     free: NDArray[np.bool_],
+    order: OrderOnAllPlacements,
 ) -> tuple[BundleResult, ClockModel]:
-    """The final adjustment of the placements ``used`` from ``state``; with timing, the wand's motion is
-    refitted first to where the adjustments put them, and again while an adjustment moves a timing
-    parameter by more than MOTION_SETTLED of its standard deviation (at most MOTION_ROUNDS rounds)."""
+    """The final adjustment of the placements ``used`` from ``state``, the model order decided again on
+    its first linearisation (``order``); with timing, the wand's motion is refitted first to where the
+    adjustments put them, and again while an adjustment moves a timing parameter by more than
+    MOTION_SETTLED of its standard deviation (at most MOTION_ROUNDS rounds)."""
     for _ in range(MOTION_ROUNDS if clocks.modelled else 1):
         if clocks.modelled:
             points = np.full((len(uv), uv.shape[2], 3), np.nan)
@@ -295,7 +294,10 @@ def _final_adjustment(
                 points[rest] = triangulate_placements(state.models, state.poses, aligned[rest])
             points[used] = state.points(rig.wand)
             clocks = refresh_motion(clocks, points)
-        result = bundle_adjust(state, BundleProblem.from_dense(rig.wand, uv_used, clocks.placements(used)), free)
+        problem = BundleProblem.from_dense(rig.wand, uv_used, clocks.placements(used))
+        result = bundle_adjust(state, problem, free, choose=order if order.decision is None else None)
+        if order.decision is not None:
+            free = free_mask(len(rig.cameras), order.reference, order.decision)
         if not clocks.modelled:
             break
         std = result.camera_std[:, N_GEOMETRIC:]
