@@ -85,3 +85,16 @@ def test_what_is_missing_says_what_would_be_enough() -> None:
     assert "% of the image covered (need 50 %)" in message
     reach = np.degrees(tracker.reach[0])
     assert f"deg off-axis of {reach:.0f} (need {0.7 * reach:.0f}): move it towards the image border" in message
+
+
+def test_frames_added_at_once_count_as_added_one_by_one() -> None:
+    scenario = ring_scenario()  # mixed lenses: not every camera sees every frame
+    data = simulate(scenario, 0.5, np.random.default_rng(3), n=200)
+    one_by_one, at_once = CoverageTracker(scenario.rig), CoverageTracker(scenario.rig)
+    for uv in data.observations.uv:
+        one_by_one.add(uv)
+    at_once.add(data.observations.uv)
+    at_once.add(data.observations.uv[:0])  # nothing: nothing changes
+    for name in ("cells", "placements", "shared", "max_theta", "directions", "lengths"):
+        assert np.array_equal(getattr(one_by_one, name), getattr(at_once, name)), name
+    assert one_by_one.status().messages() == at_once.status().messages()

@@ -124,21 +124,26 @@ class CoverageTracker:
         return float(min(theta.max(), spec.max_view_angle))
 
     def add(self, uv: FloatArray) -> None:
-        """One frame: (C, 3, 2) pixels, NaN where a camera did not see the point."""
-        complete = np.all(np.isfinite(uv), axis=(1, 2))
-        self.placements += complete
-        self.shared += np.outer(complete, complete)
-        for c in np.flatnonzero(complete):
+        """Frames: (C, 3, 2) pixels of one, or (F, C, 3, 2) of several; NaN where a camera did not see the point."""
+        frames = uv.reshape(-1, *uv.shape[-3:])
+        complete = np.all(np.isfinite(frames), axis=(2, 3))  # (F, C)
+        counts = complete.astype(np.int64)
+        self.placements += counts.sum(axis=0)
+        self.shared += counts.T @ counts
+        for c in np.flatnonzero(complete.any(axis=0)):
+            seen = frames[complete[:, c], c]  # (f, 3, 2)
             width, height = self.rig.cameras[c].image_size
-            cells = np.clip((uv[c] / [width, height] * GRID).astype(np.int64), 0, GRID - 1)
+            cells = np.clip((seen / [width, height] * GRID).astype(np.int64), 0, GRID - 1).reshape(-1, 2)
             np.add.at(self.cells[c], (cells[:, 1], cells[:, 0]), 1)
-            du, dv = uv[c, -1] - uv[c, 0]
-            self.directions[c, int(np.arctan2(dv, du) % np.pi / np.pi * DIRECTIONS) % DIRECTIONS] += 1
-            octave = np.log2(max(float(np.hypot(du, dv)), 1.0)) / LENGTH_OCTAVES
-            self.lengths[c, min(int(octave * LENGTH_BINS), LENGTH_BINS - 1)] += 1
+            du, dv = (seen[:, -1] - seen[:, 0]).T
+            direction = (np.arctan2(dv, du) % np.pi / np.pi * DIRECTIONS).astype(np.int64) % DIRECTIONS
+            self.directions[c] += np.bincount(direction, minlength=DIRECTIONS)
+            octave = np.log2(np.maximum(np.hypot(du, dv), 1.0)) / LENGTH_OCTAVES
+            length = np.minimum((octave * LENGTH_BINS).astype(np.int64), LENGTH_BINS - 1)
+            self.lengths[c] += np.bincount(length, minlength=LENGTH_BINS)
             table = self._bearings[c]
             if table is not None:
-                theta = np.arccos(np.clip(table(uv[c])[:, 2], -1, 1))
+                theta = np.arccos(np.clip(table(seen.reshape(-1, 2))[:, 2], -1, 1))
                 self.max_theta[c] = max(self.max_theta[c], float(theta.max()))
 
     def _depth_ratio(self, c: int) -> float:

@@ -63,8 +63,7 @@ def _write_report(rig: RigSpec, observations: WandObservations, result_path: Pat
 def coverage_of(rig: RigSpec, observations: WandObservations, thresholds: CoverageThresholds) -> CoverageStatus:
     """Coverage of a set of observations (what the collector reports while waving)."""
     tracker = CoverageTracker(rig, thresholds)
-    for uv in observations.uv:
-        tracker.add(uv)
+    tracker.add(observations.uv)
     return tracker.status()
 
 

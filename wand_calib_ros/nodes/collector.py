@@ -148,8 +148,7 @@ class CollectorNode(Node):
         if self.buffer.repaired is not None:
             self.get_logger().warning(self.buffer.repaired.describe(self.buffer.path))
         self.coverage = CoverageTracker(self.rig, coverage_thresholds(values))
-        for uv in self.buffer.uv:
-            self.coverage.add(uv)
+        self.coverage.add(self.buffer.observations().uv)  # the frames a restart found in the buffer file
         hold_ns = int(values["label_hold_ms"] * 1e6)
         self.sync = FrameSynchroniser(
             self.rig.camera_names,
