@@ -163,10 +163,11 @@ def refine_calibration(
             np.concatenate([result.state.wand_direction, admitted_state.wand_direction]),
             result.state.timing,
         )
-        # 4. The final adjustment of them all, the model order decided again on all on its way.
-        order = OrderOnAllPlacements(rig, fixed, reference, decided_on)
+        # 4. The final adjustment of them all; with more than the coarse ones, the model order decided
+        # again on all of them on its way.
+        order = OrderOnAllPlacements(rig, fixed, reference, decided_on) if used.size > decided_on else None
         result, clocks = _final_adjustment(rig, uv, uv_used, used, state, clocks, free, order)
-        fixed = order.decision or fixed
+        fixed = order.decision if order is not None and order.decision is not None else fixed
     check_geometry(result.state.points(wand))
     check_camera_views(rig, uv, uv_used)
     check_uncertainty(rig, result)
@@ -278,10 +279,10 @@ def _final_adjustment(
     state: BundleState,
     clocks: ClockModel,
     free: NDArray[np.bool_],
-    order: OrderOnAllPlacements,
+    order: OrderOnAllPlacements | None,
 ) -> tuple[BundleResult, ClockModel]:
     """The final adjustment of the placements ``used`` from ``state``, the model order decided again on
-    its first linearisation (``order``); with timing, the wand's motion is refitted first to where the
+    its first linearisation (``order``, if any); with timing, the wand's motion is refitted first to where the
     adjustments put them, and again while an adjustment moves a timing parameter by more than
     MOTION_SETTLED of its standard deviation (at most MOTION_ROUNDS rounds)."""
     for _ in range(MOTION_ROUNDS if clocks.modelled else 1):
@@ -295,8 +296,10 @@ def _final_adjustment(
             points[used] = state.points(rig.wand)
             clocks = refresh_motion(clocks, points)
         problem = BundleProblem.from_dense(rig.wand, uv_used, clocks.placements(used))
-        result = bundle_adjust(state, problem, free, choose=order if order.decision is None else None)
-        if order.decision is not None:
+        result = bundle_adjust(
+            state, problem, free, choose=order if order is not None and order.decision is None else None
+        )
+        if order is not None and order.decision is not None:
             free = free_mask(len(rig.cameras), order.reference, order.decision)
         if not clocks.modelled:
             break
