@@ -648,7 +648,8 @@ def bundle_adjust(
     if choose is not None and cameras:
         gauss_newton = undamped(normal)
         s, rhs, v_inv = reduced_system(gauss_newton, layout)
-        choice = choose(state, CameraSystem(columns, s, rhs), _sigma(res, loss_scale, dof))
+        start = CameraSystem(columns, s, rhs)
+        choice = choose(state, start, _sigma(res, loss_scale, dof))
         if choice is not None:
             free, moves = choice
             if not np.array_equal(timing_columns(free), timing):
@@ -656,9 +657,12 @@ def bundle_adjust(
             free_flat = free[:, columns].reshape(-1)
             p = int(free_flat.sum()) + N_PLACEMENT_PARAMS * problem.n_placements
             dof = max(m - p, 1)
-            delta_c = CameraSystem(columns, s, rhs).step(free, moves)[:, columns]
-            delta_p = back_substitute(delta_c, v_inv, gauss_newton, layout)
-            state = _apply_step(state, delta_c, delta_p, timing)
+            delta_c = start.step(free, moves)[:, columns]
+            try:
+                state = _apply_step(state, delta_c, back_substitute(delta_c, v_inv, gauss_newton, layout), timing)
+            except ModelError:  # the linearised solution leaves the camera model: only the fixed ones move
+                moved = np.where(free[:, columns], 0.0, moves[:, columns])
+                state = _apply_step(state, moved, np.zeros((problem.n_placements, N_PLACEMENT_PARAMS)), timing)
             del gauss_newton, normal  # before the next ones are summed: the peak memory holds one W
             res, normal = _evaluate(state, problem, layout, timing, loss_scale)
             cost = robust_cost(res, loss_scale) if np.all(np.isfinite(res)) else np.inf
