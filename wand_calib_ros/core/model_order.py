@@ -179,7 +179,8 @@ class OrderOnAllPlacements:
 
 
 def _orders_text(rig: RigSpec, fixed: FixedParameters) -> str:
-    """The radial terms fixed at zero, cameras grouped: 'k4, k5 fixed at 0 (14 cameras); k5 (cam01, cam04)'."""
+    """The radial terms fixed at zero, cameras grouped (``radial terms fixed at 0: k4, k5 (14 cameras); k5
+    (cam01, cam04)``)."""
     groups: dict[tuple[int, ...], list[str]] = {}
     for spec, order, held in zip(rig.cameras, fixed.per_camera, fixed.held, strict=True):
         if not held:
