@@ -12,7 +12,7 @@ from rigs import scenario_data, timed_take
 from wand_calib_ros.core.camera_model import to_opencv_fisheye
 from wand_calib_ros.core.pipeline import calibrate
 from wand_calib_ros.io.errors import FormatError
-from wand_calib_ros.io.result_yaml import read_result, write_calibration, write_result
+from wand_calib_ros.io.result_yaml import read_result, write_calibration, write_result, yaml_text
 from wand_calib_ros.sim.clocks import TakeOptions
 
 
@@ -89,3 +89,17 @@ def test_estimated_time_offsets_are_written_in_seconds_with_their_std(tmp_path: 
     _, cameras = read_result(tmp_path / "result.yaml")
     assert cameras["cam1"].time_offset == document["cameras"]["cam1"]["time_offset_s"]
     assert cameras["cam1"].readout == document["cameras"]["cam1"]["rolling_shutter_readout_s"]
+
+
+def test_files_are_the_text_pyyaml_itself_writes(tmp_path: Path, result) -> None:  # type: ignore[no-untyped-def]
+    # libyaml's emitter, where PyYAML has it, writes the same text as PyYAML's own (long warnings,
+    # special floats and nested lists included).
+    paths = write_calibration(result, tmp_path / "result.yaml", tmp_path / "info")
+    documents = [yaml.safe_load(path.read_text()) for path in paths]
+    documents[0]["warnings"] = ["cam1: a warning long enough to wrap " * 6 + "(a: b # c)", "multi\nline", ""]
+    documents[0]["special"] = [float("nan"), float("inf"), -0.0, 1e-300, None, True]
+    for document in documents:
+        assert yaml_text(document) == yaml.safe_dump(document, sort_keys=False, default_flow_style=None, width=120)
+    assert paths[0].read_text() == yaml.safe_dump(
+        yaml.safe_load(paths[0].read_text()), sort_keys=False, default_flow_style=None, width=120
+    )
