@@ -5,7 +5,7 @@ of the placements, then the model order again on all of them at the final adjust
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -135,14 +135,17 @@ class OrderOnAllPlacements:
     Attributes:
         rig, fixed, reference: the rig, the coarse decision, the reference camera.
         coarse_placements: how many placements the coarse decision was made on.
-        decision: set once called: the order on all placements (``fixed`` when it stands).
+        decision: the order: ``fixed`` until a call changes it.
     """
 
     rig: RigSpec
     fixed: FixedParameters
     reference: int
     coarse_placements: int
-    decision: FixedParameters | None = None
+    decision: FixedParameters = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.decision = self.fixed
 
     def __call__(
         self, state: BundleState, system: CameraSystem, sigma: float
@@ -168,7 +171,6 @@ class OrderOnAllPlacements:
             if set(decided) != set(per_camera[c]):  # (the order the tests fix them in aside)
                 per_camera[c] = decided
         if per_camera == list(fixed.per_camera):
-            self.decision = fixed
             return None
         self.decision = FixedParameters(tuple(per_camera), fixed.timing, fixed.held)
         log.info("model order on all %d placements: %s", n_placements, _orders_text(self.rig, self.decision))

@@ -167,7 +167,7 @@ def refine_calibration(
         # again on all of them on its way.
         order = OrderOnAllPlacements(rig, fixed, reference, decided_on) if used.size > decided_on else None
         result, clocks = _final_adjustment(rig, uv, uv_used, used, state, clocks, free, order)
-        fixed = order.decision if order is not None and order.decision is not None else fixed
+        fixed = order.decision if order is not None else fixed
     check_geometry(result.state.points(wand))
     check_camera_views(rig, uv, uv_used)
     check_uncertainty(rig, result)
@@ -285,6 +285,7 @@ def _final_adjustment(
     its first linearisation (``order``, if any); with timing, the wand's motion is refitted first to where the
     adjustments put them, and again while an adjustment moves a timing parameter by more than
     MOTION_SETTLED of its standard deviation (at most MOTION_ROUNDS rounds)."""
+    choose = order  # on the first round's first linearisation; later rounds keep what it decided
     for _ in range(MOTION_ROUNDS if clocks.modelled else 1):
         if clocks.modelled:
             points = np.full((len(uv), uv.shape[2], 3), np.nan)
@@ -296,11 +297,9 @@ def _final_adjustment(
             points[used] = state.points(rig.wand)
             clocks = refresh_motion(clocks, points)
         problem = BundleProblem.from_dense(rig.wand, uv_used, clocks.placements(used))
-        result = bundle_adjust(
-            state, problem, free, choose=order if order is not None and order.decision is None else None
-        )
-        if order is not None and order.decision is not None:
-            free = free_mask(len(rig.cameras), order.reference, order.decision)
+        result = bundle_adjust(state, problem, free, choose=choose)
+        if choose is not None:
+            free, choose = free_mask(len(rig.cameras), choose.reference, choose.decision), None
         if not clocks.modelled:
             break
         std = result.camera_std[:, N_GEOMETRIC:]
