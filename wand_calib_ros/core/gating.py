@@ -111,15 +111,19 @@ def subset_state(state: BundleState, mask: NDArray[np.bool_]) -> BundleState:
 
 
 def robust_adjustment(
-    state: BundleState, problem: BundleProblem, free: NDArray[np.bool_]
+    state: BundleState, problem: BundleProblem, free: NDArray[np.bool_], *, scale_from: BundleState | None = None
 ) -> tuple[BundleResult, float]:
     """Huber adjustment with the loss scale from the initial state's robust noise estimate.
+
+    Args:
+        scale_from: the state whose residuals set the loss scale instead of ``state``'s (a warm
+            start that solves the same robust problem as an adjustment from ``scale_from``).
 
     Returns:
         The result and the robust estimate of the pixel noise: the residuals' robust
         scale corrected for the degrees of freedom the fit absorbs (sqrt(m / (m - p))).
     """
-    sigma = robust_sigma(residuals(state, problem))
+    sigma = robust_sigma(residuals(state if scale_from is None else scale_from, problem))
     # Only outliers are decided here: a loose tolerance is enough, the least-squares passes finish the job.
     result = bundle_adjust(
         state, problem, free, loss_scale=HUBER_SIGMAS * sigma, tolerance=1e-5, settled=DECIDING_SETTLED

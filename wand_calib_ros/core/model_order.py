@@ -85,10 +85,13 @@ def adjust_with_model_selection(
 
     Per camera the highest free coefficient among k3..k5 is fixed to zero while it
     is insignificant (|k| < SIGNIFICANCE sigma) or makes r(theta) turn over inside
-    the image. The decisions are made on the linearised problem: fixing k_h = 0
-    moves the other parameters to their conditional mean
+    the image. The first decision is made on the adjustment's first linearisation
+    (:class:`OrderOnAllPlacements` at SIGNIFICANCE: the full model's linearised estimate from
+    the low-order start), so the adjustment runs on the order it chose instead of converging
+    the full model first. At its solution the same tests run again on the linearised problem:
+    fixing k_h = 0 moves the other parameters to their conditional mean
     ``x - cov[:, h] / cov[h, h] * x[h]`` and shrinks the covariance accordingly, so
-    one re-adjustment (from that better start) usually settles the model. Time
+    one re-adjustment (from that better start) settles a term fixed only then. Time
     offsets and readout times under ``auto`` are kept only when significant
     (:func:`wand_calib_ros.core.timing.reduce_timing`).
 
@@ -98,9 +101,12 @@ def adjust_with_model_selection(
     problem = BundleProblem.from_dense(rig.wand, uv, clocks.placements(used))
     fixed = FixedParameters(tuple(() for _ in rig.cameras), clocks.free.copy(), held_intrinsics(rig))
     start = initial
+    choose: OrderOnAllPlacements | None = OrderOnAllPlacements(rig, fixed, reference, len(uv))
     while True:
-        result = bundle_adjust(start, problem, free_mask(len(rig.cameras), reference, fixed))
+        result = bundle_adjust(start, problem, free_mask(len(rig.cameras), reference, fixed), choose=choose)
         log.info("bundle adjustment: %d iterations, sigma %.3f px", result.iterations, result.sigma)
+        if choose is not None:  # the order chosen at the start is the one this adjustment ran with
+            fixed, choose = choose.decision, None
         per_camera = list(fixed.per_camera)
         models = list(result.state.models)
         for c, spec in enumerate(rig.cameras):
@@ -120,21 +126,25 @@ def adjust_with_model_selection(
 
 @dataclass(eq=False)
 class OrderOnAllPlacements:
-    """The radial model order decided again on all placements, at the start of the final adjustment
-    (a :data:`~wand_calib_ros.core.bundle_adjustment.ChooseFree` for :func:`bundle_adjust`, on its
-    first linearisation), keeping the effect size the coarse decision demanded.
+    """The radial model order decided on all of an adjustment's placements at its start (a
+    :data:`~wand_calib_ros.core.bundle_adjustment.ChooseFree` for :func:`bundle_adjust`, on its
+    first linearisation), with the effect size of SIGNIFICANCE on ``coarse_placements`` placements.
 
-    :func:`adjust_with_model_selection` decides on a coarse subset, where a term near the threshold is
-    kept or dropped by the luck of the subset drawn: which cameras keep k4 (or lose k3) changes from
-    one subset to the next. Here k3..k5 are released on the normal equations of all placements
-    (:meth:`CameraSystem.step`: the linearised estimate of the full model) and the same sequential
-    tests keep a term that would be SIGNIFICANCE sigma on ``coarse_placements`` placements:
-    ``|k| / std(k) >= SIGNIFICANCE * sqrt(P / coarse_placements)`` on all P. The decision is the coarse
-    rule's on average, without the subset's sampling noise.
+    k3..k5 are released on the normal equations (:meth:`CameraSystem.step`: the linearised estimate
+    of the full model) and the sequential tests of :func:`reduce_radial` keep a term from
+    ``|k| / std(k) >= SIGNIFICANCE * sqrt(P / coarse_placements)`` on, P the adjustment's placements.
+    Two uses:
+
+    - :func:`adjust_with_model_selection`'s first adjustment (``coarse_placements`` = P, nothing
+      fixed yet): from the low-order start it runs on the order chosen here, not the full model.
+    - The final adjustment, on more placements than that coarse subset, where a term near the
+      threshold was kept or dropped by the luck of the subset drawn (which cameras keep k4, or
+      lose k3, changes from one subset to the next). Its decision is the coarse rule's on
+      average, without the subset's sampling noise.
 
     Attributes:
-        rig, fixed, reference: the rig, the coarse decision, the reference camera.
-        coarse_placements: how many placements the coarse decision was made on.
+        rig, fixed, reference: the rig, the order so far, the reference camera.
+        coarse_placements: the placements the effect size refers to (how many the coarse decision was made on).
         decision: the order: ``fixed`` until a call changes it.
     """
 

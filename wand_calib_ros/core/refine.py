@@ -229,7 +229,8 @@ def _robust_pass(
     synchronised cameras, then adjustments from its solution with the timing parameters free tell
     whether the data hold readout times and offsets (:func:`reduce_timing`, finer term first).
     Without them the refinement goes on exactly as for synchronised cameras; with them the pass is
-    redone with the timing (outliers are decided with it) on the placements whose motion is known.
+    redone with the timing (outliers are decided with it) on the placements whose motion is known:
+    the robust problem of a pass from the start, started from the test's solution.
 
     Args:
         uv: (P, C, 3, 2) every placement of the timeline; ``points`` (P, 3, 3) their starting triangulation.
@@ -244,6 +245,7 @@ def _robust_pass(
             models, poses, points[index, 0], wand_directions(points[index, 0], points[index, -1]), timing
         )
 
+    tested: BundleState | None = None  # the timing test's solution, if there was one
     if clocks.tentative:
         robust, sigma = robust_adjustment(start(keep, None), BundleProblem.from_dense(wand, uv[keep]), free)
         problem = BundleProblem.from_dense(wand, uv[keep], clocks.placements(keep))
@@ -253,21 +255,26 @@ def _robust_pass(
             test_free[:, N_GEOMETRIC:] = timing
             fit = bundle_adjust(tested, problem, test_free, tolerance=1e-5, settled=DECIDING_SETTLED)
             kept = reduce_timing(clocks, fit, timing)
-            if np.array_equal(kept, timing):
-                break
             values = fit.state.camera_timing.copy()
             values[timing & ~kept] = clocks.start[timing & ~kept]
             tested, timing = replace(fit.state, timing=values), kept
+            if np.array_equal(kept, test_free[:, N_GEOMETRIC:]):
+                break
         if not timing.any():
             log.info("the views are synchronised: no time offsets or readout times")
             note = "time offsets and readout times tested: not significant (synchronised global shutters)"
             return robust, sigma, clocks.without_timing(note), keep
         clocks = replace(clocks, free=timing, tentative=False)
-    keep = keep[clocks.placeable(len(uv))[keep]]
+    placeable = clocks.placeable(len(uv))[keep]
+    keep = keep[placeable]
     with_timing = free.copy()
     with_timing[:, N_GEOMETRIC:] = clocks.free
     problem = BundleProblem.from_dense(wand, uv[keep], clocks.placements(keep))
-    robust, sigma = robust_adjustment(start(keep, clocks.start), problem, with_timing)
+    if tested is None:
+        robust, sigma = robust_adjustment(start(keep, clocks.start), problem, with_timing)
+    else:  # the robust problem of a start from scratch, started from the test's solution
+        warm = subset_state(tested, placeable)
+        robust, sigma = robust_adjustment(warm, problem, with_timing, scale_from=start(keep, clocks.start))
     return robust, sigma, clocks, keep
 
 
