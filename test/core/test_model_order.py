@@ -63,3 +63,19 @@ def test_a_term_dropped_by_the_coarse_draw_comes_back_in_the_final_adjustment() 
     assert result.iterations <= 2  # from the new order's linearised solution
     again = OrderOnAllPlacements(rig, order.decision, 0, PLACEMENTS)
     assert result.system is not None and again(result.state, result.system, result.sigma) is None  # it stands
+
+
+def test_a_conditional_shift_that_leaves_the_camera_model_does_not_fail_the_tests() -> None:
+    # k5 (0.5 sigma) is dropped and, correlated with k1 (0.9), shifts it by -2.25 k1: the tests of k4 and
+    # k3 go on (judging the curve with k5 at zero) and the camera restarts from its terms zeroed. Before,
+    # a ring6 take (free-running, seed 8) failed its calibration with "k1 and m must be positive".
+    scenario, _, _ = scenario_data("paper", 0, n_placements=20)
+    spec, model = scenario.rig.cameras[0], scenario.cameras[0].model
+    vector = model.intrinsic_vector()
+    vector[2:5] = (0.0, 0.0, 5.0)
+    k1_std = 5.0 * vector[0]
+    covariance = np.diag([k1_std**2, 1.0, 1e-6, 1e-6, 100.0, 1.0, 1.0])
+    covariance[0, 4] = covariance[4, 0] = 0.9 * k1_std * 10.0
+    fixed, reduced = reduce_radial(spec, model.with_intrinsic_vector(vector), covariance, ())
+    assert sorted(fixed) == [2, 3, 4]  # k3, k4 (0 sigma) tested after k5, not failed
+    assert reduced.k[0] == vector[0] and reduced.k[1] == vector[1] and np.all(reduced.k[2:] == 0.0)

@@ -230,7 +230,14 @@ def reduce_radial(
             continue
         variance = covariance[highest, highest]
         z = abs(estimate[highest]) / np.sqrt(variance) if variance > 0 else 0.0
-        current = model.with_intrinsic_vector(estimate)
+        # The curve the test judges: where the conditional shifts so far put it, or, should they leave
+        # the camera model (k1 <= 0), the estimate with the fixed terms at zero.
+        try:
+            current = model.with_intrinsic_vector(estimate)
+        except ModelError:
+            zeroed = model.intrinsic_vector()
+            zeroed[fixed_now] = 0.0
+            current = model.with_intrinsic_vector(zeroed)
         if turns_over_in_image(current, spec.max_view_angle):
             log.debug("%s: r(theta) turns over inside the image with k%d free: fixed to 0", spec.name, highest + 1)
         elif z < significance:
