@@ -22,7 +22,6 @@ from numpy.typing import NDArray
 
 from wand_calib_ros.core.assembly import assemble
 from wand_calib_ros.core.bundle_adjustment import (
-    DECIDING_SETTLED,
     N_GEOMETRIC,
     BundleProblem,
     BundleResult,
@@ -226,11 +225,11 @@ def _robust_pass(
     """The robust adjustment of the placements ``keep``, with the timing parameters the clock model estimates.
 
     A tentative model (``auto`` on simultaneous views) is tested first: the pass runs as for
-    synchronised cameras, then adjustments from its solution with the timing parameters free tell
-    whether the data hold readout times and offsets (:func:`reduce_timing`, finer term first).
-    Without them the refinement goes on exactly as for synchronised cameras; with them the pass is
-    redone with the timing (outliers are decided with it) on the placements whose motion is known:
-    the robust problem of a pass from the start, started from the test's solution.
+    synchronised cameras, then robust adjustments from its solution with the timing parameters free
+    tell whether the data hold readout times and offsets (:func:`_test_timing`). Without them the
+    refinement goes on exactly as for synchronised cameras; with them the test's last adjustment is
+    the pass (outliers are decided with the timing), redone from its solution on the placements whose
+    motion is known should that leave some out.
 
     Args:
         uv: (P, C, 3, 2) every placement of the timeline; ``points`` (P, 3, 3) their starting triangulation.
@@ -245,37 +244,54 @@ def _robust_pass(
             models, poses, points[index, 0], wand_directions(points[index, 0], points[index, -1]), timing
         )
 
-    tested: BundleState | None = None  # the timing test's solution, if there was one
+    warm: BundleState | None = None  # the timing test's solution, on the placements it can place
     if clocks.tentative:
         robust, sigma = robust_adjustment(start(keep, None), BundleProblem.from_dense(wand, uv[keep]), free)
         problem = BundleProblem.from_dense(wand, uv[keep], clocks.placements(keep))
-        timing, tested = clocks.free, replace(robust.state, timing=clocks.start)
-        while timing.any():
-            test_free = free.copy()
-            test_free[:, N_GEOMETRIC:] = timing
-            fit = bundle_adjust(tested, problem, test_free, tolerance=1e-5, settled=DECIDING_SETTLED)
-            kept = reduce_timing(clocks, fit, timing)
-            values = fit.state.camera_timing.copy()
-            values[timing & ~kept] = clocks.start[timing & ~kept]
-            tested, timing = replace(fit.state, timing=values), kept
-            if np.array_equal(kept, test_free[:, N_GEOMETRIC:]):
-                break
-        if not timing.any():
+        test = _test_timing(problem, clocks, robust.state, free, start(keep, clocks.start))
+        if test is None:
             log.info("the views are synchronised: no time offsets or readout times")
             note = "time offsets and readout times tested: not significant (synchronised global shutters)"
             return robust, sigma, clocks.without_timing(note), keep
+        fit, fit_sigma, timing = test
         clocks = replace(clocks, free=timing, tentative=False)
-    placeable = clocks.placeable(len(uv))[keep]
-    keep = keep[placeable]
+        placeable = clocks.placeable(len(uv))[keep]
+        if placeable.all():  # the test's last adjustment is the pass with the timing it kept
+            return fit, fit_sigma, clocks, keep
+        warm = subset_state(fit.state, placeable)
+    keep = keep[clocks.placeable(len(uv))[keep]]
     with_timing = free.copy()
     with_timing[:, N_GEOMETRIC:] = clocks.free
     problem = BundleProblem.from_dense(wand, uv[keep], clocks.placements(keep))
-    if tested is None:
+    if warm is None:
         robust, sigma = robust_adjustment(start(keep, clocks.start), problem, with_timing)
-    else:  # the robust problem of a start from scratch, started from the test's solution
-        warm = subset_state(tested, placeable)
+    else:  # the robust problem of a pass from the start, started from the test's solution
         robust, sigma = robust_adjustment(warm, problem, with_timing, scale_from=start(keep, clocks.start))
     return robust, sigma, clocks, keep
+
+
+def _test_timing(
+    problem: BundleProblem, clocks: ClockModel, synchronised: BundleState, free: NDArray[np.bool_], scale: BundleState
+) -> tuple[BundleResult, float, NDArray[np.bool_]] | None:
+    """The tentative timing parameters tested: robust adjustments from the synchronised pass's solution
+    with them free (the Huber scale ``scale``'s, that of a pass from the start with the timing), dropping
+    what :func:`reduce_timing` finds insignificant (finer term first) until what is left stands.
+
+    Returns:
+        The last adjustment, its robust pixel noise and the (C, 2) timing parameters kept; None: none.
+    """
+    timing, tested = clocks.free, replace(synchronised, timing=clocks.start)
+    while timing.any():
+        test_free = free.copy()
+        test_free[:, N_GEOMETRIC:] = timing
+        fit, sigma = robust_adjustment(tested, problem, test_free, scale_from=scale)
+        kept = reduce_timing(clocks, fit, timing)
+        if np.array_equal(kept, timing):
+            return fit, sigma, timing
+        values = fit.state.camera_timing.copy()
+        values[timing & ~kept] = clocks.start[timing & ~kept]
+        tested, timing = replace(fit.state, timing=values), kept
+    return None
 
 
 def _final_adjustment(
