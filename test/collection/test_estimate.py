@@ -84,17 +84,23 @@ def test_rounds_wait_for_enough_frames_and_keep_to_the_placement_bound() -> None
 
 
 def test_the_worker_process_computes_rounds_and_goes_away_on_close() -> None:
-    scenario, observations = _take("paper3", 5, 20.0)
+    scenario, whole = _take("paper3", 5, 20.0)
+    buffers = [whole.select_frames(np.arange(whole.frames.size // 2)), whole]  # the buffer grows between rounds
     estimates = RunningEstimate(scenario.rig, CalibrationOptions(), period_s=0.5)
     try:
         arrived = []
         deadline = time.monotonic() + 60
         while len(arrived) < 2 and time.monotonic() < deadline:
-            new = estimates.step(time.monotonic(), lambda: observations)
+            new = estimates.step(time.monotonic(), lambda: buffers[len(arrived)])
             if new is not None:
                 arrived.append(new)
             time.sleep(0.05)
         assert len(arrived) == 2, estimates.failure
+        assert [a.round.frames for a in arrived] == [b.frames.size for b in buffers]
+        settled = time.monotonic() + 1.5  # three periods on a buffer that no longer grows: no round
+        while time.monotonic() < settled:
+            assert estimates.step(time.monotonic(), lambda: whole) is None and not estimates._busy
+            time.sleep(0.05)
         first, second = arrived
         assert first.round.result is not None and second.round.result is not None
         assert first.round.scene is not None and first.round.scene.frustums.shape == (3, 5, 3)

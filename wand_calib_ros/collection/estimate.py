@@ -5,7 +5,7 @@ warm-started from the previous round's cameras (its pairwise initialisation skip
 process of its own at the lowest CPU priority (:mod:`~wand_calib_ros.collection.estimate_worker`): the
 node's detection never waits for it, not even for the interpreter's lock. The
 first round starts once the buffer holds :data:`MIN_FRAMES` frames showing the whole wand to two
-cameras; a round that fails (the rig not connected yet, too few views) says why and the next one
+cameras, and none starts on a buffer that has not grown since the newest result; a round that fails (the rig not connected yet, too few views) says why and the next one
 starts cold. Each finished round is an :class:`Estimate`: the result with its quality verdict, the
 scene for RViz, and per camera whether its uncertainties still fall.
 """
@@ -186,7 +186,10 @@ class RunningEstimate:
         if not self._busy and now - self._started >= self.period_s:
             observations = snapshot()
             frames = int(observations.frames.size)
-            chosen = round_input(self.rig, observations, self.max_placements)
+            # A buffer that has not grown since the newest result (the wand at rest, waving over, a
+            # /calibrate running) has nothing new to estimate: no round takes the CPU from the node.
+            settled = self.latest is not None and self.failure is None and self.latest.round.frames == frames
+            chosen = None if settled else round_input(self.rig, observations, self.max_placements)
             if chosen is not None:
                 warm = self.latest.round.result if self.latest is not None and self.failure is None else None
                 options = replace(self.options, start=warm)
