@@ -5,9 +5,10 @@ warm-started from the previous round's cameras (its pairwise initialisation skip
 process of its own at the lowest CPU priority (:mod:`~wand_calib_ros.collection.estimate_worker`): the
 node's detection never waits for it, not even for the interpreter's lock. The
 first round starts once the buffer holds :data:`MIN_FRAMES` frames showing the whole wand to two
-cameras, and none starts on a buffer that has not grown since the newest result; a round that fails (the rig not connected yet, too few views) says why and the next one
-starts cold. Each finished round is an :class:`Estimate`: the result with its quality verdict, the
-scene for RViz, and per camera whether its uncertainties still fall.
+cameras, and none starts on a buffer that has not grown since the newest result; a round that fails
+(the rig not connected yet, too few views) says why and the next one starts cold. Each finished
+round is an :class:`Estimate`: the result with its quality verdict, the scene for RViz, and per
+camera whether its uncertainties still fall.
 """
 
 from __future__ import annotations

@@ -33,7 +33,7 @@ from wand_calib_ros.core.timing import frame_period
 FloatArray = NDArray[np.float64]
 
 #: Stamps a camera's period is learned from (the median of their spacings).
-RATE_WINDOW = 15
+RATE_WINDOW = 30
 #: Images per camera before its rate counts for choosing the anchor.
 WARMUP_IMAGES = 4
 #: An image of another camera joins a frame's anchor up to this fraction of the anchor period away
@@ -147,7 +147,7 @@ class FrameSynchroniser:
         if (
             self._emitted_until is not None
             and self.anchor is not None
-            and stamp_ns < self._emitted_until - self._tolerance()
+            and stamp_ns < self._emitted_until - self._tolerance(c)
         ):
             self.stats.late[camera] += 1  # the frames it could have joined are gone
             return []
@@ -167,8 +167,15 @@ class FrameSynchroniser:
         period = self._streams[self.anchor].period_ns
         return period if period is not None else 2.0 * self.max_delay_ns
 
-    def _tolerance(self) -> float:
-        return float(self.tolerance_ns) if self.tolerance_ns > 0 else HALF * self._anchor_period()
+    def _tolerance(self, camera: int) -> float:
+        """How far from its frame's anchor stamp an image of ``camera`` may lie: the given tolerance, else
+        half the anchor's period or half the camera's own if that is shorter. Its nearest image is never
+        further than that, and a camera that lost most of its images, the anchor too, looks slower than it
+        is: half of what it seems to take would let the neighbouring frame's image in."""
+        if self.tolerance_ns > 0:
+            return float(self.tolerance_ns)
+        own = self._streams[camera].period_ns
+        return HALF * (self._anchor_period() if own is None else min(own, self._anchor_period()))
 
     def _choose_anchor(self, *, force: bool = False) -> None:
         ready = [s.count >= WARMUP_IMAGES for s in self._streams]
@@ -247,11 +254,11 @@ class FrameSynchroniser:
     def _assign(self, final: bool) -> list[SyncedFrame]:
         """Give each pending image of the other cameras to its nearest frame; returns the images left alone."""
         singles: list[SyncedFrame] = []
-        tolerance = self._tolerance()
         half = HALF * self._anchor_period()
         for c, stream in enumerate(self._streams):
             if c == self.anchor:
                 continue
+            tolerance = self._tolerance(c)
             while stream.pending:
                 stamp, points = stream.pending[0]
                 slot = self._nearest_slot(stamp)
@@ -300,8 +307,8 @@ class FrameSynchroniser:
         assert self._newest is not None
         if self._newest - slot.stamp_ns > self.max_delay_ns:
             return True
-        tolerance = self._tolerance()
         for c, stream in enumerate(self._streams):
+            tolerance = self._tolerance(c)
             if c == self.anchor or (stream.newest is not None and stream.newest >= slot.stamp_ns + tolerance):
                 continue
             if stream.pending and stream.pending[0][0] <= slot.stamp_ns + tolerance:

@@ -181,7 +181,7 @@ def timing_summary(rig: RigSpec, clocks: ClockModel, fixed: FixedParameters) -> 
         line.unit,
         "estimated" if fixed.timing[:, 0].any() else "fixed",
         {spec.name: "estimated" if fixed.timing[c, 1] else "fixed" for c, spec in enumerate(rig.cameras)},
-        line.period,
+        line.frame_period,
         clocks.notes,
     )
 

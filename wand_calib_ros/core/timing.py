@@ -54,6 +54,12 @@ END_WINDOW = (4, 2)
 #: A recording is a continuous motion when the local fits leave less than this fraction of the points'
 #: spread within each fit (independent placements leave about all of it).
 CONTINUITY_FRACTION = 0.3
+#: frame_period: a period is at least this fraction of the spacings' lower quartile (most images lost), ...
+MAX_MULTIPLE = 5
+#: ... this fraction of the spacings (at least two) are single periods, ...
+SINGLE_SUPPORT = 0.05
+#: ... and each spacing up to the quartile is a whole number n of periods within this fraction of n periods.
+MULTIPLE_TOLERANCE = 0.1
 #: ``auto`` keeps the time offsets (the readout times) when they differ from zero at this level
 #: (chi-square test over the cameras).
 SIGNIFICANCE_LEVEL = 0.99
@@ -84,10 +90,17 @@ class Timeline:
 
     @property
     def period(self) -> float:
-        """The spacing of consecutive frames (median over placements), in the unit."""
+        """The spacing of consecutive placements (median), in the unit: the time scale of the motion fits,
+        longer than a frame where frames were lost or showed no wand."""
         steps = np.diff(np.sort(self.placement_times))
         steps = steps[steps > 0]
         return float(np.median(steps)) if steps.size else 1.0
+
+    @property
+    def frame_period(self) -> float:
+        """The rig's frame period in the unit: the slowest camera's (frames come at the anchor's rate),
+        or :attr:`period` where no camera's is known."""
+        return float(np.nanmax(self.periods)) if np.any(np.isfinite(self.periods)) else self.period
 
     @property
     def simultaneous(self) -> bool:
@@ -131,13 +144,26 @@ def timeline(observations: WandObservations) -> Timeline:
 def frame_period(stamps: FloatArray) -> float:
     """A camera's frame period from its stamps (any unit; NaN with fewer than three).
 
-    The lower quartile of the spacings of consecutive stamps: images that were dropped or
-    show no wand make some spacings two or more periods long, and a quarter of single
-    spacings is enough.
+    Images that were dropped or show no wand make some spacings of consecutive stamps two or
+    more periods long, bursts of a driver a few much shorter. The period is the shortest
+    spacing from a MAX_MULTIPLE-th of their lower quartile on, refined as the median of every
+    spacing divided by the whole number of it that spacing is, when each spacing up to the
+    quartile is such a whole number and SINGLE_SUPPORT of them (at least two) are one; else the
+    lower quartile itself.
     """
     steps = np.diff(np.sort(np.asarray(stamps, dtype=np.float64)))
     steps = steps[steps > 0]
-    return float(np.percentile(steps, 25)) if steps.size >= 2 else float("nan")
+    if steps.size < 2:
+        return float("nan")
+    quartile = float(np.percentile(steps, 25))
+    shortest = float(np.min(steps[steps >= quartile / MAX_MULTIPLE]))
+    multiples = np.round(steps / shortest)
+    whole = (multiples >= 1) & (np.abs(steps - multiples * shortest) < MULTIPLE_TOLERANCE * multiples * shortest)
+    if np.all(whole[(steps >= shortest) & (steps <= quartile)]) and np.count_nonzero(whole & (multiples == 1)) >= max(
+        2, SINGLE_SUPPORT * steps.size
+    ):
+        return float(np.median(steps[whole] / multiples[whole]))
+    return quartile
 
 
 def rate_warnings(observations: WandObservations, line: Timeline) -> list[str]:
