@@ -85,11 +85,13 @@ class _Stream:
     newest: int | None = None
     count: int = 0
     emitted: int | None = None  # the stamp of its newest image emitted in a frame
+    period_ns: float | None = None  # the frame period of ``recent`` (None: fewer than three stamps)
 
-    @property
-    def period_ns(self) -> float | None:
+    def note(self, stamp_ns: int) -> None:
+        """A new image's stamp: the period is learned once per image, not per question about it."""
+        self.recent.append(stamp_ns)
         period = frame_period(np.asarray(self.recent, dtype=np.float64))
-        return period if np.isfinite(period) else None
+        self.period_ns = period if np.isfinite(period) else None
 
 
 @dataclass
@@ -141,7 +143,7 @@ class FrameSynchroniser:
             counter[camera] += 1
             return []
         stream.newest = stamp_ns
-        stream.recent.append(stamp_ns)
+        stream.note(stamp_ns)
         stream.count += 1
         self._newest = stamp_ns if self._newest is None else max(self._newest, stamp_ns)
         if (
