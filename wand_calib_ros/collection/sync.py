@@ -32,7 +32,7 @@ from wand_calib_ros.core.timing import frame_period
 
 FloatArray = NDArray[np.float64]
 
-#: Stamps a camera's period is learned from (the median of their spacings).
+#: Stamps a camera's period is learned from (:func:`~wand_calib_ros.core.timing.frame_period`).
 RATE_WINDOW = 30
 #: Images per camera before its rate counts for choosing the anchor.
 WARMUP_IMAGES = 4

@@ -183,7 +183,11 @@ class OrderOnAllPlacements:
         if per_camera == list(fixed.per_camera):
             return None
         self.decision = FixedParameters(tuple(per_camera), fixed.timing, fixed.held)
-        log.info("model order on all %d placements: %s", n_placements, _orders_text(self.rig, self.decision))
+        log.info(
+            "model order chosen on all %d placements at the adjustment's start: %s",
+            n_placements,
+            _orders_text(self.rig, self.decision),
+        )
         moves = np.zeros_like(delta)  # radial terms fixed now go to zero (those fixed before are)
         moves[:, 2:N_RADIAL] = -values[:, 2:N_RADIAL]
         moves[fixed.held] = 0.0

@@ -245,6 +245,7 @@ def _robust_pass(
         )
 
     warm: BundleState | None = None  # the timing test's solution, on the placements it can place
+    placeable = clocks.placeable(len(uv))[keep]
     if clocks.tentative:
         robust, sigma = robust_adjustment(start(keep, None), BundleProblem.from_dense(wand, uv[keep]), free)
         problem = BundleProblem.from_dense(wand, uv[keep], clocks.placements(keep))
@@ -255,11 +256,10 @@ def _robust_pass(
             return robust, sigma, clocks.without_timing(note), keep
         fit, fit_sigma, timing = test
         clocks = replace(clocks, free=timing, tentative=False)
-        placeable = clocks.placeable(len(uv))[keep]
         if placeable.all():  # the test's last adjustment is the pass with the timing it kept
             return fit, fit_sigma, clocks, keep
         warm = subset_state(fit.state, placeable)
-    keep = keep[clocks.placeable(len(uv))[keep]]
+    keep = keep[placeable]
     with_timing = free.copy()
     with_timing[:, N_GEOMETRIC:] = clocks.free
     problem = BundleProblem.from_dense(wand, uv[keep], clocks.placements(keep))

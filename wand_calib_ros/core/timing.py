@@ -159,9 +159,9 @@ def frame_period(stamps: FloatArray) -> float:
     shortest = float(np.min(steps[steps >= quartile / MAX_MULTIPLE]))
     multiples = np.round(steps / shortest)
     whole = (multiples >= 1) & (np.abs(steps - multiples * shortest) < MULTIPLE_TOLERANCE * multiples * shortest)
-    if np.all(whole[(steps >= shortest) & (steps <= quartile)]) and np.count_nonzero(whole & (multiples == 1)) >= max(
-        2, SINGLE_SUPPORT * steps.size
-    ):
+    explained = np.all(whole[(steps >= shortest) & (steps <= quartile)])
+    singles = np.count_nonzero(whole & (multiples == 1))
+    if explained and singles >= max(2, SINGLE_SUPPORT * steps.size):
         return float(np.median(steps[whole] / multiples[whole]))
     return quartile
 
