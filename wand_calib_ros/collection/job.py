@@ -13,6 +13,11 @@ from pathlib import Path
 
 import numpy as np
 
+# numpy loads these on first use, inside a calibration (the RANSAC sampler's numpy.random, numpy.ma
+# through np.unique): loaded with the nodes that run jobs, a first /calibrate does not wait 23 ms for them.
+import numpy.ma
+import numpy.random
+
 from wand_calib_ros.collection.coverage import CoverageStatus, CoverageThresholds, CoverageTracker
 from wand_calib_ros.collection.errors import CoverageError
 from wand_calib_ros.core.pipeline import CalibrationOptions, calibrate
