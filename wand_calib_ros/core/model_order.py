@@ -70,12 +70,14 @@ def free_mask(n_cameras: int, reference: int, fixed: FixedParameters) -> NDArray
 
 
 def zero_fixed(models: tuple[CameraModel, ...], fixed: FixedParameters) -> tuple[CameraModel, ...]:
-    out = []
-    for model, indices in zip(models, fixed.per_camera, strict=True):
-        vector = model.intrinsic_vector()
-        vector[list(indices)] = 0.0
-        out.append(model.with_intrinsic_vector(vector))
-    return tuple(out)
+    return tuple(_zeroed(model, indices) for model, indices in zip(models, fixed.per_camera, strict=True))
+
+
+def _zeroed(model: CameraModel, indices: tuple[int, ...] | list[int]) -> CameraModel:
+    """``model`` with the radial coefficients ``indices`` (into k1..k5) at zero."""
+    vector = model.intrinsic_vector()
+    vector[list(indices)] = 0.0
+    return model.with_intrinsic_vector(vector)
 
 
 def adjust_with_model_selection(
@@ -239,9 +241,7 @@ def reduce_radial(
         try:
             current = model.with_intrinsic_vector(estimate)
         except ModelError:
-            zeroed = model.intrinsic_vector()
-            zeroed[fixed_now] = 0.0
-            current = model.with_intrinsic_vector(zeroed)
+            current = _zeroed(model, fixed_now)
         if turns_over_in_image(current, spec.max_view_angle):
             log.debug("%s: r(theta) turns over inside the image with k%d free: fixed to 0", spec.name, highest + 1)
         elif z < significance:
@@ -264,6 +264,4 @@ def reduce_radial(
     try:
         return tuple(fixed_now), model.with_intrinsic_vector(estimate)
     except ModelError:  # the linearised shift leaves the camera model (k1 <= 0): re-adjust from the zeros instead
-        vector = model.intrinsic_vector()
-        vector[fixed_now] = 0.0
-        return tuple(fixed_now), model.with_intrinsic_vector(vector)
+        return tuple(fixed_now), _zeroed(model, fixed_now)

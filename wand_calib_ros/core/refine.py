@@ -263,10 +263,8 @@ def _robust_pass(
     with_timing = free.copy()
     with_timing[:, N_GEOMETRIC:] = clocks.free
     problem = BundleProblem.from_dense(wand, uv[keep], clocks.placements(keep))
-    if warm is None:
-        robust, sigma = robust_adjustment(start(keep, clocks.start), problem, with_timing)
-    else:  # the robust problem of a pass from the start, started from the test's solution
-        robust, sigma = robust_adjustment(warm, problem, with_timing, scale_from=start(keep, clocks.start))
+    cold = start(keep, clocks.start)  # the robust problem of a pass from the start, from the test's solution if any
+    robust, sigma = robust_adjustment(cold if warm is None else warm, problem, with_timing, scale_from=cold)
     return robust, sigma, clocks, keep
 
 
