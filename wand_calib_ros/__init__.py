@@ -34,8 +34,9 @@ def _keep_freed_memory() -> bool:
     follows twice the largest block freed so far), and the next iteration's arrays fault the same
     pages in again, zeroed by the kernel: on the live benchmark's buffer (570 frames, 4 cameras)
     29,600 page faults per calibration and a fifth of its time; with these settings 20 faults (4,300
-    on the first), the calibration's peak memory unchanged. The values are the limits glibc's own dynamic thresholds
-    reach on a large workload, set from the start. Linux with glibc only; a no-op elsewhere.
+    on the first), the calibration's peak memory unchanged. The values are the limits glibc's own
+    dynamic thresholds reach on a large workload, set from the start. Linux with glibc only; a no-op
+    elsewhere.
     """
     if not sys.platform.startswith("linux"):
         return False
