@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from wand_calib_ros.core.bundle_adjustment import (
     N_CAMERA_PARAMS,
@@ -21,8 +22,10 @@ from wand_calib_ros.core.bundle_adjustment import (
     _linearise,
     bundle_adjust,
     default_free_mask,
+    parameter_mask,
     residuals,
 )
+from wand_calib_ros.core.camera_model import from_opencv_pinhole
 from wand_calib_ros.core.geometry import Pose
 from wand_calib_ros.core.normal_equations import SCHUR_WASTE, block_layout, reduced_system
 from wand_calib_ros.sim.scenarios import paper_fisheye_scenario, simulate
@@ -63,30 +66,58 @@ def _with_timing(scenario, data, state, seed: int, uv=None):  # type: ignore[no-
     return timed, BundleProblem.from_dense(scenario.wand, uv, timing)
 
 
-def test_jacobians_match_finite_differences() -> None:
+def _pinhole_cameras(state: BundleState) -> BundleState:
+    """The state with camera 1 a plumb_bob and camera 2 a rational_polynomial camera (camera 0 stays a fisheye)."""
+    models = list(state.models)
+    for c, (name, d) in enumerate(
+        (
+            ("plumb_bob", [-0.2, 0.05, 2e-3, -1e-3, 0.01]),
+            ("rational_polynomial", [-0.2, 0.05, 2e-3, -1e-3, 0.01, 0.1, 0.02, 0.003]),
+        ),
+        start=1,
+    ):
+        k, m = models[c].focal_px, models[c].m
+        camera_matrix = np.array([[k[0], 0.0, 300.0], [0.0, k[1], 250.0], [0.0, 0.0, 1.0]])
+        models[c] = from_opencv_pinhole(camera_matrix, np.array(d), m, models[c].image_size, name)
+    return replace(state, models=tuple(models))
+
+
+@pytest.mark.parametrize("lenses", ["fisheye", "pinhole"])
+def test_jacobians_match_finite_differences(lenses: str) -> None:
     scenario, data, state, _ = _setup(1.0, 8, 1, n_cameras=3)
     state, problem = _with_timing(scenario, data, state, 7)
     every = np.array([TIME_OFFSET, READOUT])
-    _, jc, jp = _linearise(state, problem, timing=every)
-    assert jc.shape[2] == N_CAMERA_PARAMS
+    if lenses == "pinhole":
+        state = _pinhole_cameras(state)
+        every = np.arange(TIME_OFFSET, N_CAMERA_PARAMS)
+    _, jc, jp = _linearise(state, problem, carried=every)
+    assert jc.shape[2] == 13 + every.size
+    finite = np.all(np.isfinite(jc), axis=(1, 2))
+    assert finite.mean() > 0.9  # points behind a pinhole camera have no image
     h = 1e-6
+    exists = parameter_mask(state.models)
     for c in range(3):
-        for i in range(N_CAMERA_PARAMS):
-            delta = np.zeros((3, N_CAMERA_PARAMS))
+        for i in range(jc.shape[2]):
+            delta = np.zeros((3, jc.shape[2]))
             delta[c, i] = h
             plus = residuals(_apply_step(state, delta, np.zeros((8, 5)), every), problem)
             minus = residuals(_apply_step(state, -delta, np.zeros((8, 5)), every), problem)
             numeric = (plus - minus) / (2 * h)
             analytic = np.where((problem.camera == c)[:, None], jc[:, :, i], 0.0)
-            assert np.allclose(analytic, numeric, atol=1e-4 * max(1.0, np.max(np.abs(numeric))))
+            if not exists[c, np.r_[0:13, every][i]]:
+                assert np.all(numeric[finite] == 0)  # not a parameter of its model: the step does not move it
+                continue
+            scale = max(1.0, np.max(np.abs(numeric[finite])))
+            assert np.allclose(analytic[finite], numeric[finite], atol=1e-4 * scale), (c, i)
     for j in range(5):
         delta = np.zeros((8, 5))
         delta[:, j] = h
+        zero = np.zeros((3, jc.shape[2]))
         numeric = (
-            residuals(_apply_step(state, np.zeros((3, 15)), delta, every), problem)
-            - residuals(_apply_step(state, np.zeros((3, 15)), -delta, every), problem)
+            residuals(_apply_step(state, zero, delta, every), problem)
+            - residuals(_apply_step(state, zero, -delta, every), problem)
         ) / (2 * h)
-        assert np.allclose(jp[:, :, j], numeric, atol=1e-5)
+        assert np.allclose(jp[finite, :, j], numeric[finite], atol=1e-5)
 
 
 def test_sparse_normal_equations_and_schur_complement_match_the_dense_jacobian(monkeypatch) -> None:  # type: ignore[no-untyped-def]
@@ -104,7 +135,7 @@ def test_sparse_normal_equations_and_schur_complement_match_the_dense_jacobian(m
     state = BundleState(state.models, state.poses, data.wand_a[seen], data.wand_direction[seen])
     state, problem = _with_timing(scenario, data, state, 6, uv[seen])
     every = np.array([TIME_OFFSET])
-    res, jc, jp = _linearise(state, problem, timing=every)
+    res, jc, jp = _linearise(state, problem, carried=every)
     weights = _huber_weights(res, 1.5)
     assert 0 < np.sum(weights < 1) < weights.size
     layout = block_layout(problem.camera, problem.placement, problem.point, 3, problem.n_placements, 3, jc.shape[2])

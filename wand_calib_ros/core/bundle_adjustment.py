@@ -1,8 +1,8 @@
 """Step 4 of the paper (and Step 2 of Section III-B): wand bundle adjustment.
 
-Unknowns: per camera the intrinsics k1..k5, u0, v0 (m fixed), the pose
-(reference camera's pose fixed) and, for cameras that are not hardware-triggered,
-a time offset and a rolling-shutter readout time; per wand placement j the point
+Unknowns: per camera the intrinsics k1..k5, u0, v0 (m fixed; a pinhole model's tangential and
+rational terms too), the pose (reference camera's pose fixed) and, for cameras that are not
+hardware-triggered, a time offset and a rolling-shutter readout time; per wand placement j the point
 A_j and the wand direction n_j; B_j = A_j + L1 n_j and C_j = A_j + L n_j (paper
 eq. orientation). The paper writes n_j with spherical angles (phi_j, theta_j);
 the solver updates n_j in its tangent plane instead, which is the same 2 degrees
@@ -35,9 +35,13 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from wand_calib_ros.core import pinhole
 from wand_calib_ros.core.camera_model import (
+    EQUIDISTANT,
+    N_EXTRA,
     N_INTRINSIC,
     N_RADIAL,
+    PLUMB_BOB,
     CameraModel,
     project_arrays,
     project_with_jacobian_arrays,
@@ -67,15 +71,36 @@ IntArray = NDArray[np.int64]
 
 #: Geometric parameters per camera: k1..k5, u0, v0, rotation (3), translation (3).
 N_GEOMETRIC = N_INTRINSIC + 6
-#: Parameters per camera: the geometric ones, then the time offset and the rolling-shutter readout time.
-N_CAMERA_PARAMS = N_GEOMETRIC + 2
+#: Parameters per camera: the geometric ones, the time offset and the rolling-shutter readout time, then
+#: the pinhole models' tangential (t1, t2) and rational (d1, d2, d3) terms.
+N_CAMERA_PARAMS = N_GEOMETRIC + 2 + N_EXTRA
 #: Indices of the timing parameters in a camera's parameter vector.
 TIME_OFFSET, READOUT = N_GEOMETRIC, N_GEOMETRIC + 1
+TIMING = slice(TIME_OFFSET, READOUT + 1)
+#: The pinhole models' further parameters in a camera's parameter vector (its ``CameraModel.lens_vector``).
+LENS = slice(READOUT + 1, N_CAMERA_PARAMS)
+#: Every intrinsic parameter's index in a camera's parameter vector.
+INTRINSICS = np.r_[0:N_INTRINSIC, LENS.start : LENS.stop]
 #: Names of the per-camera parameters in order (rotation as a small-angle update, rad; the timing
-#: parameters in the time unit of the observations).
+#: parameters in the time unit of the observations; t1, t2 in mm, d1..d3 dimensionless).
 CAMERA_PARAM_NAMES = (
     "k1", "k2", "k3", "k4", "k5", "u0", "v0", "rx", "ry", "rz", "tx", "ty", "tz", "time_offset", "readout",
+    "t1", "t2", "d1", "d2", "d3",
 )  # fmt: skip
+
+
+def parameter_mask(models: tuple[CameraModel, ...] | list[CameraModel]) -> NDArray[np.bool_]:
+    """(C, N_CAMERA_PARAMS) the parameters each camera's model has: the fisheye model none of the lens
+    terms, plumb_bob no k5 and no rational terms, rational_polynomial no k5."""
+    mask = np.ones((len(models), N_CAMERA_PARAMS), dtype=bool)
+    for c, model in enumerate(models):
+        if model.distortion_model == EQUIDISTANT:
+            mask[c, LENS] = False
+            continue
+        mask[c, N_RADIAL - 1] = False
+        if model.distortion_model == PLUMB_BOB:
+            mask[c, LENS.start + pinhole.DENOMINATOR.start : LENS.stop] = False
+    return mask
 
 
 @dataclass(frozen=True, eq=False)
@@ -235,14 +260,16 @@ class CameraSystem:
     rhs: FloatArray
 
     def step(self, free: NDArray[np.bool_], moves: FloatArray | None = None) -> FloatArray:
-        """(C, 15) the Gauss-Newton step with the camera parameters ``free`` (C, 15) estimated and the
-        others moved by ``moves`` (C, 15; e.g. a term fixed at zero: minus its value; None: they stay).
+        """(C, 20) the Gauss-Newton step with the camera parameters ``free`` (C, 20) estimated and the
+        others moved by ``moves`` (C, 20; e.g. a term fixed at zero: minus its value; None: they stay).
 
         With other parameters free than the adjustment's (e.g. distortion terms it held at zero
         released), this is the linearised estimate of that other model: no new linearisation, the
-        placements follow implicitly. Timing parameters only where the system carries them.
+        placements follow implicitly. Timing parameters only where the system carries them (and lens
+        terms only where it carries them: else no camera's model has them).
         """
-        if free[:, np.setdiff1d(np.arange(N_CAMERA_PARAMS), self.columns)].any():
+        missing = np.setdiff1d(np.arange(N_CAMERA_PARAMS), self.columns)
+        if free[:, missing[missing < LENS.start]].any():  # lens terms not carried are of no camera's model
             raise ValueError("a timing parameter the adjustment did not carry cannot be estimated")
         n_cameras = free.shape[0]
         free_flat = free[:, self.columns].reshape(-1)
@@ -255,7 +282,7 @@ class CameraSystem:
         return delta
 
     def covariance(self, free: NDArray[np.bool_], sigma: float) -> FloatArray:
-        """(C*15, C*15) sigma^2 S^-1 over the ``free`` (C, 15) camera parameters (0 rows and columns elsewhere)."""
+        """(C*20, C*20) sigma^2 S^-1 over the ``free`` (C, 20) camera parameters (0 rows and columns elsewhere)."""
         n_cameras = free.shape[0]
         free_flat = free[:, self.columns].reshape(-1)
         carried = (np.arange(n_cameras)[:, None] * N_CAMERA_PARAMS + self.columns[None, :]).reshape(-1)[free_flat]
@@ -266,7 +293,7 @@ class CameraSystem:
 
 #: A choice of the parameters to estimate made on the normal equations at an adjustment's start (see
 #: :func:`bundle_adjust`): called with the start, its cameras' system and its noise estimate (px), it
-#: returns the (C, 15) parameters to estimate and the (C, 15) steps of those it fixes, or None.
+#: returns the (C, 20) parameters to estimate and the (C, 20) steps of those it fixes, or None.
 ChooseFree = Callable[["BundleState", CameraSystem, float], "tuple[NDArray[np.bool_], FloatArray] | None"]
 
 
@@ -279,9 +306,9 @@ class BundleResult:
         residuals: (M, 2) reprojection residuals (projected minus observed), px.
         iterations: LM iterations done.
         converged: whether a convergence criterion was met.
-        camera_std: (C, 15) standard deviations of the camera parameters
+        camera_std: (C, 20) standard deviations of the camera parameters
             (:data:`CAMERA_PARAM_NAMES` order; 0 for fixed ones), from the final Jacobian.
-        camera_covariance: (C*15, C*15) covariance of all camera parameters (0 rows/cols for fixed).
+        camera_covariance: (C*20, C*20) covariance of all camera parameters (0 rows/cols for fixed).
         sigma: estimated pixel noise sqrt(sum r^2 / (m - p)), px.
         dof: (m, p) residual scalars and free parameters.
         system: the cameras' normal equations at ``state`` (None: no camera parameter was free).
@@ -305,8 +332,8 @@ class BundleResult:
 
 
 #: Columns of :class:`_Unknowns`' camera table: k (5), m (2), principal point (2), rotation (9, row-major),
-#: translation (3), time offset and readout (2).
-_K, _M, _PP, _ROT, _T, _TIMING = 0, 5, 7, 9, 18, 21
+#: translation (3), time offset and readout (2), the pinhole models' further terms (5).
+_K, _M, _PP, _ROT, _T, _TIMING, _EXTRA = 0, 5, 7, 9, 18, 21, 23
 #: Columns of its placement table: A (3), the direction (3), its tangent basis e1 (3) and e2 (3).
 _A, _DIRECTION, _E1, _E2 = 0, 3, 6, 9
 
@@ -316,13 +343,15 @@ class _Unknowns:
     """The state as two tables the linearisation gathers rows from, one gather per chunk.
 
     Attributes:
-        cameras: (C, 23) per camera k, m, principal point, rotation (row-major), translation, time
-            offset and readout time.
+        cameras: (C, 28) per camera k, m, principal point, rotation (row-major), translation, time
+            offset and readout time, the pinhole models' further terms.
         placements: (P, 12) per placement A, the unit direction A -> C and its tangent basis e1, e2.
+        pinhole: (C,) which cameras have a pinhole model (None: none has).
     """
 
     cameras: FloatArray
     placements: FloatArray
+    pinhole: NDArray[np.bool_] | None = None
 
     @staticmethod
     def of(state: BundleState) -> _Unknowns:
@@ -335,12 +364,54 @@ class _Unknowns:
                 np.stack([p.rotation.reshape(9) for p in state.poses]),
                 np.stack([p.translation for p in state.poses]),
                 state.camera_timing,
+                np.stack([m.lens_vector() for m in state.models]),
             ],
             axis=1,
         )
         basis = tangent_basis(state.wand_direction)  # (P, 3, 2)
         placements = np.concatenate([state.wand_a, state.wand_direction, basis[:, :, 0], basis[:, :, 1]], axis=1)
-        return _Unknowns(cameras, placements)
+        pinhole = np.array([m.is_pinhole for m in state.models], dtype=bool)
+        return _Unknowns(cameras, placements, pinhole if pinhole.any() else None)
+
+
+def _project_rows(
+    unknowns: _Unknowns, cam: FloatArray, c: IntArray, points: FloatArray, *, jacobians: bool, intrinsics: bool
+) -> tuple[FloatArray, FloatArray | None, FloatArray | None, FloatArray | None]:
+    """Pixels (n, 2) of camera-frame points (n, 3) seen by the cameras ``c`` (n,) whose parameters ``cam``
+    (28, n) holds, each by its own model, and with ``jacobians`` d_point (n, 2, 3), d_intrinsics (n, 2, 7
+    or 0 without ``intrinsics``) and the pinhole models' d_extra (n, 2, 5; None when no camera has one)."""
+    k, m, pp = cam[_K : _K + N_RADIAL].T, cam[_M : _M + 2].T, cam[_PP : _PP + 2].T
+    if unknowns.pinhole is None:  # the common case: fisheye-model cameras only
+        if not jacobians:
+            return project_arrays(k, m, pp, points), None, None, None
+        kb = project_with_jacobian_arrays(k, m, pp, points, intrinsics=intrinsics)
+        return kb.uv, kb.d_point, kb.d_intrinsics, None
+    extra = cam[_EXTRA : _EXTRA + N_EXTRA].T
+    rows = unknowns.pinhole[c]
+    if not jacobians:
+        uv = np.empty((points.shape[0], 2))
+        uv[rows] = pinhole.project_arrays(k[rows], extra[rows], m[rows], pp[rows], points[rows])
+        other = ~rows
+        if other.any():
+            uv[other] = project_arrays(k[other], m[other], pp[other], points[other])
+        return uv, None, None, None
+    if rows.all():
+        ph = pinhole.project_with_jacobian_arrays(k, extra, m, pp, points, intrinsics=intrinsics)
+        return ph.uv, ph.d_point, ph.d_intrinsics, ph.d_extra if intrinsics else None
+    n, width = points.shape[0], N_INTRINSIC if intrinsics else 0
+    uv, d_point = np.empty((n, 2)), np.empty((n, 2, 3))
+    d_intrinsics, d_extra = np.empty((n, 2, width)), np.zeros((n, 2, N_EXTRA))
+    ph = pinhole.project_with_jacobian_arrays(
+        k[rows], extra[rows], m[rows], pp[rows], points[rows], intrinsics=intrinsics
+    )
+    other = ~rows
+    kb = project_with_jacobian_arrays(k[other], m[other], pp[other], points[other], intrinsics=intrinsics)
+    for target, pinhole_part, fisheye_part in ((uv, ph.uv, kb.uv), (d_point, ph.d_point, kb.d_point),
+                                               (d_intrinsics, ph.d_intrinsics, kb.d_intrinsics)):  # fmt: skip
+        target[rows], target[other] = pinhole_part, fisheye_part
+    if intrinsics:
+        d_extra[rows] = ph.d_extra
+    return uv, d_point, d_intrinsics, d_extra if intrinsics else None
 
 
 def _linearise_rows(
@@ -351,21 +422,24 @@ def _linearise_rows(
     *,
     jacobians: bool,
     cameras: bool,
-    timing: IntArray,
+    carried: IntArray,
 ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
     """The observations ``first:stop`` linearised: residuals (n, 2) and, when ``jacobians``, the camera
-    Jacobians (n, 2, 13 + len(timing) + 1; None unless ``cameras``) and the placement Jacobians
+    Jacobians (n, 2, 13 + len(carried) + 1; None unless ``cameras``) and the placement Jacobians
     (n, 2, 5 + 1), each with the residuals as last column (:func:`accumulate` sums [J | r]^T [J | r]).
+    ``carried`` are the camera parameters beyond the 13 geometric ones: the timing ones, then the
+    pinhole models' lens terms.
 
     Written on component arrays (n,) of a chunk small enough to stay in cache (see
     :mod:`~wand_calib_ros.core.normal_equations`); the projection and its derivatives come from
-    :func:`~wand_calib_ros.core.camera_model.project_with_jacobian_arrays`, the rotation columns are
+    :func:`~wand_calib_ros.core.camera_model.project_with_jacobian_arrays` (and the pinhole models'
+    :func:`~wand_calib_ros.core.pinhole.project_with_jacobian_arrays`), the rotation columns are
     ``d uv / d rotvec = -d_point [R X]x`` (R <- exp([d]x) R), row by row the cross product ``R X x
     d_point_row``; the placement's ``d_point R`` and ``offset d_point R e``.
     """
     c = problem.camera[first:stop]
     pl = problem.placement[first:stop]
-    cam = np.take(unknowns.cameras, c, axis=0).T  # (23, n)
+    cam = np.take(unknowns.cameras, c, axis=0).T  # (28, n)
     placed = np.take(unknowns.placements, pl, axis=0).T  # (12, n)
     offsets = problem.wand.offsets[problem.point[first:stop]]
     world = placed[_A : _A + 3] + offsets * placed[_DIRECTION : _DIRECTION + 3]  # (3, n) reference frame
@@ -383,21 +457,30 @@ def _linearise_rows(
     rotated = np.empty((n, 3))  # R X
     for i in range(3):
         rotated[:, i] = rot[3 * i] * world[0] + rot[3 * i + 1] * world[1] + rot[3 * i + 2] * world[2]
-    intrinsics = cam[_K : _K + N_RADIAL].T, cam[_M : _M + 2].T, cam[_PP : _PP + 2].T
+    in_camera = rotated + cam[_T : _T + 3].T
+    uv, d_camera, d_intrinsics, d_extra = _project_rows(
+        unknowns, cam, c, in_camera, jacobians=jacobians, intrinsics=cameras
+    )
+    res = uv - problem.uv[first:stop]
     if not jacobians:
-        return project_arrays(*intrinsics, rotated + cam[_T : _T + 3].T) - problem.uv[first:stop], None, None
-    projection = project_with_jacobian_arrays(*intrinsics, rotated + cam[_T : _T + 3].T, intrinsics=cameras)
-    res = projection.uv - problem.uv[first:stop]
+        return res, None, None
+    assert d_camera is not None and d_intrinsics is not None
+    timing = carried[carried < LENS.start]
     q0, q1, q2 = rotated.T
-    d_point = projection.d_point.transpose(1, 2, 0)  # (2, 3, n): d(u, v) / d(x, y, z), camera frame
+    d_point = d_camera.transpose(1, 2, 0)  # (2, 3, n): d(u, v) / d(x, y, z), camera frame
     e1, e2 = placed[_E1 : _E1 + 3], placed[_E2 : _E2 + 3]
-    width = N_GEOMETRIC + timing.size
+    width = N_GEOMETRIC + carried.size
     jc = np.empty((n, 2, width + 1)) if cameras else None
     jp = np.empty((n, 2, N_PLACEMENT_PARAMS + 1))
     jp[:, :, N_PLACEMENT_PARAMS] = res
     if jc is not None:
-        jc[:, :, :N_INTRINSIC] = projection.d_intrinsics
-        jc[:, :, N_INTRINSIC + 3 : N_GEOMETRIC] = projection.d_point  # translation
+        jc[:, :, :N_INTRINSIC] = d_intrinsics
+        jc[:, :, N_INTRINSIC + 3 : N_GEOMETRIC] = d_camera  # translation
+        lens = carried[carried >= LENS.start]
+        if lens.size:
+            if d_extra is None:
+                raise ValueError("lens terms are carried only for pinhole cameras")
+            jc[:, :, N_GEOMETRIC + timing.size : width] = d_extra[:, :, lens - LENS.start]
         jc[:, :, width] = res
     for i, (p0, p1, p2) in enumerate(d_point):
         w0 = p0 * rot[0] + p1 * rot[3] + p2 * rot[6]  # d uv_i / d world point: d_point R
@@ -427,7 +510,7 @@ def residuals(state: BundleState, problem: BundleProblem) -> FloatArray:
     for first in range(0, problem.n_observations, CHUNK_OBSERVATIONS):
         stop = min(first + CHUNK_OBSERVATIONS, problem.n_observations)
         out[first:stop] = _linearise_rows(
-            unknowns, problem, first, stop, jacobians=False, cameras=False, timing=_NO_TIMING
+            unknowns, problem, first, stop, jacobians=False, cameras=False, carried=_NO_TIMING
         )[0]
     return out
 
@@ -438,7 +521,13 @@ def timing_columns(free: NDArray[np.bool_]) -> IntArray:
     The adjustment carries the 13 geometric parameters of every camera and only these timing
     ones, so a synchronised rig costs what it did before timing was modelled.
     """
-    return (np.flatnonzero(free[:, N_GEOMETRIC:].any(axis=0)) + N_GEOMETRIC).astype(np.int64)
+    return (np.flatnonzero(free[:, TIMING].any(axis=0)) + TIMING.start).astype(np.int64)
+
+
+def lens_columns(models: tuple[CameraModel, ...]) -> IntArray:
+    """The pinhole models' lens terms (indices into :data:`CAMERA_PARAM_NAMES`) some camera's model has:
+    the adjustment carries them (fixed or free) only then, so a fisheye-model rig costs what it did."""
+    return (np.flatnonzero(parameter_mask(models)[:, LENS].any(axis=0)) + LENS.start).astype(np.int64)
 
 
 #: No timing parameter carried.
@@ -446,16 +535,16 @@ _NO_TIMING = np.empty(0, dtype=np.int64)
 
 
 def _linearise(
-    state: BundleState, problem: BundleProblem, *, timing: IntArray = _NO_TIMING
+    state: BundleState, problem: BundleProblem, *, carried: IntArray = _NO_TIMING
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Residuals (M, 2), camera Jacobians (M, 2, 13 + len(timing)) and placement Jacobians (M, 2, 5) of
+    """Residuals (M, 2), camera Jacobians (M, 2, 13 + len(carried)) and placement Jacobians (M, 2, 5) of
     the whole problem at once (the adjustment sums them chunk by chunk instead: :func:`_evaluate`)."""
     unknowns = _Unknowns.of(state)
     res, jc, jp = [], [], []
     for first in range(0, problem.n_observations, CHUNK_OBSERVATIONS):
         stop = min(first + CHUNK_OBSERVATIONS, problem.n_observations)
         part, camera, placement = _linearise_rows(
-            unknowns, problem, first, stop, jacobians=True, cameras=True, timing=timing
+            unknowns, problem, first, stop, jacobians=True, cameras=True, carried=carried
         )
         assert camera is not None and placement is not None
         res.append(part)
@@ -468,7 +557,7 @@ def _evaluate(
     state: BundleState,
     problem: BundleProblem,
     layout: BlockLayout,
-    timing: IntArray,
+    carried: IntArray,
     loss_scale: float | None,
 ) -> tuple[FloatArray, NormalEquations]:
     """(M, 2) residuals at ``state`` and the normal equations of the (Huber-weighted) problem there,
@@ -479,7 +568,7 @@ def _evaluate(
     cameras = layout.width > 0
     for chunk in layout.chunks:
         part, jc, jp = _linearise_rows(
-            unknowns, problem, chunk.first, chunk.stop, jacobians=True, cameras=cameras, timing=timing
+            unknowns, problem, chunk.first, chunk.stop, jacobians=True, cameras=cameras, carried=carried
         )
         assert jp is not None
         res[chunk.first : chunk.stop] = part
@@ -488,17 +577,21 @@ def _evaluate(
     return res, normal
 
 
-def _apply_step(state: BundleState, delta_c: FloatArray, delta_p: FloatArray, timing: IntArray) -> BundleState:
-    """The state moved by camera steps (C, 13 + len(timing)) and placement steps (P, 5)."""
+def _apply_step(state: BundleState, delta_c: FloatArray, delta_p: FloatArray, carried: IntArray) -> BundleState:
+    """The state moved by camera steps (C, 13 + len(carried)) and placement steps (P, 5)."""
+    delta = np.zeros((len(state.models), N_CAMERA_PARAMS))
+    delta[:, np.concatenate([np.arange(N_GEOMETRIC), carried])] = delta_c
+    delta[~parameter_mask(state.models)] = 0.0  # what a camera's model does not have stays as it is
     models, poses = [], []
-    for model, pose, d in zip(state.models, state.poses, delta_c, strict=True):
-        models.append(model.with_intrinsic_vector(model.intrinsic_vector() + d[:N_INTRINSIC]))
+    lens = bool(np.any(carried >= LENS.start))
+    for model, pose, d in zip(state.models, state.poses, delta, strict=True):
+        extra = model.lens_vector() + d[LENS] if lens and model.is_pinhole else None
+        models.append(model.with_intrinsic_vector(model.intrinsic_vector() + d[:N_INTRINSIC], extra))
         rotation = rotation_from_rotvec(d[N_INTRINSIC : N_INTRINSIC + 3]) @ pose.rotation
         poses.append(Pose(rotation, pose.translation + d[N_INTRINSIC + 3 : N_GEOMETRIC]))
     camera_timing = state.timing
-    if timing.size:
-        camera_timing = state.camera_timing.copy()
-        camera_timing[:, timing - N_GEOMETRIC] += delta_c[:, N_GEOMETRIC:]
+    if np.any(carried < LENS.start):
+        camera_timing = state.camera_timing + delta[:, TIMING]
     basis = tangent_basis(state.wand_direction)
     direction = state.wand_direction + np.einsum("pij,pj->pi", basis, delta_p[:, 3:])
     direction /= np.linalg.norm(direction, axis=1, keepdims=True)
@@ -576,12 +669,15 @@ def _hold_worse_placements(
     )
 
 
-def default_free_mask(n_cameras: int, reference: int = 0) -> NDArray[np.bool_]:
-    """(C, 15) mask: every intrinsic free, every pose but the reference camera's free, no timing."""
+def default_free_mask(
+    n_cameras: int, reference: int = 0, models: tuple[CameraModel, ...] | None = None
+) -> NDArray[np.bool_]:
+    """(C, 20) mask: every intrinsic free (of the cameras' ``models``, when given: the adjustment leaves out
+    what a model does not have anyway), every pose but the reference camera's free, no timing."""
     free = np.ones((n_cameras, N_CAMERA_PARAMS), dtype=bool)
-    free[reference, N_INTRINSIC:] = False
-    free[:, N_GEOMETRIC:] = False
-    return free
+    free[reference, N_INTRINSIC:N_GEOMETRIC] = False
+    free[:, TIMING] = False
+    return free if models is None else free & parameter_mask(models)
 
 
 def bundle_adjust(
@@ -600,8 +696,8 @@ def bundle_adjust(
     Args:
         state: initial values (Step 3 result, placements from triangulation).
         problem: the observations, sorted by placement then camera.
-        free: (C, 15) which camera parameters are estimated (see :func:`default_free_mask`); the
-            timing ones need ``problem.timing``.
+        free: (C, 20) which camera parameters are estimated (see :func:`default_free_mask`; only those
+            of each camera's model are, :func:`parameter_mask`); the timing ones need ``problem.timing``.
         loss_scale: Huber threshold on each observation's 2D residual (px), or None for least
             squares. The robust problem is solved by iteratively reweighted least squares.
         max_iterations: LM iteration cap.
@@ -625,8 +721,11 @@ def bundle_adjust(
         The optimised state, residuals and parameter uncertainties.
     """
     n_cameras = problem.n_cameras
+    exists = parameter_mask(state.models)
+    free = free & exists
     timing = timing_columns(free)
-    columns = np.concatenate([np.arange(N_GEOMETRIC), timing])  # the camera parameters carried
+    carried = np.concatenate([timing, lens_columns(state.models)])  # beyond the geometric parameters
+    columns = np.concatenate([np.arange(N_GEOMETRIC), carried])  # the camera parameters carried
     free_flat = free[:, columns].reshape(-1)
     cameras = bool(free_flat.any())
     layout = block_layout(
@@ -639,7 +738,7 @@ def bundle_adjust(
         columns.size if cameras else 0,
     )
     lam, growth, trusted = 1e-6, 2.0, False
-    res, normal = _evaluate(state, problem, layout, timing, loss_scale)
+    res, normal = _evaluate(state, problem, layout, carried, loss_scale)
     if not np.all(np.isfinite(res)):
         raise CalibrationFailedError("the bundle adjustment starts from non-finite reprojections")
     cost = robust_cost(res, loss_scale)
@@ -652,19 +751,26 @@ def bundle_adjust(
         choice = choose(state, start, _sigma(res, loss_scale, dof))
         if choice is not None:
             free, moves = choice
+            free = free & exists
             if not np.array_equal(timing_columns(free), timing):
                 raise ValueError("a choice of the parameters to estimate cannot change the timing ones carried")
             free_flat = free[:, columns].reshape(-1)
             p = int(free_flat.sum()) + N_PLACEMENT_PARAMS * problem.n_placements
             dof = max(m - p, 1)
             delta_c = start.step(free, moves)[:, columns]
+            moved = np.where(free[:, columns], 0.0, moves[:, columns])
+            no_step = np.zeros((problem.n_placements, N_PLACEMENT_PARAMS))
             try:
-                state = _apply_step(state, delta_c, back_substitute(delta_c, v_inv, gauss_newton, layout), timing)
+                chosen = _apply_step(state, delta_c, back_substitute(delta_c, v_inv, gauss_newton, layout), carried)
             except ModelError:  # the linearised solution leaves the camera model: only the fixed ones move
-                moved = np.where(free[:, columns], 0.0, moves[:, columns])
-                state = _apply_step(state, moved, np.zeros((problem.n_placements, N_PLACEMENT_PARAMS)), timing)
+                chosen = None
             del gauss_newton, normal  # before the next ones are summed: the peak memory holds one W
-            res, normal = _evaluate(state, problem, layout, timing, loss_scale)
+            if chosen is not None:
+                res, normal = _evaluate(chosen, problem, layout, carried, loss_scale)
+            if chosen is None or not np.all(np.isfinite(res)):  # (or puts a point behind a pinhole camera)
+                chosen = _apply_step(state, moved, no_step, carried)
+                res, normal = _evaluate(chosen, problem, layout, carried, loss_scale)
+            state = chosen
             cost = robust_cost(res, loss_scale) if np.all(np.isfinite(res)) else np.inf
             if not np.isfinite(cost):
                 raise CalibrationFailedError("the bundle adjustment's chosen start has non-finite reprojections")
@@ -700,19 +806,19 @@ def bundle_adjust(
                 final = CameraSystem(columns, s, rhs) if cameras and used == 0.0 else None
                 break
             try:
-                candidate = _apply_step(state, delta_c, delta_p, timing)
+                candidate = _apply_step(state, delta_c, delta_p, carried)
             except ModelError:  # e.g. k1 <= 0: not a camera, reject the step
                 lam, growth = (lam, growth) if used == 0.0 else (lam * growth, 2.0 * growth)
                 trusted = False
                 continue
             # The normal equations come with the trial residuals: steps are rarely rejected near a solution.
-            new_res, new_normal = _evaluate(candidate, problem, layout, timing, loss_scale)
+            new_res, new_normal = _evaluate(candidate, problem, layout, carried, loss_scale)
             new_cost = robust_cost(new_res, loss_scale) if np.all(np.isfinite(new_res)) else np.inf
             if not new_cost < cost:  # before damping every step: the placements the step made worse held
                 held = _hold_worse_placements(state, candidate, problem, new_res, loss_scale, cost)
                 if held is not None:
                     candidate = held
-                    new_res, new_normal = _evaluate(candidate, problem, layout, timing, loss_scale)
+                    new_res, new_normal = _evaluate(candidate, problem, layout, carried, loss_scale)
                     new_cost = robust_cost(new_res, loss_scale) if np.all(np.isfinite(new_res)) else np.inf
             if new_cost < cost:
                 accepted = True

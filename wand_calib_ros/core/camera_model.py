@@ -16,6 +16,12 @@ Only ``k1*m_u``, ``k1*m_v`` and ``k_i/k1`` are identifiable from images, so
 OpenCV's / ROS's ``equidistant`` (fisheye) model with ``fx = k1*m_u``,
 ``fy = k1*m_v``, ``cx = u0``, ``cy = v0`` and ``D = [k2, k3, k4, k5] / k1``
 (see :func:`to_opencv_fisheye`).
+
+Conventional lenses may instead be described by OpenCV's pinhole model with radial-tangential
+distortion (ROS ``plumb_bob``, ``rational_polynomial``; :mod:`wand_calib_ros.core.pinhole`), a camera
+model of its own (``CameraModel.distortion_model``): the same k1..k5 slots hold the radial polynomial
+in tan(theta) instead of theta (k5 unused), and five more parameters (``extra``) the tangential terms
+and the rational denominator. The functions here take either.
 """
 
 from __future__ import annotations
@@ -26,6 +32,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from wand_calib_ros.core import pinhole
 from wand_calib_ros.core.errors import ModelError
 
 FloatArray = NDArray[np.float64]
@@ -34,6 +41,16 @@ FloatArray = NDArray[np.float64]
 N_RADIAL = 5
 #: Free intrinsic parameters in the optimisers: k1..k5, u0, v0 (m stays fixed).
 N_INTRINSIC = 7
+#: Parameters of the pinhole models beyond those: t1, t2 (tangential), d1, d2, d3 (rational denominator).
+N_EXTRA = pinhole.N_EXTRA
+
+#: The camera models by their ROS ``distortion_model`` names: Kannala-Brandt (OpenCV fisheye), OpenCV's
+#: pinhole with radial-tangential distortion, and the same with the rational radial term.
+EQUIDISTANT = "equidistant"
+PLUMB_BOB = "plumb_bob"
+RATIONAL_POLYNOMIAL = "rational_polynomial"
+CAMERA_MODELS = (EQUIDISTANT, PLUMB_BOB, RATIONAL_POLYNOMIAL)
+PINHOLE_MODELS = (PLUMB_BOB, RATIONAL_POLYNOMIAL)
 
 
 def _frozen_array(values: object, shape: tuple[int, ...], name: str) -> FloatArray:
@@ -51,25 +68,43 @@ class CameraModel:
     """Intrinsics of one camera.
 
     Attributes:
-        k: (5,) radial coefficients k1..k5 of r(theta), mm (theta in rad).
+        k: (5,) radial coefficients k1..k5 of r(theta), mm (theta in rad); for the pinhole models the
+            coefficients of r(s) = k1 s + k2 s^3 + k3 s^5 + k4 s^7 in s = tan(theta) (k5 = 0).
         m: (2,) pixel densities m_u, m_v, px/mm.
         principal_point: (2,) u0, v0, px (OpenCV pixel origin).
         image_size: (width, height), px.
+        distortion_model: one of :data:`CAMERA_MODELS`.
+        extra: (5,) the pinhole models' tangential terms t1, t2 (mm) and rational denominator d1, d2,
+            d3 (zero for ``equidistant``; d zero for ``plumb_bob``).
     """
 
     k: FloatArray
     m: FloatArray
     principal_point: FloatArray
     image_size: tuple[int, int]
+    distortion_model: str = EQUIDISTANT
+    extra: FloatArray | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "k", _frozen_array(self.k, (N_RADIAL,), "k"))
         object.__setattr__(self, "m", _frozen_array(self.m, (2,), "m"))
         object.__setattr__(self, "principal_point", _frozen_array(self.principal_point, (2,), "principal_point"))
+        extra = np.zeros(N_EXTRA) if self.extra is None else self.extra
+        object.__setattr__(self, "extra", _frozen_array(extra, (N_EXTRA,), "extra"))
         width, height = (int(s) for s in self.image_size)
         object.__setattr__(self, "image_size", (width, height))
         if self.k[0] <= 0 or np.any(self.m <= 0):
             raise ModelError(f"k1 and m must be positive, got k1={self.k[0]}, m={self.m.tolist()}")
+        if self.distortion_model not in CAMERA_MODELS:
+            raise ModelError(f"unknown camera model {self.distortion_model!r}, expected one of {list(CAMERA_MODELS)}")
+        unused = {EQUIDISTANT: slice(0, N_EXTRA), PLUMB_BOB: pinhole.DENOMINATOR}.get(self.distortion_model)
+        if (unused is not None and np.any(self.lens_vector()[unused] != 0)) or (self.is_pinhole and self.k[4] != 0):
+            raise ModelError(f"the {self.distortion_model} model has no such terms: k5 or extra {self.lens_vector()}")
+
+    @property
+    def is_pinhole(self) -> bool:
+        """Whether the model is one of OpenCV's pinhole models (:data:`PINHOLE_MODELS`)."""
+        return self.distortion_model in PINHOLE_MODELS
 
     @property
     def focal_px(self) -> FloatArray:
@@ -80,9 +115,21 @@ class CameraModel:
         """(7,) free intrinsics [k1..k5, u0, v0] in the optimisers' order."""
         return np.concatenate([self.k, self.principal_point])
 
-    def with_intrinsic_vector(self, vector: FloatArray) -> CameraModel:
-        """A copy with k and principal point taken from a (7,) vector."""
-        return CameraModel(vector[:N_RADIAL], self.m, vector[N_RADIAL:N_INTRINSIC], self.image_size)
+    def lens_vector(self) -> FloatArray:
+        """(5,) the pinhole models' further parameters [t1, t2, d1, d2, d3] (zeros for ``equidistant``)."""
+        assert self.extra is not None  # set in __post_init__
+        return self.extra
+
+    def with_intrinsic_vector(self, vector: FloatArray, extra: FloatArray | None = None) -> CameraModel:
+        """A copy with k and principal point taken from a (7,) vector (and the (5,) ``extra`` if given)."""
+        return CameraModel(
+            vector[:N_RADIAL],
+            self.m,
+            vector[N_RADIAL:N_INTRINSIC],
+            self.image_size,
+            self.distortion_model,
+            self.lens_vector() if extra is None else extra,
+        )
 
 
 def _odd_powers(theta: FloatArray) -> FloatArray:
@@ -154,6 +201,39 @@ def max_image_radius_mm(model: CameraModel) -> float:
     return float(np.max(np.hypot(*((corners - model.principal_point) / model.m).T)))
 
 
+def radius_mm(model: CameraModel, theta: FloatArray) -> FloatArray:
+    """The model's radial curve r(theta) in mm at any-shaped angles (rad): the image radius of a ray without
+    the pinhole models' tangential terms (NaN from 90 degrees on for those)."""
+    if model.is_pinhole:
+        return pinhole.radius(model.k, model.lens_vector(), theta)
+    return radius(model.k, np.asarray(theta, dtype=np.float64))
+
+
+def radial_basis(model: CameraModel, theta: float) -> FloatArray:
+    """(5,) d r(theta) / d k1..k5 (mm per mm) of the model's curve at one angle: theta^(2i+1) for the fisheye
+    model, tan(theta)^(2i+1) over the rational denominator for the pinhole ones (0 for their k5)."""
+    if not model.is_pinhole:
+        return np.asarray(theta ** (2 * np.arange(N_RADIAL) + 1), dtype=np.float64)
+    s = float(np.tan(theta))
+    _, _, denominator = pinhole.radial_terms(model.k, model.lens_vector(), np.array(s * s))
+    return np.r_[s ** (2 * np.arange(N_RADIAL - 1) + 1) / float(denominator), 0.0]
+
+
+def radius_limit(model: CameraModel) -> float:
+    """First angle (rad) where the model's r(theta) stops increasing (pi if it never does; at most 90
+    degrees for the pinhole models): the curve is invertible up to it."""
+    if model.is_pinhole:
+        return pinhole.radial_limit(model.k, model.lens_vector())
+    return monotonic_limit(model.k)
+
+
+def angle_of_radius(model: CameraModel, r: FloatArray) -> FloatArray:
+    """theta with r(theta) = r (mm) on the increasing branch of the model's curve; NaN beyond its reach."""
+    if model.is_pinhole:
+        return pinhole.inverse_radius(model.k, model.lens_vector(), r)
+    return inverse_radius(model.k, r)
+
+
 def turns_over_in_image(model: CameraModel, max_view_angle: float) -> bool:
     """True when r(theta) stops increasing inside both the lens's field and the image.
 
@@ -161,10 +241,10 @@ def turns_over_in_image(model: CameraModel, max_view_angle: float) -> bool:
         model: the camera.
         max_view_angle: theta_max of the lens in rad (half the field of view).
     """
-    limit = monotonic_limit(model.k)
-    if limit >= max_view_angle:
+    limit = radius_limit(model)
+    if limit >= max_view_angle or (model.is_pinhole and limit >= 0.5 * np.pi - 1e-3):
         return False
-    return float(radius(model.k, np.array(limit))) < max_image_radius_mm(model)
+    return float(radius_mm(model, np.array(limit))) < max_image_radius_mm(model)
 
 
 def inverse_radius(k: FloatArray, r: FloatArray, *, tol: float = 1e-13) -> FloatArray:
@@ -252,12 +332,17 @@ def project(model: CameraModel, points: FloatArray) -> FloatArray:
         points: (..., 3) points in the camera frame (any positive scale).
 
     Returns:
-        (..., 2) pixel coordinates u, v.
+        (..., 2) pixel coordinates u, v (NaN where a pinhole model has no image: z <= 0).
     """
     points = np.asarray(points, dtype=np.float64)
     _split_points(points)  # the shape checked
     one = model.k[None, :], model.m[None, :], model.principal_point[None, :]
-    return project_arrays(*one, points.reshape(-1, 3)).reshape(*points.shape[:-1], 2)
+    flat = points.reshape(-1, 3)
+    if model.is_pinhole:
+        uv = pinhole.project_arrays(one[0], model.lens_vector()[None, :], one[1], one[2], flat)
+    else:
+        uv = project_arrays(*one, flat)
+    return uv.reshape(*points.shape[:-1], 2)
 
 
 def project_arrays(k: FloatArray, m: FloatArray, principal_point: FloatArray, points: FloatArray) -> FloatArray:
@@ -286,8 +371,14 @@ class ProjectionJacobian(NamedTuple):
 
 
 def project_with_jacobian(model: CameraModel, points: FloatArray) -> ProjectionJacobian:
-    """Project (N, 3) camera-frame points and return exact Jacobians (see ProjectionJacobian)."""
-    return project_with_jacobian_arrays(model.k[None, :], model.m[None, :], model.principal_point[None, :], points)
+    """Project (N, 3) camera-frame points and return exact Jacobians (see ProjectionJacobian; a pinhole
+    model's derivatives with respect to its lens terms come from
+    :func:`wand_calib_ros.core.pinhole.project_with_jacobian_arrays`)."""
+    one = model.k[None, :], model.m[None, :], model.principal_point[None, :]
+    if model.is_pinhole:
+        jacobian = pinhole.project_with_jacobian_arrays(one[0], model.lens_vector()[None, :], one[1], one[2], points)
+        return ProjectionJacobian(jacobian.uv, jacobian.d_point, jacobian.d_intrinsics)
+    return project_with_jacobian_arrays(*one, points)
 
 
 def project_with_jacobian_arrays(
@@ -373,6 +464,13 @@ def unproject(model: CameraModel, uv: FloatArray) -> FloatArray:
         (..., 3) unit vectors in the camera frame; NaN for pixels the model
         cannot reach (beyond the radius where r(theta) stops increasing).
     """
+    if model.is_pinhole:
+        uv = np.asarray(uv, dtype=np.float64)
+        if uv.ndim < 1 or uv.shape[-1] != 2:
+            raise ValueError(f"uv must have shape (..., 2), got {uv.shape}")
+        flat = uv.reshape(-1, 2)
+        bearings = pinhole.unproject(model.k, model.lens_vector(), model.m, model.principal_point, flat)
+        return bearings.reshape(*uv.shape[:-1], 3)
     _, _, cos_phi, sin_phi, sin_theta, cos_theta = _unproject_parts(model, uv)
     return np.stack([sin_theta * cos_phi, sin_theta * sin_phi, cos_theta], axis=-1)
 
@@ -384,7 +482,12 @@ def unproject_with_jacobian(model: CameraModel, uv: FloatArray) -> tuple[FloatAr
         (N, 3) unit bearings (NaN where unreachable) and (N, 3, 7) their
         derivatives with respect to k1..k5, u0, v0 (implicit differentiation of
         r(theta) = rho).
+
+    Raises:
+        ModelError: for the pinhole models (Step 3 starts from the fisheye model's curves).
     """
+    if model.is_pinhole:
+        raise ModelError(f"bearing derivatives are computed for the {EQUIDISTANT} model only")
     theta, rho, cos_phi, sin_phi, sin_theta, cos_theta = _unproject_parts(model, uv)
     bearings = np.stack([sin_theta * cos_phi, sin_theta * sin_phi, cos_theta], axis=-1)
     # sin(theta)/rho -> 1/k1 at the centre.
@@ -424,12 +527,44 @@ def to_opencv_fisheye(model: CameraModel) -> OpenCVFisheye:
     OpenCV maps theta to theta_d = theta (1 + D1 theta^2 + D2 theta^4 + D3 theta^6 + D4 theta^8)
     and u = fx * theta_d * cos(phi) + cx, which equals this model's
     m_u * r(theta) * cos(phi) + u0 with fx = k1 m_u and D = k[1:] / k1.
+
+    Raises:
+        ModelError: the model is a pinhole one (see :func:`to_opencv`).
     """
+    if model.is_pinhole:
+        raise ModelError(f"a {model.distortion_model} camera has no OpenCV fisheye parameters")
+    return OpenCVFisheye(opencv_camera_matrix(model), model.k[1:] / model.k[0])
+
+
+def opencv_camera_matrix(model: CameraModel) -> FloatArray:
+    """(3, 3) OpenCV's K = [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] of any model."""
     fx, fy = model.focal_px
-    camera_matrix = np.array(
-        [[fx, 0.0, model.principal_point[0]], [0.0, fy, model.principal_point[1]], [0.0, 0.0, 1.0]]
-    )
-    return OpenCVFisheye(camera_matrix, model.k[1:] / model.k[0])
+    return np.array([[fx, 0.0, model.principal_point[0]], [0.0, fy, model.principal_point[1]], [0.0, 0.0, 1.0]])
+
+
+class OpenCVCamera(NamedTuple):
+    """A camera in OpenCV's (and ROS camera_info's) terms.
+
+    Attributes:
+        distortion_model: the ROS name: ``equidistant`` (``cv2.fisheye``), ``plumb_bob`` or
+            ``rational_polynomial`` (``cv2.projectPoints``).
+        camera_matrix: (3, 3) K.
+        distortion: D: 4 (equidistant), 5 (plumb_bob: k1, k2, p1, p2, k3) or 8 (rational_polynomial).
+    """
+
+    distortion_model: str
+    camera_matrix: FloatArray
+    distortion: FloatArray
+
+
+def to_opencv(model: CameraModel) -> OpenCVCamera:
+    """Exact OpenCV parameters of any model, in its own distortion model."""
+    if model.is_pinhole:
+        rational = model.distortion_model == RATIONAL_POLYNOMIAL
+        distortion = pinhole.opencv_distortion(model.k, model.lens_vector(), rational)
+        return OpenCVCamera(model.distortion_model, opencv_camera_matrix(model), distortion)
+    fisheye = to_opencv_fisheye(model)
+    return OpenCVCamera(EQUIDISTANT, fisheye.camera_matrix, fisheye.distortion)
 
 
 def from_opencv_fisheye(
@@ -441,3 +576,18 @@ def from_opencv_fisheye(
     k1 = camera_matrix[0, 0] / m[0]
     k = np.concatenate([[k1], k1 * np.asarray(distortion, dtype=np.float64).ravel()[:4]])
     return CameraModel(k, m, camera_matrix[:2, 2], image_size)
+
+
+def from_opencv_pinhole(
+    camera_matrix: FloatArray,
+    distortion: FloatArray,
+    m: FloatArray,
+    image_size: tuple[int, int],
+    distortion_model: str = PLUMB_BOB,
+) -> CameraModel:
+    """The exact model of OpenCV pinhole parameters (D = k1, k2, p1, p2[, k3[, k4, k5, k6]]) for a pixel
+    density m (px/mm; fx = k1 m_u)."""
+    camera_matrix = np.asarray(camera_matrix, dtype=np.float64)
+    m = np.asarray(m, dtype=np.float64)
+    k, extra = pinhole.from_opencv_distortion(float(camera_matrix[0, 0] / m[0]), distortion)
+    return CameraModel(k, m, camera_matrix[:2, 2], image_size, distortion_model, extra)
