@@ -17,8 +17,9 @@ from wand_calib_ros.core.bundle_adjustment import (
 )
 from wand_calib_ros.core.camera_model import (
     CameraModel,
-    inverse_radius,
+    angle_of_radius,
     max_image_radius_mm,
+    radial_basis,
 )
 from wand_calib_ros.core.gating import VIEW_GATE_SIGMAS
 from wand_calib_ros.core.model_order import FixedParameters, free_mask
@@ -44,7 +45,7 @@ COVERAGE_FRACTION = 0.8
 
 def radial_std_px(model: CameraModel, covariance: FloatArray, theta: float) -> float:
     """Standard deviation (px) of the image radius m*r(theta) from the (5, 5) covariance of k1..k5."""
-    gradient = float(np.max(model.m)) * theta ** (2 * np.arange(5) + 1)
+    gradient = float(np.max(model.m)) * radial_basis(model, theta)
     return float(np.sqrt(max(float(gradient @ covariance @ gradient), 0.0)))
 
 
@@ -67,13 +68,15 @@ def coverage_warnings(
             f"{spec.name}: the wand covered only {100 * covered:.0f} % of the image ({COVERAGE_GRID}x{COVERAGE_GRID} "
             "cells); wave it through the rest of the view"
         )
+    if spec.holds_intrinsics:  # given and held: nothing about its lens is extrapolated from these views
+        return out
     band = radial_std_px(model, result.camera_block(camera, slice(0, 5)), max_theta)
     if band > WEAK_CURVE_PX:
         out.append(
             f"{spec.name}: the distortion curve is uncertain by {band:.1f} px at {np.degrees(max_theta):.0f} deg, "
             "the widest angle observed; add wand placements near the image border"
         )
-    image_theta = float(inverse_radius(model.k, np.array(max_image_radius_mm(model))))
+    image_theta = float(angle_of_radius(model, np.array(max_image_radius_mm(model))))
     reach = min(spec.max_view_angle, image_theta if np.isfinite(image_theta) else spec.max_view_angle)
     if max_theta < COVERAGE_FRACTION * reach:
         out.append(
@@ -141,7 +144,7 @@ def assemble(
                 std,
                 float(np.degrees(max_theta[c])),
                 initial_projections[c],
-                tuple(f"k{i + 1}" for i in sorted(fixed.per_camera[c])),
+                tuple(CAMERA_PARAM_NAMES[i] for i in sorted(fixed.per_camera[c])),
                 views,
                 int(rejected_views[c]),
                 result.camera_block(c, slice(0, 5)).copy(),

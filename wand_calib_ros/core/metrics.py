@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.camera_model import CameraModel, inverse_radius, radius
+from wand_calib_ros.core.camera_model import CameraModel, angle_of_radius, radius_mm
 from wand_calib_ros.core.gating import ac_length_errors
 from wand_calib_ros.core.geometry import Pose, rotation_error_deg, translation_error
 from wand_calib_ros.core.placements import triangulate_placements
@@ -46,9 +46,9 @@ def curve_error_px(model: CameraModel, true_model: CameraModel) -> float:
     """RMS (px) of m_u (r(theta) - r_true(theta)) for theta up to where the true image radius reaches half
     the image's shorter side (the inscribed circle: every direction of the image sees it)."""
     inscribed = 0.5 * min(true_model.image_size) / float(true_model.m[0])
-    limit = float(inverse_radius(true_model.k, np.array(inscribed)))
+    limit = float(angle_of_radius(true_model, np.array(inscribed)))
     theta = np.linspace(0.0, limit if np.isfinite(limit) else 0.5, CURVE_SAMPLES)
-    return float(true_model.m[0] * np.sqrt(np.mean((radius(model.k, theta) - radius(true_model.k, theta)) ** 2)))
+    return float(true_model.m[0] * np.sqrt(np.mean((radius_mm(model, theta) - radius_mm(true_model, theta)) ** 2)))
 
 
 def camera_errors(model: CameraModel, pose: Pose, true_model: CameraModel, true_pose: Pose) -> CameraErrors:

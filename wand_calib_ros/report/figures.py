@@ -13,7 +13,7 @@ import networkx as nx
 import numpy as np
 from matplotlib.figure import Figure
 
-from wand_calib_ros.core.camera_model import radius
+from wand_calib_ros.core.camera_model import radial_basis, radius_mm
 from wand_calib_ros.core.intrinsics_init import PROJECTIONS
 from wand_calib_ros.report.analysis import ReportData
 
@@ -120,14 +120,14 @@ def distortion_curves(data: ReportData) -> Figure:
     ):
         theta = np.linspace(0.0, spec.max_view_angle, 200)
         scale = float(np.max(model.m))
-        fitted = scale * radius(model.k, theta)
+        fitted = scale * radius_mm(model, theta)
         corner_px = 0.5 * float(np.hypot(*spec.image_size))  # the image's reach from its centre
         top_px = 1.2 * max(corner_px, float(np.nanmax(np.abs(fitted))))
         entry = data.document["cameras"][name]
         covariance = np.array(
             entry.get("radial_covariance", np.diag([entry["std"].get(f"k{i + 1}", 0.0) ** 2 for i in range(5)]))
         )
-        powers = theta[:, None] ** (2 * np.arange(5) + 1)
+        powers = np.stack([radial_basis(model, float(t)) for t in theta])  # d r / d k1..k5
         band = 2 * scale * np.sqrt(np.clip(np.einsum("ni,ij,nj->n", powers, covariance, powers), 0, None))
         top, bottom = axes[0, c], axes[1, c]
         for label, function in PROJECTIONS.items():

@@ -19,7 +19,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.camera_model import CameraModel, inverse_radius, unproject
+from wand_calib_ros.core.camera_model import CameraModel, angle_of_radius, unproject
 from wand_calib_ros.io.errors import ExportError
 from wand_calib_ros.io.export import ExportedCamera
 
@@ -61,7 +61,7 @@ def coefficients(camera: ExportedCamera) -> FloatArray:
     model = camera.model
     focal, error = pinhole_focal(model)
     if not error <= MAX_PINHOLE_ERROR_PX:
-        reach = float(np.degrees(inverse_radius(model.k, np.array(0.5 * np.hypot(*model.image_size) / model.m[0]))))
+        reach = float(np.degrees(angle_of_radius(model, np.array(0.5 * np.hypot(*model.image_size) / model.m[0]))))
         how = "reaches 90 deg off axis" if not np.isfinite(error) else f"differs from any pinhole by {error:.1f} px"
         raise ExportError(
             f"camera {camera.name}: DLT coefficients describe distortion-free pinhole cameras; its lens {how} "
