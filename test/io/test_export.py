@@ -18,11 +18,13 @@ from wand_calib_ros.io.export import ExportedCamera, export
 from wand_calib_ros.io.result_yaml import camera_info_dict
 from wand_calib_ros.sim.scenarios import SCENARIOS
 
-RIGS = ["mixed3", "ring6"]
+#: mixed3 with plumb_bob lenses: a fisheye and two plumb_bob cameras in one file.
+RIGS = ["mixed3", "ring6", "mixed3:plumb_bob"]
 
 
 def _cameras(name: str) -> list[ExportedCamera]:
-    return [ExportedCamera(c.spec.name, c.model, c.pose) for c in SCENARIOS[name]().cameras]
+    scenario = SCENARIOS[name.split(":")[0]](pinhole=True) if name.endswith(":plumb_bob") else SCENARIOS[name]()
+    return [ExportedCamera(c.spec.name, c.model, c.pose) for c in scenario.cameras]
 
 
 def _points_seen_by(camera: ExportedCamera, rng: np.random.Generator, n: int = 200) -> np.ndarray:
@@ -53,13 +55,17 @@ def test_opencv_file_storage_projects_with_cv2_fisheye_as_we_do(tmp_path: Path, 
         storage = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
         k, d = storage.getNode("K").mat(), storage.getNode("D").mat()
         rvec, t, r = storage.getNode("rvec").mat(), storage.getNode("T").mat(), storage.getNode("R").mat()
-        assert storage.getNode("camera_model").string() == "fisheye"
+        kind = storage.getNode("camera_model").string()
+        assert kind == ("pinhole" if camera.model.is_pinhole else "fisheye")
+        if camera.model.is_pinhole:
+            assert storage.getNode("distortion_model").string() == camera.model.distortion_model
         assert storage.getNode("reference_camera").string() == cameras[0].name
         assert int(storage.getNode("image_width").real()) == camera.model.image_size[0]
         storage.release()
         assert np.allclose(cv2.Rodrigues(rvec)[0], r, atol=1e-12)
         points = _points_seen_by(camera, rng)
-        theirs, _ = cv2.fisheye.projectPoints(points.reshape(-1, 1, 3), rvec, t, k, d)
+        opencv_project = cv2.projectPoints if kind == "pinhole" else cv2.fisheye.projectPoints
+        theirs, _ = opencv_project(points.reshape(-1, 1, 3), rvec, t, k, d)
         assert np.max(np.abs(theirs.reshape(-1, 2) - _ours(camera, points))) < 1e-6
 
 
@@ -69,7 +75,9 @@ def _triangulate(calibration: dict, keys: list[str], pixels: list[np.ndarray]) -
     for key, uv in zip(keys, pixels, strict=True):
         cam = calibration[key]
         matrix, dist = np.array(cam["matrix"]), np.array(cam["distortions"])
-        normalised = cv2.fisheye.undistortPoints(uv.reshape(-1, 1, 2), matrix, dist).reshape(-1, 2)
+        undistort = cv2.fisheye.undistortPoints if cam["fisheye"] else cv2.undistortPointsIter
+        criteria = () if cam["fisheye"] else (None, None, (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-12))
+        normalised = undistort(uv.reshape(-1, 1, 2), matrix, dist, *criteria).reshape(-1, 2)
         extrinsic = np.hstack([cv2.Rodrigues(np.array(cam["rotation"]))[0], np.array(cam["translation"])[:, None]])
         rows.append((normalised, extrinsic))
     out = []
@@ -87,12 +95,14 @@ def test_anipose_toml_projects_and_triangulates_the_wand_as_we_do(tmp_path: Path
     calibration = tomllib.loads(path.read_text())
     keys = sorted(k for k in calibration if k != "metadata")  # aniposelib's load order
     assert [calibration[k]["name"] for k in keys] == [c.name for c in cameras]
-    assert calibration["metadata"]["units"] == "mm" and all(calibration[k]["fisheye"] for k in keys)
+    assert calibration["metadata"]["units"] == "mm"
+    assert [calibration[k]["fisheye"] for k in keys] == [not c.model.is_pinhole for c in cameras]
     rng = np.random.default_rng(1)
     for key, camera in zip(keys, cameras, strict=True):
         entry = calibration[key]
         points = _points_seen_by(camera, rng)
-        theirs, _ = cv2.fisheye.projectPoints(  # aniposelib's FisheyeCamera.project
+        opencv_project = cv2.fisheye.projectPoints if entry["fisheye"] else cv2.projectPoints
+        theirs, _ = opencv_project(  # aniposelib's FisheyeCamera.project (Camera.project for pinholes)
             points.reshape(-1, 1, 3),
             np.array(entry["rotation"]),
             np.array(entry["translation"]),
@@ -112,10 +122,18 @@ def test_anipose_toml_projects_and_triangulates_the_wand_as_we_do(tmp_path: Path
 
 
 def _kalibr_project(entry: dict, points_in_camera: np.ndarray) -> np.ndarray:
-    """Kalibr's pinhole camera with equidistant distortion (its documented model)."""
+    """Kalibr's pinhole camera with equidistant or radtan distortion (its documented models)."""
     fu, fv, pu, pv = entry["intrinsics"]
-    k1, k2, k3, k4 = entry["distortion_coeffs"]
     x, y, z = points_in_camera.T
+    if entry["distortion_model"] == "radtan":
+        p1, p2 = entry["distortion_coeffs"][2:]
+        a, b = x / z, y / z
+        r2 = a * a + b * b
+        radial = 1 + entry["distortion_coeffs"][0] * r2 + entry["distortion_coeffs"][1] * r2 * r2
+        xd = a * radial + 2 * p1 * a * b + p2 * (r2 + 2 * a * a)
+        yd = b * radial + p1 * (r2 + 2 * b * b) + 2 * p2 * a * b
+        return np.column_stack([fu * xd + pu, fv * yd + pv])
+    k1, k2, k3, k4 = entry["distortion_coeffs"]
     r = np.hypot(x, y)
     theta = np.arctan2(r, z)
     theta_d = theta * (1 + k1 * theta**2 + k2 * theta**4 + k3 * theta**6 + k4 * theta**8)
@@ -133,7 +151,8 @@ def test_kalibr_camchain_field_by_field(tmp_path: Path, rig: str) -> None:
     pose_of_previous = Pose.identity()  # cam0 is the reference
     for index, camera in enumerate(cameras):
         entry = chain[f"cam{index}"]
-        assert entry["camera_model"] == "pinhole" and entry["distortion_model"] == "equidistant"
+        kind = "radtan" if camera.model.is_pinhole else "equidistant"
+        assert entry["camera_model"] == "pinhole" and entry["distortion_model"] == kind
         assert len(entry["intrinsics"]) == 4 and len(entry["distortion_coeffs"]) == 4
         assert entry["resolution"] == list(camera.model.image_size)
         assert entry["rostopic"] == f"/{camera.name}/image_raw"
@@ -149,6 +168,18 @@ def test_kalibr_camchain_field_by_field(tmp_path: Path, rig: str) -> None:
         pose_of_previous = pose
         points = _points_seen_by(camera, rng)
         assert np.max(np.abs(_kalibr_project(entry, camera.pose.apply(points)) - _ours(camera, points))) < 1e-6
+
+
+def test_kalibr_refuses_a_plumb_bob_k3_by_name(tmp_path: Path) -> None:
+    cameras = _cameras("mixed3:plumb_bob")
+    model = cameras[1].model
+    with_k3 = model.with_intrinsic_vector(model.intrinsic_vector() + np.r_[0, 0, 0, 0.01 * model.k[0], 0, 0, 0])
+    cameras[1] = ExportedCamera(cameras[1].name, with_k3, cameras[1].pose)
+    with pytest.raises(
+        ExportError, match=r"camera cam1: Kalibr's radtan model has k1, k2, p1, p2 only and its k3 is 0\.01"
+    ):
+        export(cameras, "kalibr", tmp_path)
+    assert not list(tmp_path.iterdir())
 
 
 def test_camera_info_export_is_the_ros_document(tmp_path: Path) -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -9,11 +10,21 @@ import pytest
 import yaml
 from rigs import scenario_data, timed_take
 
-from wand_calib_ros.core.camera_model import to_opencv_fisheye
+from wand_calib_ros.core.camera_model import (
+    PLUMB_BOB,
+    RATIONAL_POLYNOMIAL,
+    CameraModel,
+    from_opencv_pinhole,
+    project,
+    to_opencv_fisheye,
+)
 from wand_calib_ros.core.pipeline import calibrate
+from wand_calib_ros.core.rig import RigSpec, WandSpec
 from wand_calib_ros.io.errors import FormatError
-from wand_calib_ros.io.result_yaml import read_result, write_calibration, write_result, yaml_text
+from wand_calib_ros.io.result_yaml import camera_info_dict, read_result, write_calibration, write_result, yaml_text
+from wand_calib_ros.io.rig_yaml import load_rig, save_rig
 from wand_calib_ros.sim.clocks import TakeOptions
+from wand_calib_ros.sim.scenarios import SCENARIOS, simulate
 
 
 @pytest.fixture(scope="module")
@@ -103,3 +114,74 @@ def test_files_are_the_text_pyyaml_itself_writes(tmp_path: Path, result) -> None
     assert paths[0].read_text() == yaml.safe_dump(
         yaml.safe_load(paths[0].read_text()), sort_keys=False, default_flow_style=None, width=120
     )
+
+
+@pytest.fixture(scope="module")
+def pinhole_result():  # type: ignore[no-untyped-def]
+    """The mixed rig with a plumb_bob conventional camera, calibrated in that model (the rig says so)."""
+    scenario = SCENARIOS["mixed"](pinhole=True)
+    data = simulate(scenario, 1.0, np.random.default_rng(5))
+    rig = dataclasses.replace(
+        scenario.rig,
+        cameras=(scenario.rig.cameras[0], dataclasses.replace(scenario.rig.cameras[1], camera_model=PLUMB_BOB)),
+    )
+    return calibrate(rig, data.observations)
+
+
+def _same_camera(a: CameraModel, b: CameraModel) -> None:
+    """Two models of one camera: the same model, parameters to the last bits, projections to 1e-9 px."""
+    assert a.distortion_model == b.distortion_model and a.image_size == b.image_size
+    for x, y in ((a.k, b.k), (a.principal_point, b.principal_point), (a.lens_vector(), b.lens_vector())):
+        assert np.allclose(x, y, rtol=1e-15, atol=1e-300)
+    rays = np.random.default_rng(0).normal(size=(200, 3)) * [0.3, 0.3, 0.0] + [0.0, 0.0, 1.0]
+    assert np.abs(project(a, rays) - project(b, rays)).max() < 1e-9
+
+
+def test_a_plumb_bob_camera_round_trips_through_the_result_and_camera_info(tmp_path: Path, pinhole_result) -> None:  # type: ignore[no-untyped-def]
+    result = pinhole_result
+    assert result.camera("cam1").model.distortion_model == PLUMB_BOB
+    paths = write_calibration(result, tmp_path / "result.yaml", tmp_path / "info")
+    _, cameras = read_result(paths[0])
+    for camera in result.cameras:  # read back exactly
+        back = cameras[camera.name].model
+        assert back.distortion_model == camera.model.distortion_model
+        assert np.array_equal(back.k, camera.model.k) and np.array_equal(back.lens_vector(), camera.model.lens_vector())
+    entry = yaml.safe_load(paths[0].read_text())["cameras"]["cam1"]
+    assert entry["camera_model"] == PLUMB_BOB and "opencv_equidistant" not in entry
+    assert entry["opencv"]["distortion_model"] == PLUMB_BOB and len(entry["opencv"]["distortion"]) == 5
+    info = yaml.safe_load((tmp_path / "info" / "cam1.yaml").read_text())
+    assert info["distortion_model"] == PLUMB_BOB and info["distortion_coefficients"]["cols"] == 5
+    # a driver's camera_info is what a rig description can give back: the same camera
+    scenario = SCENARIOS["mixed"](pinhole=True)
+    rig = dataclasses.replace(scenario.rig, cameras=tuple(
+        dataclasses.replace(spec, intrinsics=result.camera(spec.name).model) for spec in scenario.rig.cameras
+    ))  # fmt: skip
+    save_rig(rig, tmp_path / "cameras.yaml")
+    text = (tmp_path / "cameras.yaml").read_text()
+    document = yaml.safe_load(text)
+    document["cameras"][1]["intrinsics"] = {"camera_info": str(tmp_path / "info" / "cam1.yaml")}
+    (tmp_path / "from_info.yaml").write_text(yaml.safe_dump(document))
+    for path in (tmp_path / "cameras.yaml", tmp_path / "from_info.yaml"):
+        loaded = load_rig(path).cameras[1].intrinsics
+        assert loaded is not None
+        _same_camera(loaded, result.camera("cam1").model)
+
+
+def test_a_rational_polynomial_camera_info_round_trips(tmp_path: Path) -> None:
+    camera_matrix = np.array([[800.0, 0.0, 322.0], [0.0, 803.0, 251.0], [0.0, 0.0, 1.0]])
+    distortion = np.array([-0.2, 0.05, 1e-3, -2e-3, 0.01, 0.1, 0.02, 0.003])
+    spec = SCENARIOS["conventional"]().rig.cameras[0]
+    m = np.array([spec.m[0], spec.m[0] * 803 / 800])
+    model = from_opencv_pinhole(camera_matrix, distortion, m, spec.image_size, RATIONAL_POLYNOMIAL)
+    (tmp_path / "cam0.yaml").write_text(yaml_text(camera_info_dict("cam0", model)))
+    rig = RigSpec(WandSpec.from_lengths(400, 200), (dataclasses.replace(spec, intrinsics=model),))
+    save_rig(rig, tmp_path / "cameras.yaml")
+    document = yaml.safe_load((tmp_path / "cameras.yaml").read_text())
+    assert document["cameras"][0]["intrinsics"]["distortion_model"] == RATIONAL_POLYNOMIAL
+    document["cameras"][0]["intrinsics"] = "cam0.yaml"
+    (tmp_path / "cameras.yaml").write_text(yaml.safe_dump(document))
+    loaded = load_rig(tmp_path / "cameras.yaml").cameras[0].intrinsics
+    assert loaded is not None
+    _same_camera(loaded, model)
+    info = yaml.safe_load((tmp_path / "cam0.yaml").read_text())
+    assert np.allclose(info["distortion_coefficients"]["data"], distortion, rtol=1e-15)

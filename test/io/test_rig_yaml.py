@@ -135,9 +135,24 @@ def test_known_intrinsics_round_trip_and_come_from_a_camera_info_file(tmp_path: 
             "{K: [800, 0, 320, 0, 800, 240, 0, 0, 1], D: [0, 0, 0, 0], distortion_model: kb8}",
             "distortion model 'kb8' is not supported",
         ),
-        (
-            "{K: [300, 0, 320, 0, 300, 240, 0, 0, 1], D: [-0.05, 0, 0.002, 0], distortion_model: plumb_bob}",
+        (  # converted to the equidistant model only where the rig asks for it, and only when it converts
+            "{K: [300, 0, 320, 0, 300, 240, 0, 0, 1], D: [-0.05, 0, 0.002, 0], distortion_model: plumb_bob}, "
+            "camera_model: equidistant",
             "camera 'cam0': the plumb_bob intrinsics differ",
+        ),
+        (
+            "{K: [300, 0, 320, 0, 300, 240, 0, 0, 1], D: [-0.05, 0, 0, 0, 0, 0, 0, 0], distortion_model: plumb_bob}",
+            "plumb_bob distortion has 4 or 5 (k1, k2, p1, p2[, k3]), got 8",
+        ),
+        (
+            "{K: [300, 0, 320, 0, 300, 240, 0, 0, 1], D: [-0.05, 0, 0, 0], distortion_model: rational_polynomial}",
+            "rational_polynomial distortion has 8 coefficients",
+        ),
+        ("{K: [800, 0, 320, 0, 800, 240, 0, 0, 1], D: [0, 0, 0, 0]}, camera_model: kb8", "camera_model must be one of"),
+        (
+            "{K: [800, 0, 320, 0, 800, 240, 0, 0, 1], D: [0, 0, 0, 0, 0], distortion_model: plumb_bob}, "
+            "camera_model: plumb_bob",
+            "camera_model plumb_bob is a pinhole model, which images no ray at 90 deg or more",
         ),
         ("missing.yaml", "camera 'cam0' intrinsics: no such camera_info file"),
         ("wrong_size.yaml", "is for 1280x1024 images, the camera's image_size is 640x480"),

@@ -40,7 +40,7 @@ class CalibrationFiles:
 
     Attributes:
         result: ``result.yaml`` (the core's result contract).
-        camera_info: one camera_info YAML per camera (``equidistant``).
+        camera_info: one camera_info YAML per camera (in its own model).
         report: the HTML report, or None when not asked for (or it failed).
         exports: the files of the other tools' formats asked for (``export/<format>/``).
         export_failures: why a format asked for could not express this calibration (e.g. a fisheye

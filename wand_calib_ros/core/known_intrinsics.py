@@ -1,11 +1,15 @@
-"""Intrinsics a user already has (a board calibration) as this package's camera model.
+"""Intrinsics a user already has (a board calibration) as this package's camera models.
 
-OpenCV's fisheye (ROS ``equidistant``) parameters convert exactly
-(:func:`wand_calib_ros.core.camera_model.from_opencv_fisheye`). OpenCV's pinhole model with radial
-and tangential distortion (ROS ``plumb_bob``, Kalibr ``radtan``; ``rational_polynomial`` too) maps
-theta to the radius f * rho_d(tan theta): its radial part is fitted by r(theta) = k1 theta + ... +
-k5 theta^9 over the angles the image reaches, and converted only when the fit and the neglected
-tangential terms stay below :data:`MAX_CONVERSION_ERROR_PX` everywhere in the image.
+Each is taken in its own model, exactly: OpenCV's fisheye (ROS ``equidistant``) parameters as the
+Kannala-Brandt model (:func:`wand_calib_ros.core.camera_model.from_opencv_fisheye`), OpenCV's pinhole
+model with radial and tangential distortion (ROS ``plumb_bob``, Kalibr ``radtan``,
+``rational_polynomial``) as the pinhole models (:func:`wand_calib_ros.core.camera_model.from_opencv_pinhole`).
+
+Only where the rig description asks for the equidistant model of a camera whose intrinsics are given
+in a pinhole model (``camera_model: equidistant``) is one converted to the other: the radial part
+f * rho_d(tan theta) is fitted by r(theta) = k1 theta + ... + k5 theta^9 over the angles the image
+reaches, and accepted only when the fit and the neglected tangential terms stay below
+:data:`MAX_CONVERSION_ERROR_PX` everywhere in the image.
 """
 
 from __future__ import annotations
@@ -13,14 +17,22 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.camera_model import CameraModel, from_opencv_fisheye, radius_derivative
+from wand_calib_ros.core.camera_model import (
+    EQUIDISTANT,
+    PLUMB_BOB,
+    RATIONAL_POLYNOMIAL,
+    CameraModel,
+    from_opencv_fisheye,
+    from_opencv_pinhole,
+    radius_derivative,
+)
 from wand_calib_ros.core.errors import ModelError
 
 FloatArray = NDArray[np.float64]
 
-#: Distortion models accepted, by their ROS (and Kalibr) names.
-EQUIDISTANT = ("equidistant", "fisheye")
-PINHOLE_RADTAN = ("plumb_bob", "radtan", "rational_polynomial")
+#: Distortion models accepted, by their ROS (and Kalibr) names, and the camera model each names.
+EQUIDISTANT_NAMES = (EQUIDISTANT, "fisheye")
+PINHOLE_RADTAN = (PLUMB_BOB, "radtan", RATIONAL_POLYNOMIAL)
 
 #: Largest image error (px) a conversion from a pinhole model may introduce.
 MAX_CONVERSION_ERROR_PX = 0.1
@@ -107,8 +119,8 @@ def from_pinhole_radtan(
         what = "tangential terms" if tangential_px >= fit_px else "radial shape"
         raise ModelError(
             f"{name}: the plumb_bob intrinsics differ from the nearest equidistant model by {error:.2f} px in the "
-            f"image ({what}; at most {MAX_CONVERSION_ERROR_PX} px): calibrate the intrinsics with an equidistant "
-            "(fisheye) model, or let wand_calib estimate them"
+            f"image ({what}; at most {MAX_CONVERSION_ERROR_PX} px): drop camera_model: equidistant to calibrate "
+            "the camera in the plumb_bob model the intrinsics are given in"
         )
     model = CameraModel(k, np.array([m[0], m[0] * fy / fx]), K[:2, 2], image_size)
     return model, error
@@ -125,7 +137,7 @@ def from_equidistant(
     return from_opencv_fisheye(K, d, np.array([m[0], m[0] * K[1, 1] / K[0, 0]]), image_size)
 
 
-def known_model(
+def from_pinhole(
     distortion_model: str,
     camera_matrix: FloatArray,
     distortion: FloatArray,
@@ -134,7 +146,43 @@ def known_model(
     *,
     name: str = "camera",
 ) -> CameraModel:
+    """The exact pinhole model of OpenCV parameters (plumb_bob: 4 or 5 coefficients; rational_polynomial:
+    8, or 5 with k4..k6 = 0); m_v follows K's fy/fx (the rig's m_u is kept).
+
+    Raises:
+        ModelError: a coefficient count the model does not have.
+    """
+    K = np.asarray(camera_matrix, dtype=np.float64)
+    d = np.asarray(distortion, dtype=np.float64).ravel()
+    rational = distortion_model == RATIONAL_POLYNOMIAL
+    if d.size not in ((5, 8) if rational else (4, 5)):
+        counts = "8 coefficients (k1, k2, p1, p2, k3, k4, k5, k6)" if rational else "4 or 5 (k1, k2, p1, p2[, k3])"
+        raise ModelError(f"{name}: {distortion_model} distortion has {counts}, got {d.size}")
+    m_camera = np.array([m[0], m[0] * K[1, 1] / K[0, 0]])
+    return from_opencv_pinhole(K, d, m_camera, image_size, RATIONAL_POLYNOMIAL if rational else PLUMB_BOB)
+
+
+def known_model(
+    distortion_model: str,
+    camera_matrix: FloatArray,
+    distortion: FloatArray,
+    m: FloatArray,
+    image_size: tuple[int, int],
+    *,
+    name: str = "camera",
+    camera_model: str | None = None,
+) -> CameraModel:
     """The camera model of given intrinsics in any accepted distortion model (see module docstring).
+
+    Args:
+        distortion_model: the intrinsics' ROS (or Kalibr) distortion model name.
+        camera_matrix, distortion: OpenCV's K and D.
+        m: (2,) the rig's pixel densities, px/mm.
+        image_size: (width, height) px.
+        name: the camera, for messages.
+        camera_model: the model the rig description asks the camera to be calibrated in (None: the
+            intrinsics' own); ``equidistant`` for pinhole intrinsics converts them (within
+            :data:`MAX_CONVERSION_ERROR_PX`).
 
     Raises:
         ModelError: an unknown distortion model, or one that does not convert (the message says why).
@@ -144,11 +192,24 @@ def known_model(
         raise ModelError(f"{name}: K must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0 (no skew)")
     if not np.all(np.isfinite(np.asarray(distortion, dtype=np.float64))):
         raise ModelError(f"{name}: distortion coefficients must be finite numbers")
-    if distortion_model in EQUIDISTANT:
+    if distortion_model in EQUIDISTANT_NAMES:
+        if camera_model not in (None, EQUIDISTANT):
+            raise ModelError(
+                f"{name}: its intrinsics are given in the equidistant model but camera_model is {camera_model}: "
+                "give them in that model, or drop camera_model"
+            )
         return from_equidistant(K, distortion, m, image_size)
     if distortion_model in PINHOLE_RADTAN:
-        return from_pinhole_radtan(K, distortion, m, image_size, name=name)[0]
+        if camera_model == EQUIDISTANT:
+            return from_pinhole_radtan(K, distortion, m, image_size, name=name)[0]
+        own = RATIONAL_POLYNOMIAL if distortion_model == RATIONAL_POLYNOMIAL else PLUMB_BOB
+        if camera_model == PLUMB_BOB and own == RATIONAL_POLYNOMIAL:
+            raise ModelError(
+                f"{name}: its intrinsics are given in the rational_polynomial model but camera_model is plumb_bob: "
+                "give them in that model, or drop camera_model"
+            )
+        return from_pinhole(own if camera_model is None else camera_model, K, distortion, m, image_size, name=name)
     raise ModelError(
-        f"{name}: distortion model {distortion_model!r} is not supported; give {' or '.join(EQUIDISTANT[:1])} "
-        f"(OpenCV fisheye) or {', '.join(PINHOLE_RADTAN)} (converted when within {MAX_CONVERSION_ERROR_PX} px)"
+        f"{name}: distortion model {distortion_model!r} is not supported; give {EQUIDISTANT} (OpenCV fisheye), "
+        f"{PLUMB_BOB} (radtan) or {RATIONAL_POLYNOMIAL}"
     )

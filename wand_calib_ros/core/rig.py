@@ -111,6 +111,9 @@ class CameraSpec:
         intrinsics: intrinsics the user already has (a board calibration), None: estimated.
         intrinsics_fixed: the given intrinsics are held fixed (only the pose is estimated); False:
             they are the start of the estimate.
+        camera_model: the camera model to calibrate it in (one of
+            :data:`~wand_calib_ros.core.camera_model.CAMERA_MODELS`); None: the given intrinsics' own
+            model, else the one the data choose (:mod:`wand_calib_ros.core.lens_choice`).
     """
 
     name: str
@@ -122,6 +125,7 @@ class CameraSpec:
     readout_ms: float | None = None
     intrinsics: CameraModel | None = None
     intrinsics_fixed: bool = True
+    camera_model: str | None = None
 
     @property
     def holds_intrinsics(self) -> bool:

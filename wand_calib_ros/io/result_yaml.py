@@ -5,14 +5,16 @@ The result contract::
     reference_camera: cam0
     cameras:
       cam0:
-        k: [k1, k2, k3, k4, k5]          # mm, r(theta) = k1 theta + k2 theta^3 + ...
+        camera_model: equidistant        # or plumb_bob, rational_polynomial (then also lens_terms)
+        k: [k1, k2, k3, k4, k5]          # mm, r(theta) = k1 theta + k2 theta^3 + ... (tan(theta) for pinholes)
         m: [mu, mv]                      # px/mm (fixed from the pixel size)
         principal_point: [u0, v0]        # px, OpenCV convention
         rotation: [[...], [...], [...]]  # X_cam = R X_ref + T
         translation: [tx, ty, tz]        # mm
         rms_reprojection_px: ...
         image_size: [w, h]
-        opencv_equidistant: {camera_matrix: 3x3, distortion: [D1..D4]}
+        opencv: {distortion_model: equidistant, camera_matrix: 3x3, distortion: [D1..D4]}
+        opencv_equidistant: {camera_matrix: 3x3, distortion: [D1..D4]}   # equidistant cameras only
         std: {k1: ..., u0: ..., rx: ..., tx: ..., time_offset_s: ...}
         time_offset_s: ...               # exposure = stamp - time_offset_s (time_offset_frames without stamps)
         rolling_shutter_readout_s: ...   # row v is exposed readout * v / H later (0: global shutter)
@@ -32,7 +34,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from wand_calib_ros.core.camera_model import CameraModel, to_opencv_fisheye
+from wand_calib_ros.core.camera_model import EQUIDISTANT, CameraModel, to_opencv
 from wand_calib_ros.core.errors import ModelError
 from wand_calib_ros.core.geometry import Pose
 from wand_calib_ros.core.result import CalibrationResult
@@ -48,6 +50,9 @@ CONVENTIONS = {
     "u = mu r cos(phi) + u0, v = mv r sin(phi) + v0",
     "equivalence": "exactly OpenCV fisheye / ROS 'equidistant': fx = k1 mu, fy = k1 mv, cx = u0, cy = v0, "
     "D = [k2, k3, k4, k5] / k1",
+    "pinhole_models": "plumb_bob / rational_polynomial cameras: r(s) = (k1 s + k2 s^3 + k3 s^5 + k4 s^7) / "
+    "(1 + d1 s^2 + d2 s^4 + d3 s^6), s = tan(theta), plus the tangential t1, t2 (mm; lens_terms = [t1, t2, d1, "
+    "d2, d3]): OpenCV's k1, k2, k3 = [k2, k3, k4] / k1, p1, p2 = [t1, t2] / k1, k4..k6 = d1..d3 (see opencv)",
     "identifiable": "only k1 mu, k1 mv and k_i / k1 are determined by images; m comes from the pixel size",
 }
 
@@ -59,19 +64,29 @@ def _floats(values: Any) -> Any:
 
 def camera_entry(model: CameraModel, pose: Pose) -> dict[str, Any]:
     """The geometric part of one camera's result entry."""
-    opencv = to_opencv_fisheye(model)
-    return {
+    opencv = to_opencv(model)
+    entry: dict[str, Any] = {
+        "camera_model": model.distortion_model,
         "k": _floats(model.k),
         "m": _floats(model.m),
         "principal_point": _floats(model.principal_point),
         "rotation": _floats(pose.rotation),
         "translation": _floats(pose.translation),
         "image_size": list(model.image_size),
-        "opencv_equidistant": {
+    }
+    if model.is_pinhole:
+        entry["lens_terms"] = _floats(model.lens_vector())
+    entry["opencv"] = {
+        "distortion_model": opencv.distortion_model,
+        "camera_matrix": _floats(opencv.camera_matrix),
+        "distortion": _floats(opencv.distortion),
+    }
+    if model.distortion_model == EQUIDISTANT:  # the key results had before the pinhole models
+        entry["opencv_equidistant"] = {
             "camera_matrix": _floats(opencv.camera_matrix),
             "distortion": _floats(opencv.distortion),
-        },
-    }
+        }
+    return entry
 
 
 def timing_keys(unit: str) -> dict[str, str]:
@@ -277,7 +292,14 @@ def read_result(path: str | Path) -> tuple[str, dict[str, CameraGeometry]]:
         for name, entry in data["cameras"].items():
             where = f"camera '{name}'"
             cameras[str(name)] = CameraGeometry(
-                CameraModel(entry["k"], entry["m"], entry["principal_point"], tuple(entry["image_size"])),
+                CameraModel(
+                    entry["k"],
+                    entry["m"],
+                    entry["principal_point"],
+                    tuple(entry["image_size"]),
+                    str(entry.get("camera_model", EQUIDISTANT)),
+                    entry.get("lens_terms"),
+                ),
                 Pose(entry["rotation"], entry["translation"]),
                 float(entry.get("time_offset_s", entry.get("time_offset_frames", 0.0))),
                 float(entry.get("rolling_shutter_readout_s", entry.get("rolling_shutter_readout_frames", 0.0))),
@@ -332,8 +354,9 @@ def read_world_poses(path: str | Path) -> dict[str, Pose] | None:
 
 
 def camera_info_dict(name: str, model: CameraModel) -> dict[str, Any]:
-    """A ROS camera_calibration style camera_info YAML document (``equidistant``)."""
-    opencv = to_opencv_fisheye(model)
+    """A ROS camera_calibration style camera_info YAML document in the camera's own model (``equidistant``,
+    ``plumb_bob`` or ``rational_polynomial``)."""
+    opencv = to_opencv(model)
     k = opencv.camera_matrix
     projection = np.hstack([k, np.zeros((3, 1))])
     return {
@@ -341,8 +364,8 @@ def camera_info_dict(name: str, model: CameraModel) -> dict[str, Any]:
         "image_height": int(model.image_size[1]),
         "camera_name": name,
         "camera_matrix": {"rows": 3, "cols": 3, "data": _floats(k.ravel())},
-        "distortion_model": "equidistant",
-        "distortion_coefficients": {"rows": 1, "cols": 4, "data": _floats(opencv.distortion)},
+        "distortion_model": opencv.distortion_model,
+        "distortion_coefficients": {"rows": 1, "cols": int(opencv.distortion.size), "data": _floats(opencv.distortion)},
         "rectification_matrix": {"rows": 3, "cols": 3, "data": _floats(np.eye(3).ravel())},
         "projection_matrix": {"rows": 3, "cols": 4, "data": _floats(projection.ravel())},
     }

@@ -5,6 +5,7 @@ wand: {L1: 400.0, L2: 200.0}        # mm, |AB| = L1, |BC| = L2, A-B-C collinear
 cameras:
   - {name: cam0, image_size: [640, 480], pixel_size_um: [5.6, 5.6],
      nominal_focal_mm: 1.8, max_view_angle_deg: 92.5, lens: fisheye,   # lens optional
+     camera_model: equidistant,                                        # optional: or plumb_bob, rational_polynomial
      readout_ms: 0.0,                                                  # optional: fixed rolling-shutter readout
      intrinsics: {K: [fx, 0, cx, 0, fy, cy, 0, 0, 1], D: [d1, d2, d3, d4],   # optional: known intrinsics
                   distortion_model: equidistant, fixed: true}}       # (or {camera_info: file.yaml}, or file.yaml)
@@ -25,9 +26,9 @@ from typing import Any
 import numpy as np
 import yaml
 
-from wand_calib_ros.core.camera_model import CameraModel, to_opencv_fisheye
+from wand_calib_ros.core.camera_model import CAMERA_MODELS, EQUIDISTANT, CameraModel, to_opencv
 from wand_calib_ros.core.errors import ModelError
-from wand_calib_ros.core.intrinsics_init import PROJECTIONS
+from wand_calib_ros.core.intrinsics_init import FISHEYE_PROJECTIONS, PROJECTIONS
 from wand_calib_ros.core.known_intrinsics import known_model
 from wand_calib_ros.core.rig import LENS_CLASSES, CameraSpec, RigSpec, WandSpec
 from wand_calib_ros.io.errors import FormatError
@@ -84,9 +85,10 @@ def _camera_info_intrinsics(path: Path, label: str, file: Any) -> dict[str, Any]
 
 
 def _intrinsics(
-    path: Path, label: str, value: Any, m: Any, image_size: tuple[int, int]
+    path: Path, label: str, value: Any, m: Any, image_size: tuple[int, int], camera_model: str | None
 ) -> tuple[CameraModel | None, bool]:
-    """A camera's known intrinsics (``intrinsics`` key) and whether they are held fixed."""
+    """A camera's known intrinsics (``intrinsics`` key, in ``camera_model`` if the camera names one) and
+    whether they are held fixed."""
     if value is None:
         return None, True
     if isinstance(value, str):
@@ -114,10 +116,24 @@ def _intrinsics(
         raise FormatError(path, f"{label} intrinsics D must be a list of numbers, got {given['D']!r}")
     D_values = np.array([_number(path, f"{label} intrinsics D", v, positive=False) for v in D])
     try:
-        model = known_model(model_name, K, D_values, np.asarray(m), image_size, name=label)
+        model = known_model(model_name, K, D_values, np.asarray(m), image_size, name=label, camera_model=camera_model)
     except ModelError as error:
         raise FormatError(path, f"intrinsics: {error}") from None
     return model, fixed
+
+
+def _camera_model(path: Path, label: str, value: Any, lens: str | None, angle: float) -> str | None:
+    """The ``camera_model`` key: one of CAMERA_MODELS; a pinhole model only for a lens that can be one."""
+    if value is None:
+        return None
+    if value not in CAMERA_MODELS:
+        raise FormatError(path, f"{label} camera_model must be one of {list(CAMERA_MODELS)}, got {value!r}")
+    if value != EQUIDISTANT and (lens == "fisheye" or lens in FISHEYE_PROJECTIONS or angle >= 90):
+        raise FormatError(
+            path, f"{label} camera_model {value} is a pinhole model, which images no ray at 90 deg or more: "
+            f"not for a fisheye lens (lens {lens}, max_view_angle_deg {angle:g}); use equidistant"
+        )  # fmt: skip
+    return str(value)
 
 
 def _wand(path: Path, wand_data: Any) -> WandSpec:
@@ -188,7 +204,8 @@ def parse_rig(data: Any, path: str | Path = "<rig>") -> RigSpec:
         pixel_size = _pair(path, f"{label} pixel_size_um", item["pixel_size_um"])
         size = (int(width), int(height))
         m = 1000.0 / np.asarray(pixel_size)
-        intrinsics, fixed = _intrinsics(path, label, item.get("intrinsics"), m, size)
+        camera_model = _camera_model(path, label, item.get("camera_model"), lens, angle)
+        intrinsics, fixed = _intrinsics(path, label, item.get("intrinsics"), m, size, camera_model)
         cameras.append(
             CameraSpec(
                 name=str(item["name"]),
@@ -200,6 +217,7 @@ def parse_rig(data: Any, path: str | Path = "<rig>") -> RigSpec:
                 readout_ms=readout,
                 intrinsics=intrinsics,
                 intrinsics_fixed=fixed,
+                camera_model=camera_model,
             )
         )
     names = [c.name for c in cameras]
@@ -230,12 +248,14 @@ def rig_to_dict(rig: RigSpec) -> dict[str, Any]:
             item["lens"] = spec.lens
         if spec.readout_ms is not None:
             item["readout_ms"] = float(spec.readout_ms)
+        if spec.camera_model is not None:
+            item["camera_model"] = spec.camera_model
         if spec.intrinsics is not None:
-            opencv = to_opencv_fisheye(spec.intrinsics)
+            opencv = to_opencv(spec.intrinsics)
             item["intrinsics"] = {
                 "K": [float(v) for v in opencv.camera_matrix.ravel()],
                 "D": [float(v) for v in opencv.distortion],
-                "distortion_model": "equidistant",
+                "distortion_model": opencv.distortion_model,
                 "fixed": bool(spec.intrinsics_fixed),
             }
         cameras.append(item)

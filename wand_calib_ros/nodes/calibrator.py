@@ -6,7 +6,7 @@ its own executor thread (diagnostics and images keep flowing). It answers at onc
 when a run is already in progress, and with what is missing or why the solve
 failed otherwise; on success with per camera RMS, the wand-length RMS and the
 result's path. It publishes per camera ``wand_calib/<cam>/camera_info``
-(sensor_msgs/CameraInfo, ``equidistant``) and ``wand_calib/<cam>/extrinsics``
+(sensor_msgs/CameraInfo, in the camera's model) and ``wand_calib/<cam>/extrinsics``
 (geometry_msgs/TransformStamped, parent = reference camera, or ``world_frame``
 once a floor was set), both transient-local, ``wand_calib/markers``
 (visualization_msgs/MarkerArray for RViz: the cameras' frustums and names, the newest wand

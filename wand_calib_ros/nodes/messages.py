@@ -75,7 +75,8 @@ def message_points(message: PolygonStamped, n_points: int = 3) -> NDArray[np.flo
 
 
 def camera_info_message(result: CalibrationResult, name: str, stamp: Time, frame_id: str | None = None) -> CameraInfo:
-    """sensor_msgs/CameraInfo (``equidistant``) exactly equivalent to a calibrated camera, in its tf frame
+    """sensor_msgs/CameraInfo exactly equivalent to a calibrated camera (in its own model: ``equidistant``,
+    ``plumb_bob`` or ``rational_polynomial``), in its tf frame
     ``frame_id`` (default its name)."""
     document = camera_info_dict(name, result.camera(name).model)
     info = CameraInfo()

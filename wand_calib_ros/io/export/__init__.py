@@ -1,10 +1,12 @@
 """A calibration in the formats of the tools users work with.
 
-Each format module turns the cameras of a result (intrinsics as OpenCV's fisheye model, which is
-ROS's ``equidistant``, and poses X_cam = R X_ref + T in mm) into text documents; :func:`export`
-writes them as one set. Every format keeps this package's projection exactly: a point projected with
-the exported parameters by the other tool's own code (``cv2.fisheye.projectPoints`` for OpenCV,
-aniposelib and Kalibr's equidistant model) lands on the pixel this package computes.
+Each format module turns the cameras of a result (intrinsics in OpenCV's terms: its fisheye model,
+which is ROS's ``equidistant``, or its pinhole model with radial-tangential distortion, ROS's
+``plumb_bob`` and ``rational_polynomial``; poses X_cam = R X_ref + T in mm) into text documents;
+:func:`export` writes them as one set. Every format keeps this package's projection exactly: a point
+projected with the exported parameters by the other tool's own code (``cv2.fisheye.projectPoints`` or
+``cv2.projectPoints`` for OpenCV, aniposelib, Kalibr's equidistant and radtan models) lands on the
+pixel this package computes; a format that has no place for a camera's model refuses it by name.
 
 Formats: ``opencv`` (a FileStorage YAML per camera), ``anipose`` (aniposelib / anipose / caliscope /
 freemocap ``calibration.toml``), ``kalibr`` (camchain YAML), ``camera_info`` (ROS, per camera),

@@ -4,14 +4,16 @@ One table per camera, ``[cam_NN]`` (zero-padded: aniposelib loads the tables in 
 with ``name``, ``size`` [width, height], ``matrix`` (K), ``distortions`` (cv2.fisheye k1..k4),
 ``rotation`` (Rodrigues vector, rad), ``translation`` (mm) and ``fisheye = true``, so that
 aniposelib's FisheyeCamera projects with ``cv2.fisheye.projectPoints(X, rotation, translation,
-matrix, distortions)``; then ``[metadata]`` (``adjusted``, ``units``, ``reference_camera``).
+matrix, distortions)``; a plumb_bob or rational_polynomial camera has ``fisheye = false`` and
+OpenCV's 5 or 8 ``distortions`` (k1, k2, p1, p2, k3[, k4, k5, k6]), which aniposelib's Camera projects
+with ``cv2.projectPoints``; then ``[metadata]`` (``adjusted``, ``units``, ``reference_camera``).
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 
-from wand_calib_ros.core.camera_model import to_opencv_fisheye
+from wand_calib_ros.core.camera_model import EQUIDISTANT, to_opencv
 from wand_calib_ros.io.export import ExportedCamera
 
 FILE = "calibration.toml"
@@ -22,7 +24,7 @@ def documents(cameras: Sequence[ExportedCamera]) -> dict[str, str]:
     width = max(2, len(str(len(cameras) - 1)))
     lines: list[str] = []
     for index, camera in enumerate(cameras):
-        opencv = to_opencv_fisheye(camera.model)
+        opencv = to_opencv(camera.model)
         lines += [
             f"[cam_{index:0{width}d}]",
             f'name = "{_escape(camera.name)}"',
@@ -31,7 +33,7 @@ def documents(cameras: Sequence[ExportedCamera]) -> dict[str, str]:
             f"distortions = {_array(opencv.distortion)}",
             f"rotation = {_array(camera.pose.rotvec)}",
             f"translation = {_array(camera.pose.translation)}",
-            "fisheye = true",
+            f"fisheye = {'true' if opencv.distortion_model == EQUIDISTANT else 'false'}",
             "",
         ]
     lines += [

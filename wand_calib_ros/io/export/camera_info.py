@@ -1,4 +1,4 @@
-"""ROS camera_info YAML per camera (``<camera>.yaml``, ``distortion_model: equidistant``), as the
+"""ROS camera_info YAML per camera (``<camera>.yaml``, ``distortion_model`` the camera's own model), as the
 camera_calibration package writes it and camera drivers load it."""
 
 from __future__ import annotations
