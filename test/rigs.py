@@ -9,6 +9,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wand_calib_ros.core.bundle_adjustment import (
+    CAMERA_PARAM_NAMES,
+    INTRINSICS,
     BundleProblem,
     BundleResult,
     BundleState,
@@ -18,6 +20,7 @@ from wand_calib_ros.core.bundle_adjustment import (
 from wand_calib_ros.core.camera_model import CameraModel
 from wand_calib_ros.core.geometry import Pose
 from wand_calib_ros.core.metrics import camera_errors, heldout_wand_rms, rereference
+from wand_calib_ros.core.model_order import zeroed
 from wand_calib_ros.core.pipeline import CalibrationOptions, calibrate
 from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.core.rig import WandObservations
@@ -40,26 +43,36 @@ def scenario_data(
 
 
 def truth_bundle(
-    scenario: Scenario, data: SimulatedData, fixed: tuple[tuple[str, ...], ...] | None = None
+    scenario: Scenario,
+    data: SimulatedData,
+    fixed: tuple[tuple[str, ...], ...] | None = None,
+    *,
+    held: bool = False,
+    placements: NDArray[np.bool_] | None = None,
 ) -> BundleResult:
     """Bundle adjustment of the same data started from the truth.
 
     Args:
         scenario: the rig with its true cameras.
         data: the observations and true placements.
-        fixed: per camera radial coefficients held at zero (as the pipeline chose), or None for all free.
+        fixed: per camera the terms held at zero (names of CAMERA_PARAM_NAMES, as the pipeline chose), or
+            None for all free.
+        held: every camera's intrinsics held at the truth (as given intrinsics are).
+        placements: (P,) the placements to adjust (default all).
     """
-    free = default_free_mask(len(scenario.cameras))
-    models = []
-    for c, camera in enumerate(scenario.cameras):
-        vector = camera.model.intrinsic_vector()
-        for name in fixed[c] if fixed else ():
-            index = int(name[1]) - 1
-            free[c, index] = False
-            vector[index] = 0.0
-        models.append(camera.model.with_intrinsic_vector(vector))
-    state = BundleState(tuple(models), tuple(c.pose for c in scenario.cameras), data.wand_a, data.wand_direction)
-    return bundle_adjust(state, BundleProblem.from_dense(scenario.wand, data.observations.uv), free)
+    models = tuple(c.model for c in scenario.cameras)
+    free = default_free_mask(len(scenario.cameras), 0, models)
+    adjusted = []
+    for c, model in enumerate(models):
+        indices = [CAMERA_PARAM_NAMES.index(name) for name in (fixed[c] if fixed else ())]
+        free[c, indices] = False
+        adjusted.append(zeroed(model, indices))
+    if held:
+        free[:, INTRINSICS] = False
+    use = np.ones(len(data.wand_a), dtype=bool) if placements is None else placements
+    poses = tuple(c.pose for c in scenario.cameras)
+    state = BundleState(tuple(adjusted), poses, data.wand_a[use], data.wand_direction[use])
+    return bundle_adjust(state, BundleProblem.from_dense(scenario.wand, data.observations.uv[use]), free)
 
 
 def fixed_of(result: CalibrationResult, scenario: Scenario) -> tuple[tuple[str, ...], ...]:

@@ -223,6 +223,16 @@ def _parser() -> argparse.ArgumentParser:
         metavar="DEG",
         help="half-angle of the LEDs' emission cone (scenario default if omitted; 180: seen from everywhere)",
     )
+    sim.add_argument(
+        "--plumb-bob",
+        action="store_true",
+        help="conventional, mixed, mixed3: the conventional cameras' true lenses are plumb_bob ones (tangential terms)",
+    )
+    sim.add_argument(
+        "--known-intrinsics",
+        action="store_true",
+        help="write every camera's true intrinsics into cameras.yaml (intrinsics, fixed: true), as a board gives them",
+    )
     sim.add_argument("--true-focal", type=float, help="paper scenario: true focal length in mm (default 2.0)")
     sim.add_argument(
         "--principal-point",
@@ -288,8 +298,8 @@ def _print_summary(result: CalibrationResult, output: Path) -> None:
         fx, fy = camera.model.focal_px
         u0, v0 = camera.model.principal_point
         print(
-            f"  {camera.name}: fx {fx:.2f} fy {fy:.2f} px, principal point ({u0:.2f}, {v0:.2f}) px, "
-            f"RMS {camera.rms_reprojection_px:.3f} px over {camera.n_observations} points"
+            f"  {camera.name} ({camera.model.distortion_model}): fx {fx:.2f} fy {fy:.2f} px, principal point "
+            f"({u0:.2f}, {v0:.2f}) px, RMS {camera.rms_reprojection_px:.3f} px over {camera.n_observations} points"
             + (f"; {', '.join(camera.fixed_coefficients)} fixed at 0" if camera.fixed_coefficients else "")
             + _timing_summary(result, camera)
         )
@@ -299,7 +309,7 @@ def _print_summary(result: CalibrationResult, output: Path) -> None:
         f"(nominal {result.wand.L:.1f}), RMS error {result.wand_length_rms_mm:.3f} mm; "
         f"{result.placements_used} placements used, {result.placements_rejected} rejected"
     )
-    print("  model = OpenCV/ROS 'equidistant': fx = k1*mu, fy = k1*mv, D = [k2..k5]/k1")
+    print("  models as OpenCV/ROS have them (camera_info, result 'opencv'): fx = k1*mu, fy = k1*mv, D from k2.. / k1")
     if result.world is not None:
         world = result.world
         print(
@@ -383,6 +393,10 @@ def _simulate(args: argparse.Namespace) -> int:
         if args.placements < 1:
             raise WandCalibError("--placements must be positive")
         kwargs["n_placements"] = args.placements
+    if args.plumb_bob:
+        if args.scenario not in ("conventional", "mixed", "mixed3"):
+            raise WandCalibError("--plumb-bob applies to the conventional, mixed and mixed3 scenarios")
+        kwargs["pinhole"] = True
     if not (args.noise >= 0):
         raise WandCalibError("--noise must be >= 0")
     if not (0 <= args.outliers < 1):
@@ -416,7 +430,11 @@ def _simulate(args: argparse.Namespace) -> int:
     )
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
-    save_rig(scenario.rig, out / "cameras.yaml")
+    rig = scenario.rig
+    if args.known_intrinsics:
+        cameras = zip(rig.cameras, scenario.cameras, strict=True)
+        rig = dataclasses.replace(rig, cameras=tuple(dataclasses.replace(s, intrinsics=c.model) for s, c in cameras))
+    save_rig(rig, out / "cameras.yaml")
     write_observations(observations, out / "observations.csv")
     write_observations(heldout.observations, out / "heldout.csv")
     truth = {

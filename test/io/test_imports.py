@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from wand_calib_ros.cli import main
 from wand_calib_ros.core.rig import WandSpec
@@ -14,13 +15,14 @@ from wand_calib_ros.io.errors import FormatError
 from wand_calib_ros.io.imports.xypts import read_xypts
 from wand_calib_ros.io.observations_csv import read_observations
 from wand_calib_ros.io.rig_yaml import save_rig
-from wand_calib_ros.sim.scenarios import paper_three_camera_scenario, simulate
+from wand_calib_ros.sim.scenarios import SCENARIOS, paper_three_camera_scenario, simulate
 
 TWO = WandSpec((0.0, 600.0))
 
 
-def _write_xypts(path: Path, uv: np.ndarray, heights: list[int]) -> None:
-    """A point file as Argus writes its paired points: pt1 of every camera, then pt2; y up from the bottom."""
+def _write_xypts(path: Path, uv: np.ndarray, heights: list[int], unseen: str = "NaN") -> None:
+    """A point file as Argus writes its paired points: pt1 of every camera, then pt2; y up from the bottom;
+    ``unseen`` in the cells of markers not seen (DLTdv leaves them empty)."""
     _, n_cameras, n_points, _ = uv.shape
     header = [f"pt{p + 1}_cam{c + 1}_{axis}" for p in range(n_points) for c in range(n_cameras) for axis in "xy"]
     lines = [",".join(header)]
@@ -29,7 +31,7 @@ def _write_xypts(path: Path, uv: np.ndarray, heights: list[int]) -> None:
         for p in range(n_points):
             for c in range(n_cameras):
                 x, y = frame[c, p]
-                cells += ["NaN", "NaN"] if not np.isfinite(x) else [f"{x:.6f}", f"{heights[c] - y:.6f}"]
+                cells += [unseen, unseen] if not np.isfinite(x) else [f"{x:.6f}", f"{heights[c] - y:.6f}"]
         lines.append(",".join(cells))
     path.write_text("\n".join(lines) + "\n")
 
@@ -50,10 +52,42 @@ def test_an_argus_point_file_imports_exactly_and_calibrates(tmp_path: Path) -> N
                  "--output", str(tmp_path / "result.yaml")]) == 0  # fmt: skip
 
 
+def test_a_sparse_two_marker_take_with_empty_cells_keeps_its_frames_and_calibrates_with_board_intrinsics(
+    tmp_path: Path,
+) -> None:
+    # A digitised take as a user has it: the plumb_bob intrinsics of a board calibration, most frames
+    # showing the wand to few cameras, views of one marker, labels swapped per view, empty cells where
+    # a marker was not seen and rows where no camera saw anything.
+    scenario = SCENARIOS["sparse4"]()
+    data = simulate(scenario, 0.3, np.random.default_rng(4))
+    uv = data.observations.uv.copy()
+    swap = np.random.default_rng(5).random(uv.shape[:2]) < 0.5
+    uv[swap] = uv[swap][:, ::-1]
+    assert (~np.isfinite(uv).any(axis=(1, 2, 3))).sum() > 5  # rows of empty cells
+    cameras = tuple(
+        replace(spec, intrinsics=c.model) for spec, c in zip(scenario.rig.cameras, scenario.cameras, strict=True)
+    )
+    save_rig(replace(scenario.rig, cameras=cameras), tmp_path / "cameras.yaml")
+    _write_xypts(tmp_path / "xypts.csv", uv, [spec.image_size[1] for spec in scenario.rig.cameras], unseen="")
+    out = tmp_path / "observations.csv"
+    argv = ["--points", str(tmp_path / "xypts.csv"), "--cameras", str(tmp_path / "cameras.yaml"), "--out", str(out)]
+    assert main(["-q", "import", "--format", "xypts", *argv]) == 0
+    read = read_observations(out, scenario.rig.camera_names, labels=scenario.wand.labels)
+    seen = np.flatnonzero(np.isfinite(uv).any(axis=(1, 2, 3)))
+    assert np.array_equal(read.frames, seen)  # frame id = row index, empty rows counted
+    assert np.allclose(read.uv, uv[seen], atol=2e-6, equal_nan=True)
+    result = tmp_path / "result.yaml"
+    assert main(["-q", "calibrate", "--cameras", str(tmp_path / "cameras.yaml"), "--observations", str(out),
+                 "--output", str(result)]) == 0  # fmt: skip
+    metrics = yaml.safe_load(result.read_text())["metrics"]
+    assert metrics["wand_length_std_mm"] / metrics["wand_length_mean_mm"] < 0.01
+
+
 @pytest.mark.parametrize(
     ("text", "message"),
     [
         ("pt1_cam1_x,pt1_cam1_y\n1,2\n", "1 cameras in the file, 3 in the rig description"),
+        ("pt0_cam0_x,pt0_cam0_y\n1,2\n", "column 1 is 'pt0_cam0_x': markers and cameras count from 1"),
         ("frame,pt1_cam1_x\n", "column 1 is 'frame', not pt<P>_cam<C>_x or _y"),
         (None, "'high' is not a number (write NaN where a marker was not seen)"),
         (None, "pt2_cam3 has x or y only"),

@@ -42,7 +42,11 @@ def test_simulated_points_are_exactly_the_visible_ones_and_reproducible(name: st
     again = simulate(scenario, 0.0, np.random.default_rng(11), n=50)
     assert np.array_equal(first.observations.uv, again.observations.uv, equal_nan=True)
     seen = visibility(scenario, first.wand_a, first.wand_direction, first.facing)
-    assert np.array_equal(np.all(np.isfinite(first.observations.uv), axis=-1), seen)
+    recorded = np.all(np.isfinite(first.observations.uv), axis=-1)
+    if scenario.view_rates is not None:  # a sparse take records some of the visible views only
+        assert not np.any(recorded & ~seen) and 0.2 < recorded.sum() / seen.sum() < 0.6
+        return
+    assert np.array_equal(recorded, seen)
     needed = len(scenario.cameras) if scenario.min_views is None else scenario.min_views
     assert np.all(first.observations.complete.sum(axis=1) >= needed)
 

@@ -71,7 +71,7 @@ def _rotation_to_z(direction: FloatArray) -> FloatArray:
     return np.eye(3) + s * kx + (1 - c) * kx @ kx
 
 
-def _minimal_solutions(m0: FloatArray, m1: FloatArray) -> list[FloatArray]:
+def minimal_solutions(m0: FloatArray, m1: FloatArray) -> list[FloatArray]:
     """Essential matrices through five bearing pairs (Nister's solver in rotated frames)."""
     q0 = _rotation_to_z(m0.mean(axis=0))
     q1 = _rotation_to_z(m1.mean(axis=0))
@@ -86,7 +86,7 @@ def _minimal_solutions(m0: FloatArray, m1: FloatArray) -> list[FloatArray]:
     return [q1.T @ e @ q0 for e in stacked.reshape(-1, 3, 3)]
 
 
-def _linear_essential(m0: FloatArray, m1: FloatArray) -> FloatArray:
+def linear_essential(m0: FloatArray, m1: FloatArray) -> FloatArray:
     """Least-squares E from many bearing pairs, projected onto the essential manifold."""
     design = np.einsum("ni,nj->nij", m1, m0).reshape(-1, 9)
     _, _, vt = np.linalg.svd(design, full_matrices=False)
@@ -127,7 +127,7 @@ def ransac_essential(
     while iteration < min(needed, max_iterations):
         iteration += 1
         sample = rng.choice(n, 5, replace=False)
-        for e in _minimal_solutions(m0[sample], m1[sample]):
+        for e in minimal_solutions(m0[sample], m1[sample]):
             errors = epipolar_angles(e, m0, m1)
             inlier = errors < threshold_rad
             count = int(inlier.sum())
@@ -143,7 +143,7 @@ def ransac_essential(
             f"{max(best_count, 0)} of {n} correspondences within {np.degrees(threshold_rad):.2f} deg"
         )
     inliers = epipolar_angles(best_e, m0, m1) < threshold_rad
-    refined = _linear_essential(m0[inliers], m1[inliers])
+    refined = linear_essential(m0[inliers], m1[inliers])
     refined_inliers = epipolar_angles(refined, m0, m1) < threshold_rad
     if refined_inliers.sum() >= inliers.sum():
         return refined, refined_inliers

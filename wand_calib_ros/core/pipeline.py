@@ -8,8 +8,11 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from wand_calib_ros.core.camera_model import CameraModel
 from wand_calib_ros.core.diagnostics import clock_offsets, clock_warnings
-from wand_calib_ros.core.errors import InsufficientDataError
+from wand_calib_ros.core.errors import CalibrationFailedError, CoreError, InsufficientDataError
+from wand_calib_ros.core.incremental import place_cameras
+from wand_calib_ros.core.lens_choice import model_starts, nominal_model
 from wand_calib_ros.core.metrics import rereference
 from wand_calib_ros.core.multi_camera import RigInitialisation, initialise_rig
 from wand_calib_ros.core.pairwise import PairOptions
@@ -20,7 +23,14 @@ from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.core.rig import RigSpec, WandObservations, spread_subset
 from wand_calib_ros.core.timing import align_views, offset_warnings, rate_warnings, timing_input
 from wand_calib_ros.core.two_markers import consistent_labels, continuous_in_image
-from wand_calib_ros.core.vision_graph import VisionGraph, build_vision_graph
+from wand_calib_ros.core.vision_graph import (
+    DisconnectedRigError,
+    VisionGraph,
+    build_vision_graph,
+    chained,
+    covisibility,
+    reference_index,
+)
 from wand_calib_ros.core.world_frame import floor_of
 
 log = logging.getLogger(__name__)
@@ -98,37 +108,57 @@ def calibrate(
         usable = usable[spread_subset(usable.size, options.max_placements)]
     uv = obs.uv[usable]  # partial views stay: the bundle adjustment uses every point seen
     log.info("%d of %d frames show the whole wand to at least two cameras", usable.size, complete.shape[0])
-    graph = build_vision_graph(
-        names, complete[usable], reference=options.reference_camera, min_shared=options.pair.min_placements
-    )
-    log.info(
-        "reference camera %s; pairs calibrated: %s",
-        names[graph.reference],
-        ", ".join(f"{names[a]}-{names[b]}" for a, b in graph.edges),
-    )
+    reference = reference_index(names, covisibility(complete[usable]), options.reference_camera)
     line = timing.line.subset(usable)
     if rig.wand.n_points == 2:  # a two-marker wand's labels are the detector's: per camera, follow the marker
         uv = continuous_in_image(uv)
     aligned = align_views(uv, line)  # free-running views moved to their placement's time, for the starts
-    init = _initialise(rig, aligned, graph, options.pair) if options.start is None else _warm(rig, graph, options.start)
-    if rig.wand.n_points == 2:  # one label per marker in every view and over time, from the started cameras
-        uv = consistent_labels(init.models, init.poses, uv)
-        aligned = align_views(uv, line)
     given = [spec.intrinsics is not None for spec in rig.cameras]
     if any(given):
         log.info("intrinsics given for %s", ", ".join(n for n, g in zip(names, given, strict=True) if g))
-    result = refine_calibration(
-        rig,
-        uv,
-        tuple(spec.intrinsics or model for spec, model in zip(rig.cameras, init.models, strict=True)),
-        init.poses,
-        reference=graph.reference,
-        initial_projections=tuple("given" if g else p for g, p in zip(given, init.projections, strict=True)),
-        lens_trials=init.trials,
-        timing=replace(timing, line=line),
-        start_uv=aligned,
-    )
-    check_result(rig, result)
+
+    def solve(init: RigInitialisation) -> tuple[CalibrationResult, NDArray[np.float64]]:
+        """Step 4 from a start: the two-marker wand's labels settled, the refinement, its plausibility."""
+        init = replace(init, models=model_starts(rig, init.models))
+        views, start_uv = uv, aligned
+        if rig.wand.n_points == 2:  # one label per marker in every view and over time, from the started cameras
+            views = consistent_labels(init.models, init.poses, uv)
+            start_uv = align_views(views, line)
+        result = refine_calibration(
+            rig,
+            views,
+            init.models,
+            init.poses,
+            reference=reference,
+            initial_projections=tuple("given" if g else p for g, p in zip(given, init.projections, strict=True)),
+            lens_trials=init.trials,
+            timing=replace(timing, line=line),
+            start_uv=start_uv,
+        )
+        check_result(rig, result)
+        return result, views
+
+    if options.start is not None:
+        result, uv = solve(_warm(rig, reference, options.start))
+    elif all(given):  # a pair needs only its relative pose
+        known = tuple(spec.intrinsics for spec in rig.cameras if spec.intrinsics is not None)
+        result, uv = solve(_placed(rig, aligned, reference, options.pair, known))
+    else:
+        try:
+            result, uv = solve(_paper(rig, aligned, options))
+        except (DisconnectedRigError, CalibrationFailedError, InsufficientDataError) as error:
+            reason = _unplaceable(rig, aligned, options)
+            if reason is not None:
+                if isinstance(error, DisconnectedRigError):
+                    raise DisconnectedRigError(f"{reason}; and the paper's pairwise start: {error}") from None
+                raise
+            log.info("%s: the cameras are placed one by one from their given or nominal intrinsics instead", error)
+            starts = tuple(spec.intrinsics or nominal_model(spec) for spec in rig.cameras)
+            try:
+                result, uv = solve(_placed(rig, aligned, reference, options.pair, starts, nominal=True))
+            except CoreError as placed_error:
+                log.info("placing the cameras one by one failed too: %s", placed_error)
+                raise error from None
     if floor is not None:
         models = tuple(result.camera(n).model for n in names)
         poses = tuple(result.camera(n).pose for n in names)
@@ -151,13 +181,70 @@ def _initialise(rig: RigSpec, uv: NDArray[np.float64], graph: VisionGraph, optio
     return initialise_rig(three, uv[:, :, list(rig.wand.three_points())], graph, options)
 
 
-def _warm(rig: RigSpec, graph: VisionGraph, start: CalibrationResult) -> RigInitialisation:
-    """A previous calibration's cameras as the start, its poses re-expressed in the graph's reference."""
+def _paper(rig: RigSpec, uv: NDArray[np.float64], options: CalibrationOptions) -> RigInitialisation:
+    """The paper's initialisation through the vision graph (pairs of at least ``min_placements`` views)."""
+    names = rig.camera_names
+    complete = np.all(np.isfinite(uv), axis=(2, 3))
+    graph = build_vision_graph(
+        names, complete, reference=options.reference_camera, min_shared=options.pair.min_placements
+    )
+    log.info(
+        "reference camera %s; pairs calibrated: %s",
+        names[graph.reference],
+        ", ".join(f"{names[a]}-{names[b]}" for a, b in graph.edges),
+    )
+    return _initialise(rig, uv, graph, options.pair)
+
+
+def _unplaceable(rig: RigSpec, uv: NDArray[np.float64], options: CalibrationOptions) -> str | None:
+    """Why the cameras cannot be placed one by one instead of through the paper's pairs (None: they can):
+    every camera whose intrinsics are estimated needs ``min_placements`` views of the whole wand that
+    another camera shares, and the cameras must share views at all."""
+    complete = np.all(np.isfinite(uv), axis=(2, 3))
+    if not chained(covisibility(complete) > 0):
+        return "no camera shares a view of the whole wand with the others"
+    views = (complete & (complete.sum(axis=1, keepdims=True) >= 2)).sum(axis=0)
+    few = [(spec.name, int(views[c])) for c, spec in enumerate(rig.cameras) if spec.intrinsics is None]
+    few = [(name, count) for name, count in few if count < options.pair.min_placements]
+    if not few:
+        return None
+    counts = ", ".join(f"'{name}' has {count}" for name, count in few)
+    return (
+        f"estimating a camera's intrinsics takes at least {options.pair.min_placements} views of the whole wand "
+        f"that another camera shares ({counts}): wave the wand longer, or give its intrinsics (intrinsics in "
+        "cameras.yaml: then a camera needs only the views its pose needs)"
+    )
+
+
+#: The placing's inlier threshold over the pairs' RANSAC threshold when the intrinsics are the nominal
+#: lens's (a conventional lens's barrel moves the image corners by tens of pixels from it).
+NOMINAL_SLACK = 6.0
+
+
+def _placed(
+    rig: RigSpec,
+    uv: NDArray[np.float64],
+    reference: int,
+    options: PairOptions,
+    models: tuple[CameraModel, ...],
+    *,
+    nominal: bool = False,
+) -> RigInitialisation:
+    """The cameras placed one by one from known intrinsics (:mod:`~wand_calib_ros.core.incremental`)."""
+    focal_px = min(float(np.min(model.focal_px)) for model in models)
+    threshold = options.ransac_threshold_px / focal_px * (NOMINAL_SLACK if nominal else 1.0)
+    poses, _ = place_cameras(rig, uv, models, reference, threshold_rad=threshold, seed=options.seed)
+    projections = tuple("given" if spec.intrinsics is not None else "nominal" for spec in rig.cameras)
+    return RigInitialisation(models, poses, projections, ())
+
+
+def _warm(rig: RigSpec, reference: int, start: CalibrationResult) -> RigInitialisation:
+    """A previous calibration's cameras as the start, its poses re-expressed in the reference camera's frame."""
     names = rig.camera_names
     missing = [n for n in names if n not in {c.name for c in start.cameras}]
     if missing:
         raise InsufficientDataError(f"the warm start has no camera {', '.join(missing)}")
-    poses = rereference({n: start.camera(n).pose for n in names}, names[graph.reference])
+    poses = rereference({n: start.camera(n).pose for n in names}, names[reference])
     return RigInitialisation(
         tuple(start.camera(n).model for n in names),
         tuple(poses[n] for n in names),

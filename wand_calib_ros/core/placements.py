@@ -47,6 +47,25 @@ def triangulate_placements(models: tuple[CameraModel, ...], poses: tuple[Pose, .
     return points.reshape(n_placements, uv.shape[2], 3)
 
 
+def unprojectable(
+    models: tuple[CameraModel, ...], poses: tuple[Pose, ...], uv: FloatArray, points: FloatArray
+) -> NDArray[np.bool_]:
+    """(P,) placements some camera sees although its model gives the placed markers no image (a pinhole
+    camera with a marker on or behind its image plane: the start is wrong there, not the view).
+
+    Args:
+        uv: (P, C, K, 2) pixels (NaN where not seen); ``points`` (P, K, 3) the markers, reference frame.
+    """
+    out = np.zeros(uv.shape[0], dtype=bool)
+    for c, (model, pose) in enumerate(zip(models, poses, strict=True)):
+        if not model.is_pinhole:
+            continue  # the fisheye model images every direction
+        seen = np.any(np.isfinite(uv[:, c, :, 0]), axis=1)
+        depth = pose.apply(points[seen])[..., 2]  # (S, K)
+        out[np.flatnonzero(seen)[np.any(~(depth > 0), axis=1)]] = True
+    return out
+
+
 def fit_placements(
     wand: WandSpec,
     cameras: BundleState,
@@ -77,6 +96,7 @@ def fit_placements(
     points = triangulate_placements(models, poses, uv)
     usable = np.all(np.isfinite(points), axis=(1, 2)) & (np.linalg.norm(points[:, -1] - points[:, 0], axis=1) > 0)
     usable &= np.all(np.isfinite(uv), axis=(2, 3)).sum(axis=1) >= 2
+    usable[usable] &= ~unprojectable(models, poses, uv[usable], points[usable])
     index = np.flatnonzero(usable)
     start = BundleState(
         models, poses, points[index, 0], wand_directions(points[index, 0], points[index, -1]), cameras.timing

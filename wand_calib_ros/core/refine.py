@@ -22,7 +22,8 @@ from numpy.typing import NDArray
 
 from wand_calib_ros.core.assembly import assemble
 from wand_calib_ros.core.bundle_adjustment import (
-    N_GEOMETRIC,
+    INTRINSICS,
+    TIMING,
     BundleProblem,
     BundleResult,
     BundleState,
@@ -30,9 +31,8 @@ from wand_calib_ros.core.bundle_adjustment import (
     default_free_mask,
 )
 from wand_calib_ros.core.camera_model import (
-    N_INTRINSIC,
     CameraModel,
-    monotonic_limit,
+    radius_limit,
     turns_over_in_image,
 )
 from wand_calib_ros.core.degeneracy import check_camera_views, check_geometry, check_uncertainty, require
@@ -49,13 +49,16 @@ from wand_calib_ros.core.gating import (
     subset_state,
 )
 from wand_calib_ros.core.geometry import Pose, wand_directions
+from wand_calib_ros.core.lens_choice import choose_models
 from wand_calib_ros.core.model_order import (
     OrderOnAllPlacements,
     adjust_with_model_selection,
     free_mask,
     held_intrinsics,
+    low_order,
+    low_order_mask,
 )
-from wand_calib_ros.core.placements import fit_placements, triangulate_placements
+from wand_calib_ros.core.placements import fit_placements, triangulate_placements, unprojectable
 from wand_calib_ros.core.result import CalibrationResult, LensTrial
 from wand_calib_ros.core.rig import RigSpec, WandSpec, spread_subset
 from wand_calib_ros.core.timing import (
@@ -96,7 +99,8 @@ def refine_calibration(
     Args:
         rig: the rig description (cameras in the order of ``uv``'s axis 1).
         uv: (P, C, 3, 2) observed pixels, NaN where not seen.
-        models: initial intrinsics per camera (k3..k5 are reset to zero as in the paper).
+        models: initial intrinsics per camera (k3..k5 are reset to zero as in the paper; see
+            :data:`~wand_calib_ros.core.model_order.LOW_ORDER_FIXED` for the pinhole models).
         poses: initial poses per camera in the reference camera's frame.
         reference: index of the reference camera.
         initial_projections: per camera, the Step 1 projection it started from.
@@ -109,17 +113,17 @@ def refine_calibration(
     """
     wand = rig.wand
     n_cameras = len(rig.cameras)
-    full = default_free_mask(n_cameras, reference)
-    full[held_intrinsics(rig), :N_INTRINSIC] = False
+    full = default_free_mask(n_cameras, reference, models)
+    full[np.ix_(held_intrinsics(rig), INTRINSICS)] = False
     models = tuple(  # given intrinsics start as given; estimated ones from the low-order model
-        m if spec.intrinsics is not None else m.with_intrinsic_vector(np.r_[m.k[:2], 0.0, 0.0, 0.0, m.principal_point])
-        for m, spec in zip(models, rig.cameras, strict=True)
+        m if spec.intrinsics is not None else low
+        for m, low, spec in zip(models, low_order(models), rig.cameras, strict=True)
     )
     points = triangulate_placements(models, poses, uv if start_uv is None else start_uv)
     clocks = start_clocks(rig, timing, points, reference)
     errors = ac_length_errors(points, wand)
     threshold = gate_threshold(errors, wand)
-    keep = np.flatnonzero(gate_placements(rig, uv, errors, threshold))
+    keep = np.flatnonzero(gate_placements(rig, uv, errors, threshold) & ~unprojectable(models, poses, uv, points))
     log.info("gate |AC| within %.1f mm: %d placements kept, %d set aside", threshold, keep.size, len(uv) - keep.size)
     require(keep.size, min_placements, f"reconstruct to the wand length within {threshold:.1f} mm")
     # Coarse to fine: outliers and the distortion model are settled on a spread subset; the
@@ -129,9 +133,9 @@ def refine_calibration(
     # 1. Robust adjustment (Huber), then views with a point off by more than VIEW_GATE_SIGMAS are rejected.
     # k3..k5 stay at zero here: the robust pass only has to find the outliers, and the
     # low-order model converges in a few iterations even from a rough start.
-    low_order = full.copy()
-    low_order[:, 2:5] = False
-    robust, sigma, clocks, keep = _robust_pass(wand, uv, points, models, poses, keep, low_order, clocks)
+    robust, sigma, clocks, keep = _robust_pass(
+        wand, uv, points, models, poses, keep, low_order_mask(models, full), clocks
+    )
     clean, rejected = gate_views(uv[keep], robust.residuals, VIEW_GATE_SIGMAS * sigma)
     still = enough_views(clean)
     log.info("robust pass: sigma %.3f px, %d views rejected, %d placements left", sigma, rejected.sum(), still.sum())
@@ -144,6 +148,8 @@ def refine_calibration(
 
     # 2. Least squares on the clean data, dropping the distortion terms (and the timing) the data do not support.
     result, fixed = adjust_with_model_selection(rig, uv_used, state, reference, clocks, used)
+    # ... in plumb_bob instead for the conventional cameras whose model the rig leaves open, where the data say so
+    result, fixed = choose_models(rig, uv_used, result, fixed, reference, clocks, used)
     free = free_mask(n_cameras, reference, fixed)
 
     # 3. Placements set aside so far come back with their clean views if they fit the solution.
@@ -174,7 +180,7 @@ def refine_calibration(
     for model, spec in zip(result.state.models, rig.cameras, strict=True):
         if turns_over_in_image(model, spec.max_view_angle):
             warnings.append(
-                f"{spec.name}: r(theta) turns over at {np.degrees(monotonic_limit(model.k)):.0f} deg, inside the "
+                f"{spec.name}: r(theta) turns over at {np.degrees(radius_limit(model)):.0f} deg, inside the "
                 f"image and below max_view_angle_deg {spec.max_view_angle_deg:g}: check the rig description"
             )
     seen = np.any(np.isfinite(uv[used]), axis=(2, 3))
@@ -261,7 +267,7 @@ def _robust_pass(
         warm = subset_state(fit.state, placeable)
     keep = keep[placeable]
     with_timing = free.copy()
-    with_timing[:, N_GEOMETRIC:] = clocks.free
+    with_timing[:, TIMING] = clocks.free
     problem = BundleProblem.from_dense(wand, uv[keep], clocks.placements(keep))
     cold = start(keep, clocks.start)  # the robust problem of a pass from the start, from the test's solution if any
     robust, sigma = robust_adjustment(cold if warm is None else warm, problem, with_timing, scale_from=cold)
@@ -281,7 +287,7 @@ def _test_timing(
     timing, tested = clocks.free, replace(synchronised, timing=clocks.start)
     while timing.any():
         test_free = free.copy()
-        test_free[:, N_GEOMETRIC:] = timing
+        test_free[:, TIMING] = timing
         fit, sigma = robust_adjustment(tested, problem, test_free, scale_from=scale)
         kept = reduce_timing(clocks, fit, timing)
         if np.array_equal(kept, timing):
@@ -323,7 +329,7 @@ def _final_adjustment(
             free, choose = free_mask(len(rig.cameras), choose.reference, choose.decision), None
         if not clocks.modelled:
             break
-        std = result.camera_std[:, N_GEOMETRIC:]
+        std = result.camera_std[:, TIMING]
         moved = np.abs(result.state.camera_timing - state.camera_timing)[std > 0] / std[std > 0]
         log.info("final adjustment: timing moved by %.2f sigma at most", float(np.max(moved, initial=0.0)))
         state = result.state

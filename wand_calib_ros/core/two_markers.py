@@ -123,8 +123,32 @@ def consistent_labels(models: tuple[CameraModel, ...], poses: tuple[Pose, ...], 
             essential = skew(relative.translation) @ relative.rotation
             straight, crossed = _pairing_errors(essential, bearings[r][rows], bearings[c][rows])
             out[rows, c] = _swapped(uv[rows, c], crossed < straight)
-    points = triangulate_placements(models, poses, out)  # (P, 2, 3)
+    points = triangulate_placements(models, poses, np.where(complete[..., None, None], out, np.nan))  # (P, 2, 3)
+    _label_single_markers(models, poses, out, points)
     placed = np.flatnonzero(np.all(np.isfinite(points), axis=(1, 2)))
     flip = placed[_flips(points[placed])]
     out[flip] = out[flip][:, :, ::-1]
     return out
+
+
+def _label_single_markers(
+    models: tuple[CameraModel, ...], poses: tuple[Pose, ...], uv: FloatArray, points: FloatArray
+) -> None:
+    """Views of one marker only (the other unseen) labelled in place as the placement's marker (``points``
+    (P, 2, 3), triangulated from whole views) nearer their ray; views of placements not triangulated are
+    left as they are."""
+    seen = np.all(np.isfinite(uv), axis=-1)  # (P, C, 2)
+    known = np.all(np.isfinite(points), axis=(1, 2))
+    for c, (model, pose) in enumerate(zip(models, poses, strict=True)):
+        rows = np.flatnonzero((seen[:, c].sum(axis=1) == 1) & known)
+        if rows.size == 0:
+            continue
+        which = np.argmax(seen[rows, c], axis=1)  # the label it came with
+        pixel = uv[rows, c, which]
+        bearing = unproject(model, pixel)
+        toward = pose.apply(points[rows])  # (N, 2, 3) the two markers in the camera's frame
+        toward /= np.linalg.norm(toward, axis=-1, keepdims=True)
+        nearer = np.argmax(np.einsum("nj,nkj->nk", bearing, toward), axis=1)
+        moved = np.flatnonzero(np.isfinite(bearing[:, 0]) & (nearer != which))
+        uv[rows[moved], c, nearer[moved]] = pixel[moved]
+        uv[rows[moved], c, which[moved]] = np.nan

@@ -77,13 +77,7 @@ def build_vision_graph(
         )
     if len(groups) > 1:
         raise DisconnectedRigError(_disconnected_message(names, shared, groups, min_shared))
-    if reference is None:
-        off_diagonal = shared.sum(axis=1) - np.diag(shared)
-        ref = int(np.argmax(off_diagonal))
-    elif reference in names:
-        ref = names.index(reference)
-    else:
-        raise InsufficientDataError(f"reference camera '{reference}' is not in the rig ({', '.join(names)})")
+    ref = reference_index(names, shared, reference)
     paths = _shortest_paths(linked, shared, ref)
     edges: list[tuple[int, int]] = []
     for target in sorted(paths, key=lambda t: (len(paths[t]), t)):
@@ -91,6 +85,21 @@ def build_vision_graph(
         if len(path) > 1 and (path[-2], path[-1]) not in edges:
             edges.append((path[-2], path[-1]))
     return VisionGraph(names, shared, ref, {int(k): [int(x) for x in v] for k, v in paths.items()}, tuple(edges))
+
+
+def reference_index(names: tuple[str, ...], shared: IntArray, reference: str | None) -> int:
+    """The reference camera's index: the named one, else the one sharing the most placements with the
+    others (the first on a tie), from the (C, C) :func:`covisibility`."""
+    if reference is None:
+        return int(np.argmax(shared.sum(axis=1) - np.diag(shared)))
+    if reference in names:
+        return names.index(reference)
+    raise InsufficientDataError(f"reference camera '{reference}' is not in the rig ({', '.join(names)})")
+
+
+def chained(linked: NDArray[np.bool_]) -> bool:
+    """Whether a (C, C) adjacency links every camera to every other (directly or through others)."""
+    return len(_components(linked & ~np.eye(linked.shape[0], dtype=bool))) == 1
 
 
 def _components(linked: NDArray[np.bool_]) -> list[list[int]]:

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.camera_model import CameraModel, project
+from wand_calib_ros.core.camera_model import PLUMB_BOB, CameraModel, from_opencv_pinhole, project
 from wand_calib_ros.core.geometry import Pose, rotation_from_rotvec
 from wand_calib_ros.core.intrinsics_init import PROJECTIONS
 from wand_calib_ros.core.rig import CameraSpec, RigSpec, WandObservations, WandSpec
@@ -46,6 +46,10 @@ class Scenario:
             (None: by every camera).
         led_cone_deg: half-angle of the LEDs' emission cone around the wand's facing
             direction (None: visible from everywhere).
+        view_rates: per camera, the probability that a view it could have had was recorded (digitised,
+            not occluded): a sparse take, as a user digitising a video has it (None: every view).
+        marker_loss: the probability that a recorded view lacks each of its markers (occluded, not
+            digitised): views of some markers only.
     """
 
     name: str
@@ -55,6 +59,8 @@ class Scenario:
     n_placements: int
     min_views: int | None = None
     led_cone_deg: float | None = None
+    view_rates: tuple[float, ...] | None = None
+    marker_loss: float = 0.0
 
     @property
     def rig(self) -> RigSpec:
@@ -144,8 +150,27 @@ def _barrel_perspective(theta: FloatArray) -> FloatArray:
     return t * (1.0 - 0.06 * t * t)
 
 
-def _conventional_camera(name: str, pose: Pose, principal_point: tuple[float, float]) -> TrueCamera:
+#: OpenCV distortion (k1, k2, p1, p2, k3) of the conventional cameras' lenses as plumb_bob describes them
+#: (``pinhole=True``): the barrel of :func:`_barrel_perspective` and the tangential terms a board
+#: calibration of a real low-cost 4 mm C-mount lens finds (0.5-1 px at the image edges), a little different
+#: from camera to camera.
+_PLUMB_BOB_LENSES = (
+    (-0.060, 0.004, 2.0e-3, -1.5e-3, 0.0),
+    (-0.066, 0.010, -1.8e-3, 2.2e-3, 0.0),
+    (-0.055, 0.002, 1.6e-3, 1.9e-3, 0.0),
+)
+
+
+def _conventional_camera(
+    name: str, pose: Pose, principal_point: tuple[float, float], pinhole: int | None = None
+) -> TrueCamera:
+    """The 4.2 mm camera; with ``pinhole`` its true lens is plumb_bob (``_PLUMB_BOB_LENSES[pinhole]``)."""
     spec = CameraSpec(name, (658, 492), (5.6, 5.6), 4.2, 43.385)
+    if pinhole is not None:
+        focal = 4.3 * spec.m[0]
+        camera_matrix = np.array([[focal, 0.0, principal_point[0]], [0.0, focal, principal_point[1]], [0.0, 0.0, 1.0]])
+        model = from_opencv_pinhole(camera_matrix, np.array(_PLUMB_BOB_LENSES[pinhole]), spec.m, spec.image_size)
+        return TrueCamera(spec, model, pose, np.radians(48.0))
     k = fit_radial(_barrel_perspective, 4.3, np.radians(48.0))
     return TrueCamera(spec, CameraModel(k, spec.m, principal_point, spec.image_size), pose, np.radians(48.0))
 
@@ -162,21 +187,23 @@ _REAL_PAIR_POSE = Pose.from_rotvec(np.array([0.0729, 0.6276, 0.2053]), np.array(
 _REAL_PAIR_VOLUME = np.array([[-1500.0, -1000.0, 800.0], [800.0, 1000.0, 3000.0]])
 
 
-def conventional_pair_scenario(*, n_placements: int = 300) -> Scenario:
-    """Two conventional cameras like the paper's real setup (658x492, 4.2 mm nominal, 86.77 deg)."""
+def conventional_pair_scenario(*, n_placements: int = 300, pinhole: bool = False) -> Scenario:
+    """Two conventional cameras like the paper's real setup (658x492, 4.2 mm nominal, 86.77 deg); with
+    ``pinhole`` their true lenses are plumb_bob ones (with tangential terms)."""
     cameras = (
-        _conventional_camera("cam0", Pose.identity(), (335.0, 238.0)),
-        _conventional_camera("cam1", _REAL_PAIR_POSE, (322.0, 251.0)),
+        _conventional_camera("cam0", Pose.identity(), (335.0, 238.0), 0 if pinhole else None),
+        _conventional_camera("cam1", _REAL_PAIR_POSE, (322.0, 251.0), 1 if pinhole else None),
     )
     volume = _REAL_PAIR_VOLUME
     return Scenario("conventional", WandSpec.from_lengths(400.0, 200.0), cameras, volume, n_placements)
 
 
-def mixed_pair_scenario(*, n_placements: int = 300) -> Scenario:
-    """A 1.8 mm 185-degree fisheye (cam0) with a 4.2 mm conventional camera (cam1)."""
+def mixed_pair_scenario(*, n_placements: int = 300, pinhole: bool = False) -> Scenario:
+    """A 1.8 mm 185-degree fisheye (cam0) with a 4.2 mm conventional camera (cam1; with ``pinhole`` its true
+    lens is a plumb_bob one)."""
     cameras = (
         _fisheye_camera("cam0", Pose.identity(), (336.0, 241.0)),
-        _conventional_camera("cam1", _REAL_PAIR_POSE, (322.0, 251.0)),
+        _conventional_camera("cam1", _REAL_PAIR_POSE, (322.0, 251.0), 1 if pinhole else None),
     )
     volume = _REAL_PAIR_VOLUME
     return Scenario("mixed", WandSpec.from_lengths(400.0, 200.0), cameras, volume, n_placements)
@@ -186,12 +213,13 @@ def mixed_pair_scenario(*, n_placements: int = 300) -> Scenario:
 _MIRRORED_PAIR_POSE = Pose.from_rotvec(np.array([0.0729, -0.6276, -0.2053]), np.array([1373.47, -180.03, 504.96]))
 
 
-def mixed_three_camera_scenario(*, n_placements: int = 300) -> Scenario:
-    """The mixed pair with a second 4.2 mm camera mirrored to the fisheye's other side (a 3-camera mixed rig)."""
+def mixed_three_camera_scenario(*, n_placements: int = 300, pinhole: bool = False) -> Scenario:
+    """The mixed pair with a second 4.2 mm camera mirrored to the fisheye's other side (a 3-camera mixed rig;
+    with ``pinhole`` the conventional cameras' true lenses are plumb_bob ones)."""
     cameras = (
         _fisheye_camera("cam0", Pose.identity(), (336.0, 241.0)),
-        _conventional_camera("cam1", _REAL_PAIR_POSE, (322.0, 251.0)),
-        _conventional_camera("cam2", _MIRRORED_PAIR_POSE, (331.0, 244.0)),
+        _conventional_camera("cam1", _REAL_PAIR_POSE, (322.0, 251.0), 1 if pinhole else None),
+        _conventional_camera("cam2", _MIRRORED_PAIR_POSE, (331.0, 244.0), 2 if pinhole else None),
     )
     volume = np.array([[-1500.0, -1000.0, 800.0], [1500.0, 1000.0, 3000.0]])
     return Scenario("mixed3", WandSpec.from_lengths(400.0, 200.0), cameras, volume, n_placements, min_views=2)
@@ -306,6 +334,53 @@ def stage_scenario(*, n_rings: int = 4, per_ring: int = 16, n_placements: int = 
     return Scenario(name, WandSpec.from_lengths(400.0, 200.0), tuple(cameras), volume, n_placements, 2, 75.0)
 
 
+#: The sparse take's lenses: OpenCV (k1, k2, p1, p2, k3) of each camera's board calibration.
+_SPARSE_LENSES = (
+    (-0.15, 0.11, 3e-4, -2e-4, 0.0),
+    (-0.13, 0.08, -4e-4, 1e-4, 0.0),
+    (-0.17, 0.14, 2e-4, 5e-4, 0.0),
+    (-0.14, 0.09, -1e-4, -3e-4, 0.0),
+)
+
+
+def sparse_scenario(*, n_placements: int = 100) -> Scenario:
+    """A short digitised take of a two-LED wand (289.6 mm) by four 2560x1600 cameras with 16 mm lenses
+    (10 um pixels) and plumb_bob distortion, as a lab records one for easyWand.
+
+    The cameras stand on a 100-degree arc 2.4 m from a 1.2 x 0.9 x 0.9 m volume, looking at it from 1.2
+    m above; of each placement a camera recorded its view with probability ``view_rates`` (occlusion and
+    digitising), and each marker of a recorded view is missing with probability 0.15: about 30 of 100
+    frames show both markers to two or more cameras, pairs share 2-15 such views (seed to seed), and
+    many views show one marker only.
+    """
+    target = np.array([0.0, 0.0, 0.0])
+    world_poses, cameras = [], []
+    for angle in np.radians([-50.0, -17.0, 17.0, 50.0]):
+        centre = np.array([2400.0 * np.sin(angle), -1200.0, -2400.0 * np.cos(angle)])
+        world_poses.append(_look_at(centre, target, np.array([0.0, 1.0, 0.0])))
+    poses = _relative_to_first(world_poses)
+    for i, (pose, lens) in enumerate(zip(poses, _SPARSE_LENSES, strict=True)):
+        spec = CameraSpec(f"cam{i}", (2560, 1600), (10.0, 10.0), 16.0, 45.0)
+        focal = (16.0 + 0.15 * (i - 1.5)) * spec.m[0]
+        centre_px = (1279.5 + 9.0 * (i - 1.5), 799.5 - 6.0 * (i - 1.5))
+        camera_matrix = np.array([[focal, 0.0, centre_px[0]], [0.0, focal, centre_px[1]], [0.0, 0.0, 1.0]])
+        model = from_opencv_pinhole(camera_matrix, np.array(lens), spec.m, spec.image_size, PLUMB_BOB)
+        cameras.append(TrueCamera(spec, model, pose, np.radians(47.0)))
+    corners = np.array([[x, y, z] for x in (-600.0, 600.0) for y in (-450.0, 450.0) for z in (-450.0, 450.0)])
+    in_first = world_poses[0].apply(corners)
+    volume = np.stack([in_first.min(axis=0), in_first.max(axis=0)])
+    return Scenario(
+        "sparse4",
+        WandSpec((0.0, 289.6)),
+        tuple(cameras),
+        volume,
+        n_placements,
+        min_views=1,
+        view_rates=(0.45, 0.4, 0.36, 0.3),
+        marker_loss=0.15,
+    )
+
+
 SCENARIOS: dict[str, Callable[..., Scenario]] = {
     "paper": paper_fisheye_scenario,
     "paper3": paper_three_camera_scenario,
@@ -315,6 +390,7 @@ SCENARIOS: dict[str, Callable[..., Scenario]] = {
     "ring6": ring_scenario,
     "mocap16": mocap_scenario,
     "stage64": stage_scenario,
+    "sparse4": sparse_scenario,
 }
 
 
@@ -400,6 +476,20 @@ def image_placements(
 
 
 def simulate(scenario: Scenario, noise_px: float, rng: np.random.Generator, n: int | None = None) -> SimulatedData:
-    """Sample ``n`` (default: the scenario's count) placements and image them with noise."""
+    """Sample ``n`` (default: the scenario's count) placements and image them with noise (and, for a
+    sparse take, drop the views and markers its ``view_rates`` and ``marker_loss`` lose)."""
     wand_a, direction, facing = sample_placements(scenario, scenario.n_placements if n is None else n, rng)
-    return image_placements(scenario, wand_a, direction, facing, noise_px, rng)
+    data = image_placements(scenario, wand_a, direction, facing, noise_px, rng)
+    return data if scenario.view_rates is None else sparse_views(scenario, data, rng)
+
+
+def sparse_views(scenario: Scenario, data: SimulatedData, rng: np.random.Generator) -> SimulatedData:
+    """The data with the views a sparse take did not record removed (see :attr:`Scenario.view_rates`)."""
+    rates = np.asarray(scenario.view_rates, dtype=np.float64)
+    uv = data.observations.uv.copy()
+    recorded = rng.random(uv.shape[:2]) < rates[None, :]
+    lost = rng.random(uv.shape[:3]) < scenario.marker_loss
+    uv[~recorded] = np.nan
+    uv[lost] = np.nan
+    observations = data.observations.with_uv(uv)
+    return SimulatedData(observations, data.wand_a, data.wand_direction, data.noise_px, data.facing)

@@ -40,7 +40,9 @@ def read_xypts(path: str | Path, rig: RigSpec, *, origin: str = "bottom-left") -
         raise FormatError(path, f"cannot read: {error.strerror}") from None
     except UnicodeDecodeError:
         raise FormatError(path, "not UTF-8 text: not a point file?") from None
-    rows = [row for row in csv.reader(text.splitlines()) if any(cell.strip() for cell in row)]
+    # a row of empty cells is a frame in which nothing was seen (it keeps the later frames' ids); only
+    # blank lines are not rows
+    rows = [row for row in csv.reader(text.splitlines()) if row]
     if not rows:
         raise FormatError(path, "empty file; expected a header pt1_cam1_x,pt1_cam1_y,...")
     columns = []
@@ -48,6 +50,12 @@ def read_xypts(path: str | Path, rig: RigSpec, *, origin: str = "bottom-left") -
         found = _COLUMN.match(name.strip())
         if found is None:
             raise FormatError(path, f"column {index + 1} is {name!r}, not pt<P>_cam<C>_x or _y", row=1)
+        if int(found[1]) == 0 or int(found[2]) == 0:
+            raise FormatError(
+                path,
+                f"column {index + 1} is {name!r}: markers and cameras count from 1 (pt1_cam1_x is the first)",
+                row=1,
+            )
         columns.append((int(found[1]) - 1, int(found[2]) - 1, found[3].lower() == "y"))
     n_points = max(p for p, _, _ in columns) + 1
     n_cameras = max(c for _, c, _ in columns) + 1

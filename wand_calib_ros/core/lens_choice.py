@@ -1,0 +1,178 @@
+"""Which camera model each camera is calibrated in, and its start in that model.
+
+A camera is calibrated in the model its rig entry names (``camera_model``), else in the model its given
+intrinsics are in, else in the fisheye (Kannala-Brandt) model the paper's initialisation works in, unless
+the data choose a pinhole one (:func:`choose_models`). The initialisation's starts are fisheye-model
+curves; a camera to be calibrated in a pinhole model starts from the pinhole curve nearest its start
+(:func:`pinhole_start`): only a start, which the bundle adjustment then refines, never a result.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wand_calib_ros.core.bundle_adjustment import INTRINSICS, BundleProblem, BundleResult
+from wand_calib_ros.core.camera_model import (
+    EQUIDISTANT,
+    PINHOLE_MODELS,
+    PLUMB_BOB,
+    CameraModel,
+    angle_of_radius,
+    max_image_radius_mm,
+    radius_mm,
+)
+from wand_calib_ros.core.chi_square import chi_square_quantile
+from wand_calib_ros.core.errors import CoreError
+from wand_calib_ros.core.intrinsics_init import FISHEYE_PROJECTIONS, fit_projection, initial_model
+from wand_calib_ros.core.model_order import FixedParameters, adjust_with_model_selection, free_mask
+from wand_calib_ros.core.rig import CameraSpec, RigSpec
+from wand_calib_ros.core.timing import ClockModel
+
+log = logging.getLogger(__name__)
+
+FloatArray = NDArray[np.float64]
+
+#: Conventional cameras are calibrated in plumb_bob rather than the fisheye model when the plumb_bob fit
+#: lowers the residuals' chi-square by more than this quantile of the chi-square law of the parameters it adds.
+CHOICE_CONFIDENCE = 0.99
+#: Lenses whose field (theta_max) is narrower than this are conventional: the data may choose plumb_bob.
+CONVENTIONAL_DEG = 80.0
+
+#: A pinhole start is fitted up to this angle at most (rad): the pinhole curve grows without bound at 90
+#: degrees.
+MAX_PINHOLE_ANGLE = float(np.radians(80.0))
+#: Samples of the fitted angles.
+N_SAMPLES = 200
+
+
+def undecided(spec: CameraSpec) -> bool:
+    """Whether the data choose the camera's model: a conventional lens (a field under CONVENTIONAL_DEG,
+    no fisheye hint) whose rig entry names no model and gives no intrinsics."""
+    fisheye = spec.lens == "fisheye" or spec.lens in FISHEYE_PROJECTIONS
+    return (
+        spec.camera_model is None
+        and spec.intrinsics is None
+        and spec.max_view_angle_deg < CONVENTIONAL_DEG
+        and not fisheye
+    )
+
+
+def choose_models(
+    rig: RigSpec,
+    uv: FloatArray,
+    result: BundleResult,
+    fixed: FixedParameters,
+    reference: int,
+    clocks: ClockModel,
+    used: NDArray[np.int64],
+) -> tuple[BundleResult, FixedParameters]:
+    """The fisheye-model adjustment ``result`` of the placements ``used`` (their pixels ``uv``) with the
+    conventional cameras whose model the rig leaves open (:func:`undecided`) in plumb_bob instead, each where
+    the data prefer it: the residuals' chi-square falls by more than the CHOICE_CONFIDENCE quantile of the
+    chi-square law of the parameters plumb_bob adds (its tangential terms, against the fisheye terms the
+    model order kept; at least one per camera), and the camera's own residuals' does not rise. Each
+    camera's order is then decided again in its model.
+
+    Returns:
+        The adjustment and its fixed parameters in the chosen models (``result``, ``fixed`` if none changed).
+    """
+    models = result.state.models  # (a warm start keeps the model an earlier calibration chose)
+    candidates = [c for c, spec in enumerate(rig.cameras) if undecided(spec) and not models[c].is_pinhole]
+    if not candidates:
+        return result, fixed
+    starts = list(models)
+    for c in candidates:
+        starts[c] = pinhole_start(models[c], PLUMB_BOB, rig.cameras[c].max_view_angle)
+    state = replace(result.state, models=tuple(starts))
+    try:
+        alternative, alternative_fixed = adjust_with_model_selection(rig, uv, state, reference, clocks, used)
+    except CoreError as error:  # the alternative did not converge: the fisheye model stays
+        log.info("plumb_bob for %s not adjusted (%s)", ", ".join(rig.cameras[c].name for c in candidates), error)
+        return result, fixed
+    camera = BundleProblem.from_dense(rig.wand, uv, clocks.placements(used)).camera
+    n_cameras = len(rig.cameras)
+    chi_fisheye = np.bincount(camera, np.sum(result.residuals**2, axis=1), minlength=n_cameras)
+    chi_pinhole = np.bincount(camera, np.sum(alternative.residuals**2, axis=1), minlength=n_cameras)
+    sigma2 = result.sigma**2
+    estimated = [free_mask(n_cameras, reference, f)[:, INTRINSICS].sum(axis=1) for f in (alternative_fixed, fixed)]
+    added = np.maximum(estimated[0] - estimated[1], 1)[candidates]  # parameters plumb_bob adds, at least one
+    gains = (chi_fisheye - chi_pinhole) / sigma2
+    total, needed = float(gains.sum()), chi_square_quantile(CHOICE_CONFIDENCE, int(added.sum()))
+    log.info(
+        "plumb_bob for %s lowers the chi-square by %.1f (needs %.1f for %d more parameters)",
+        ", ".join(rig.cameras[c].name for c in candidates), total, needed, int(added.sum()),
+    )  # fmt: skip
+    # the whole rig's residuals judge it (the other cameras' fit too follows a camera's better model),
+    # each candidate's own residuals whether it is among those that gained
+    chosen = [c for c in candidates if gains[c] >= 0] if total > needed else []
+    if not chosen:
+        return result, fixed
+    if len(chosen) == len(candidates):
+        return alternative, alternative_fixed
+    mixed = list(alternative.state.models)
+    for c in candidates:
+        if c not in chosen:
+            mixed[c] = result.state.models[c]
+    return adjust_with_model_selection(
+        rig, uv, replace(alternative.state, models=tuple(mixed)), reference, clocks, used
+    )
+
+
+def target_model(spec: CameraSpec) -> str:
+    """The camera model a camera is calibrated in, as its rig entry says (``equidistant`` where it says
+    nothing)."""
+    if spec.camera_model is not None:
+        return spec.camera_model
+    return spec.intrinsics.distortion_model if spec.intrinsics is not None else EQUIDISTANT
+
+
+def nominal_model(spec: CameraSpec) -> CameraModel:
+    """The data sheet's lens as a start: the perspective projection of the nominal focal for a conventional
+    lens (under 80 degrees, no fisheye hint), else the equidistant one (or the ``lens`` projection named)."""
+    if spec.lens not in (None, "fisheye", "conventional"):
+        projection = str(spec.lens)
+    elif spec.lens != "fisheye" and spec.max_view_angle < MAX_PINHOLE_ANGLE:
+        projection = "perspective"
+    else:
+        projection = "equidistant"
+    return initial_model(spec, fit_projection(projection, spec.nominal_focal_mm, spec.max_view_angle))
+
+
+def pinhole_start(model: CameraModel, distortion_model: str, max_angle: float) -> CameraModel:
+    """The pinhole model (``plumb_bob`` or ``rational_polynomial``) whose radial curve is nearest ``model``'s
+    over the angles its image reaches (at most ``max_angle`` and :data:`MAX_PINHOLE_ANGLE`), without
+    tangential or rational terms: k1..k3 of r(s) = k1 s + k2 s^3 + k3 s^5, s = tan(theta).
+
+    Args:
+        model: the start (any model).
+        distortion_model: one of :data:`~wand_calib_ros.core.camera_model.PINHOLE_MODELS`.
+        max_angle: the lens's theta_max, rad.
+    """
+    reach = float(angle_of_radius(model, np.array(max_image_radius_mm(model))))
+    limit = min(max_angle, MAX_PINHOLE_ANGLE, reach if np.isfinite(reach) else MAX_PINHOLE_ANGLE)
+    theta = np.linspace(0.0, limit, N_SAMPLES + 1)[1:]
+    s = np.tan(theta)
+    design = np.stack([s, s**3, s**5], axis=1)
+    scale = np.max(np.abs(design), axis=0)
+    coefficients = np.linalg.lstsq(design / scale, radius_mm(model, theta), rcond=None)[0] / scale
+    k = np.r_[coefficients, 0.0, 0.0]
+    return CameraModel(k, model.m, model.principal_point, model.image_size, distortion_model)
+
+
+def model_starts(rig: RigSpec, models: tuple[CameraModel, ...]) -> tuple[CameraModel, ...]:
+    """Each camera's start in the model it is calibrated in: its given intrinsics as given, else the
+    initialisation's start (converted to the pinhole curve nearest it where the camera's model is one)."""
+    starts = []
+    for spec, model in zip(rig.cameras, models, strict=True):
+        target = target_model(spec)
+        if spec.intrinsics is not None:
+            starts.append(spec.intrinsics)
+        elif target in PINHOLE_MODELS and model.distortion_model != target:
+            starts.append(pinhole_start(model, target, spec.max_view_angle))
+        else:
+            starts.append(model)
+    return tuple(starts)
