@@ -35,6 +35,15 @@ def test_report_for_simulated_rigs(tmp_path: Path, scenario: str) -> None:
     assert "cam1" in page
 
 
+def test_report_of_a_sparse_two_marker_take_with_plumb_bob_intrinsics_given(tmp_path: Path) -> None:
+    sim = tmp_path / "sim"
+    assert main(["-q", "simulate", "sparse4", "--seed", "3", "--known-intrinsics", "--out", str(sim)]) == 0
+    files = ["--cameras", str(sim / "cameras.yaml"), "--observations", str(sim / "observations.csv")]
+    assert main(["-q", "calibrate", *files, "--output", str(tmp_path / "result.yaml")]) == 0
+    assert main(["-q", "report", "--result", str(tmp_path / "result.yaml"), *files, "--out", str(tmp_path / "r")]) == 0
+    assert "cam3" in _check(tmp_path / "r", timing=False)
+
+
 def test_report_for_ewand(tmp_path: Path) -> None:
     files = ["--cameras", str(DATA / "cameras.yaml"), "--observations", str(DATA / "observations.csv")]
     assert main(["-q", "calibrate", *files, "--output", str(tmp_path / "result.yaml")]) == 0

@@ -37,6 +37,8 @@ from wand_calib_ros.core.gating import robust_adjustment
 from wand_calib_ros.core.geometry import Pose, skew, wand_directions
 from wand_calib_ros.core.placements import triangulate_placements
 from wand_calib_ros.core.rig import RigSpec, WandSpec
+from wand_calib_ros.core.two_markers import swapped
+from wand_calib_ros.core.vision_graph import covisibility
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -91,13 +93,6 @@ def _needed(inlier_fraction: float, size: int) -> float:
     return float(np.log(1.0 - CONFIDENCE) / np.log(max(fail, 1e-12)))
 
 
-def _swap(views: FloatArray, swap: BoolArray) -> FloatArray:
-    """(N, K, D) views with the markers' order reversed where ``swap`` (two-marker wands only swap)."""
-    out = views.copy()
-    out[swap] = views[swap, ::-1]
-    return out
-
-
 def _pair_errors(
     essential: FloatArray, b0: FloatArray, b1: FloatArray, ambiguous: bool
 ) -> tuple[FloatArray, BoolArray]:
@@ -139,7 +134,7 @@ def pair_pose(
         index = np.array(sample)
         for combo in combos:
             m0 = b0[index].reshape(-1, 3)[:5]
-            m1 = _swap(b1[index], np.array(combo)).reshape(-1, 3)[:5]
+            m1 = swapped(b1[index], np.array(combo)).reshape(-1, 3)[:5]
             for essential in minimal_solutions(m0, m1):
                 errors, _ = _pair_errors(essential, b0, b1, ambiguous)
                 score = float(np.sum(np.minimum(errors, threshold_rad) ** 2))
@@ -153,14 +148,14 @@ def pair_pose(
     errors, swap = _pair_errors(essential, b0, b1, ambiguous)
     inlier = np.all(errors < threshold_rad, axis=1)
     if inlier.sum() * k >= 8:  # the linear refit needs eight correspondences
-        refined = linear_essential(b0[inlier].reshape(-1, 3), _swap(b1, swap)[inlier].reshape(-1, 3))
+        refined = linear_essential(b0[inlier].reshape(-1, 3), swapped(b1, swap)[inlier].reshape(-1, 3))
         errors_r, swap_r = _pair_errors(refined, b0, b1, ambiguous)
         if np.all(errors_r < threshold_rad, axis=1).sum() >= inlier.sum():
             essential, errors, swap = refined, errors_r, swap_r
             inlier = np.all(errors < threshold_rad, axis=1)
     if inlier.sum() * k < MIN_PAIR_POINTS:
         return None
-    paired = _swap(b1, swap)
+    paired = swapped(b1, swap)
     unit, front = decompose_essential(essential, b0[inlier].reshape(-1, 3), paired[inlier].reshape(-1, 3))
     if front < 0.8 * inlier.sum() * k:
         return None
@@ -252,7 +247,7 @@ def resect(bearings: FloatArray, points: FloatArray, *, threshold_rad: float, rn
             break
         index = whole[np.array(sample)]
         for combo in combos:
-            pose = _pnp(_swap(bearings[index], np.array(combo)).reshape(-1, 3), points[index].reshape(-1, 3))
+            pose = _pnp(swapped(bearings[index], np.array(combo)).reshape(-1, 3), points[index].reshape(-1, 3))
             if pose is None:
                 continue
             errors, _ = _resection_errors(pose, bearings, points, ambiguous)
@@ -266,7 +261,7 @@ def resect(bearings: FloatArray, points: FloatArray, *, threshold_rad: float, rn
     inlier = seen & (errors < threshold_rad)
     if inlier.sum() < MIN_RESECTION_POINTS:
         return None
-    refit = _pnp(_swap(bearings, swap)[inlier], points[inlier])
+    refit = _pnp(swapped(bearings, swap)[inlier], points[inlier])
     if refit is not None:
         errors_r, swap_r = _resection_errors(refit, bearings, points, ambiguous)
         inlier_r = seen & (errors_r < threshold_rad)
@@ -363,7 +358,7 @@ def place_cameras(
     *,
     threshold_rad: float,
     seed: int = 0,
-) -> tuple[tuple[Pose, ...], FloatArray]:
+) -> tuple[Pose, ...]:
     """Every camera's pose from its known intrinsics, placed one by one (see the module docstring).
 
     Args:
@@ -375,8 +370,8 @@ def place_cameras(
         seed: of the samplers.
 
     Returns:
-        The poses (X_cam = R X_ref + T, mm) and the views relabelled so that a two-marker wand's markers
-        have one label in every view of a placement the fits used.
+        The poses, X_cam = R X_ref + T (mm); a two-marker wand's labels are settled from them
+        (:func:`~wand_calib_ros.core.two_markers.consistent_labels`).
 
     Raises:
         InsufficientDataError: a camera that cannot be placed, with what it has and what would do.
@@ -387,7 +382,7 @@ def place_cameras(
     bearings = np.where(np.isfinite(uv).all(axis=-1, keepdims=True), bearings, np.nan)
     state = _Placing(rig, models, bearings, uv.copy(), [None] * n_cameras, threshold_rad, np.random.default_rng(seed))
     complete = state.complete
-    shared = complete.T.astype(np.int64) @ complete.astype(np.int64)
+    shared = covisibility(complete)
     pairs = sorted(((int(shared[a, b]), a, b) for a in range(n_cameras) for b in range(a + 1, n_cameras)), reverse=True)
     for count, a, b in pairs:
         rows = np.flatnonzero(complete[:, a] & complete[:, b])
@@ -411,7 +406,7 @@ def place_cameras(
         state.adjust(fixed=seed_camera)
     poses = [p for p in state.poses if p is not None]
     inverse = poses[reference].inverse()
-    return tuple(pose.compose(inverse) for pose in poses), state.uv
+    return tuple(pose.compose(inverse) for pose in poses)
 
 
 def _candidates(state: _Placing) -> list[tuple[int, int, int | None]]:

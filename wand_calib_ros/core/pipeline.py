@@ -73,9 +73,11 @@ def calibrate(
 
     Two cameras follow Section III-A of the paper; more cameras are initialised
     through the vision graph (Section III-B) and refined by one global bundle
-    adjustment. Placements must be seen completely (every marker of the wand) by at
-    least two cameras; the initialisation uses complete views only, the bundle
-    adjustment every point seen.
+    adjustment. With every camera's intrinsics given, or where the graph's pairs do not
+    chain every camera (a sparse take), the cameras are placed one by one instead
+    (:mod:`~wand_calib_ros.core.incremental`). Placements must be seen completely (every
+    marker of the wand) by at least two cameras; the initialisation uses complete views
+    only, the bundle adjustment every point seen.
 
     Args:
         rig: wand and camera descriptions.
@@ -233,7 +235,7 @@ def _placed(
     """The cameras placed one by one from known intrinsics (:mod:`~wand_calib_ros.core.incremental`)."""
     focal_px = min(float(np.min(model.focal_px)) for model in models)
     threshold = options.ransac_threshold_px / focal_px * (NOMINAL_SLACK if nominal else 1.0)
-    poses, _ = place_cameras(rig, uv, models, reference, threshold_rad=threshold, seed=options.seed)
+    poses = place_cameras(rig, uv, models, reference, threshold_rad=threshold, seed=options.seed)
     projections = tuple("given" if spec.intrinsics is not None else "nominal" for spec in rig.cameras)
     return RigInitialisation(models, poses, projections, ())
 

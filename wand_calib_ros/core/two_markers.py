@@ -34,8 +34,8 @@ MIDPOINT_SLACK = 3.0
 REFINEMENTS = 2
 
 
-def _swapped(uv: FloatArray, swap: NDArray[np.bool_]) -> FloatArray:
-    """(N, 2, 2) views with the two markers exchanged where ``swap`` (N,)."""
+def swapped(uv: FloatArray, swap: NDArray[np.bool_]) -> FloatArray:
+    """(N, 2, D) views with the two markers exchanged where ``swap`` (N,)."""
     out = uv.copy()
     out[swap] = uv[swap, ::-1]
     return out
@@ -99,7 +99,7 @@ def match_pair(
         m0, m1 = b0[usable].reshape(-1, 3), paired[usable].reshape(-1, 3)
         essential, _ = ransac_essential(m0, m1, threshold_rad=threshold_rad, rng=rng)
     straight, crossed = _pairing_errors(essential, b0, b1)
-    return _swapped(uv1, crossed < straight)
+    return swapped(uv1, crossed < straight)
 
 
 def consistent_labels(models: tuple[CameraModel, ...], poses: tuple[Pose, ...], uv: FloatArray) -> FloatArray:
@@ -122,7 +122,7 @@ def consistent_labels(models: tuple[CameraModel, ...], poses: tuple[Pose, ...], 
             relative = poses[c].compose(poses[r].inverse())  # camera r's frame to camera c's
             essential = skew(relative.translation) @ relative.rotation
             straight, crossed = _pairing_errors(essential, bearings[r][rows], bearings[c][rows])
-            out[rows, c] = _swapped(uv[rows, c], crossed < straight)
+            out[rows, c] = swapped(uv[rows, c], crossed < straight)
     points = triangulate_placements(models, poses, np.where(complete[..., None, None], out, np.nan))  # (P, 2, 3)
     _label_single_markers(models, poses, out, points)
     placed = np.flatnonzero(np.all(np.isfinite(points), axis=(1, 2)))

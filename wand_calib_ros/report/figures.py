@@ -146,10 +146,12 @@ def distortion_curves(data: ReportData) -> Figure:
         seen = float(np.degrees(np.nanmax(camera.theta))) if camera.theta.size else 0.0
         bottom.plot(np.degrees(theta), band / 2, "k")
         bottom.axvspan(seen, spec.max_view_angle_deg, color="tab:orange", alpha=0.2, label="not observed")
-        bottom.set_title(f"{name}: 1-sigma uncertainty of r")
+        given = not np.any(band > 0)  # intrinsics given and held: no uncertainty of their own
+        bottom.set_title(f"{name}: " + ("r given, held fixed" if given else "1-sigma uncertainty of r"))
         bottom.set_xlabel("theta (deg)")
         bottom.set_ylabel("px")
-        bottom.set_yscale("log")
+        if not given:
+            bottom.set_yscale("log")
         bottom.legend(fontsize=7)
     figure.tight_layout()
     return figure
@@ -172,7 +174,7 @@ def rig_3d(data: ReportData) -> Figure:
     axis = figure.add_subplot(projection="3d")
     step = max(1, data.wand_points.shape[0] // 300)
     for wand in data.wand_points[::step]:
-        axis.plot(wand[[0, 2], 0], wand[[0, 2], 1], wand[[0, 2], 2], color="tab:gray", linewidth=0.5)
+        axis.plot(wand[[0, -1], 0], wand[[0, -1], 1], wand[[0, -1], 2], color="tab:gray", linewidth=0.5)
     extent = float(np.ptp(data.wand_points.reshape(-1, 3), axis=0).max()) if data.wand_points.size else 1000.0
     for name, model, pose, spec in zip(data.names, data.models, data.poses, data.rig.cameras, strict=True):
         centre = pose.center
