@@ -15,7 +15,7 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.bundle_adjustment import INTRINSICS, BundleProblem, BundleResult
+from wand_calib_ros.core.bundle_adjustment import LENS, N_CAMERA_PARAMS, BundleResult
 from wand_calib_ros.core.camera_model import (
     EQUIDISTANT,
     PINHOLE_MODELS,
@@ -28,7 +28,7 @@ from wand_calib_ros.core.camera_model import (
 from wand_calib_ros.core.chi_square import chi_square_quantile
 from wand_calib_ros.core.errors import CoreError
 from wand_calib_ros.core.intrinsics_init import FISHEYE_PROJECTIONS, fit_projection, initial_model
-from wand_calib_ros.core.model_order import FixedParameters, adjust_with_model_selection, free_mask
+from wand_calib_ros.core.model_order import FixedParameters, adjust_with_model_selection
 from wand_calib_ros.core.rig import CameraSpec, RigSpec
 from wand_calib_ros.core.timing import ClockModel
 
@@ -36,9 +36,12 @@ log = logging.getLogger(__name__)
 
 FloatArray = NDArray[np.float64]
 
-#: Conventional cameras are calibrated in plumb_bob rather than the fisheye model when the plumb_bob fit
-#: lowers the residuals' chi-square by more than this quantile of the chi-square law of the parameters it adds.
+#: Conventional cameras are calibrated in plumb_bob rather than the fisheye model when plumb_bob's
+#: tangential terms, which the fisheye model does not have, are significant at this confidence (a Wald
+#: test, chi-square with 2 degrees of freedom): its radial curve in tan(theta) and the fisheye model's in
+#: theta both follow a conventional lens, so the tangential terms are what the data can tell them by.
 CHOICE_CONFIDENCE = 0.99
+TANGENTIAL_THRESHOLD = chi_square_quantile(CHOICE_CONFIDENCE, 2)
 #: Lenses whose field (theta_max) is narrower than this are conventional: the data may choose plumb_bob.
 CONVENTIONAL_DEG = 80.0
 
@@ -72,10 +75,8 @@ def choose_models(
 ) -> tuple[BundleResult, FixedParameters]:
     """The fisheye-model adjustment ``result`` of the placements ``used`` (their pixels ``uv``) with the
     conventional cameras whose model the rig leaves open (:func:`undecided`) in plumb_bob instead, each where
-    the data prefer it: the residuals' chi-square falls by more than the CHOICE_CONFIDENCE quantile of the
-    chi-square law of the parameters plumb_bob adds (its tangential terms, against the fisheye terms the
-    model order kept; at least one per camera), and the camera's own residuals' does not rise. Each
-    camera's order is then decided again in its model.
+    the data show its tangential terms (:data:`TANGENTIAL_THRESHOLD`). Each camera's order is then
+    decided again in its model.
 
     Returns:
         The adjustment and its fixed parameters in the chosen models (``result``, ``fixed`` if none changed).
@@ -93,22 +94,16 @@ def choose_models(
     except CoreError as error:  # the alternative did not converge: the fisheye model stays
         log.info("plumb_bob for %s not adjusted (%s)", ", ".join(rig.cameras[c].name for c in candidates), error)
         return result, fixed
-    camera = BundleProblem.from_dense(rig.wand, uv, clocks.placements(used)).camera
-    n_cameras = len(rig.cameras)
-    chi_fisheye = np.bincount(camera, np.sum(result.residuals**2, axis=1), minlength=n_cameras)
-    chi_pinhole = np.bincount(camera, np.sum(alternative.residuals**2, axis=1), minlength=n_cameras)
-    sigma2 = result.sigma**2
-    estimated = [free_mask(n_cameras, reference, f)[:, INTRINSICS].sum(axis=1) for f in (alternative_fixed, fixed)]
-    added = np.maximum(estimated[0] - estimated[1], 1)[candidates]  # parameters plumb_bob adds, at least one
-    gains = (chi_fisheye - chi_pinhole) / sigma2
-    total, needed = float(gains.sum()), chi_square_quantile(CHOICE_CONFIDENCE, int(added.sum()))
-    log.info(
-        "plumb_bob for %s lowers the chi-square by %.1f (needs %.1f for %d more parameters)",
-        ", ".join(rig.cameras[c].name for c in candidates), total, needed, int(added.sum()),
-    )  # fmt: skip
-    # the whole rig's residuals judge it (the other cameras' fit too follows a camera's better model),
-    # each candidate's own residuals whether it is among those that gained
-    chosen = [c for c in candidates if gains[c] >= 0] if total > needed else []
+    chosen = []
+    for c in candidates:  # the Wald test of the tangential terms the fisheye model does not have
+        index = c * N_CAMERA_PARAMS + np.arange(LENS.start, LENS.start + 2)
+        covariance = alternative.camera_covariance[np.ix_(index, index)]
+        terms = alternative.state.models[c].lens_vector()[:2]
+        wald = float(terms @ np.linalg.pinv(covariance) @ terms) if np.any(covariance) else 0.0
+        log.info("%s: plumb_bob's tangential terms are %.1f (chi-square, 2 dof; needs %.1f)", rig.cameras[c].name,
+                 wald, TANGENTIAL_THRESHOLD)  # fmt: skip
+        if wald > TANGENTIAL_THRESHOLD:
+            chosen.append(c)
     if not chosen:
         return result, fixed
     if len(chosen) == len(candidates):
