@@ -14,7 +14,9 @@ import shutil
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
 import pytest
+import yaml
 
 from wand_calib_ros.cli import main
 
@@ -187,6 +189,131 @@ def _other_cameras_result(folder: Path) -> Path:
     return _rewrite(folder, "result.yaml", lambda text: text.replace("cam1", "camX"))
 
 
+def _floor(write: Callable[[Path], str]) -> Spoil:
+    """A calibration with ``--floor`` what ``write(folder)`` gives (a text, or a file it wrote)."""
+    return lambda folder: _calibrate(folder, "--floor", write(folder))
+
+
+def _floor_file(content: bytes) -> Callable[[Path], str]:
+    def write(folder: Path) -> str:
+        (folder / "floor.txt").write_bytes(content)
+        return str(folder / "floor.txt")
+
+    return write
+
+
+def _given_intrinsics(edit: Callable[[dict], dict]) -> Spoil:  # type: ignore[type-arg]
+    """cam1 given the true intrinsics of truth.yaml (K, D as OpenCV fisheye), as ``edit`` spoils them."""
+
+    def spoil(folder: Path) -> list[str]:
+        truth = yaml.safe_load((folder / "truth.yaml").read_text())["cameras"]["cam1"]["opencv"]
+        given = {"K": truth["camera_matrix"], "D": truth["distortion"], "distortion_model": "equidistant"}
+        document = yaml.safe_load((folder / "cameras.yaml").read_text())
+        document["cameras"][1]["intrinsics"] = edit(given)
+        (folder / "bad-cameras.yaml").write_text(yaml.safe_dump(document))
+        return _calibrate(folder, cameras="bad-cameras.yaml")
+
+    return spoil
+
+
+def _scaled_focal(given: dict) -> dict:  # type: ignore[type-arg]
+    k = np.array(given["K"], dtype=float)
+    k[0, 0] *= 1.25
+    k[1, 1] *= 1.25
+    return {**given, "K": k.tolist()}
+
+
+def _camera_info(text: str) -> Spoil:
+    """cam0's intrinsics from a camera_info file of ``text``."""
+
+    def spoil(folder: Path) -> list[str]:
+        (folder / "cam0-info.yaml").write_text(text)
+        _rewrite(
+            folder,
+            "cameras.yaml",
+            _yaml_replace("max_view_angle_deg: 92.5", "max_view_angle_deg: 92.5\n  intrinsics: cam0-info.yaml"),
+        )
+        return _calibrate(folder, cameras="bad-cameras.yaml")
+
+    return spoil
+
+
+INFO = (
+    "image_width: 640\nimage_height: 480\n"
+    "camera_matrix: {rows: 3, cols: 3, data: [356, 0, 310, 0, 356, 250, 0, 0, 1]}\n"
+    "distortion_model: equidistant\ndistortion_coefficients: {rows: 1, cols: 4, data: [0, 0, 0, 0]}\n"
+)
+
+
+def _result_command(command: str, result: Callable[[Path], Path]) -> Spoil:
+    """``export`` (opencv) or ``refine`` with a spoilt result."""
+
+    def spoil(folder: Path) -> list[str]:
+        path = str(result(folder))
+        if command == "export":
+            return ["export", "--result", path, "--format", "opencv", "--out", str(folder / "out" / "export")]
+        return ["refine", "--cameras", str(folder / "cameras.yaml"), "--result", path, "--observations",
+                str(folder / "observations.csv"), "--output", str(folder / "out" / "refined.yaml")]  # fmt: skip
+
+    return spoil
+
+
+def _result_text(edit: Callable[[str], str]) -> Callable[[Path], Path]:
+    return lambda folder: _rewrite(folder, "result.yaml", edit)
+
+
+def _result_document(edit: Callable[[dict], None]) -> Callable[[Path], Path]:  # type: ignore[type-arg]
+    def write(folder: Path) -> Path:
+        document = yaml.safe_load((folder / "result.yaml").read_text())
+        edit(document)
+        (folder / "bad-result.yaml").write_text(yaml.safe_dump(document))
+        return folder / "bad-result.yaml"
+
+    return write
+
+
+def _refine_views(keep: Callable[[list[str]], bool]) -> Spoil:
+    """``refine`` on the rows of observations.csv that ``keep`` keeps (new views of the calibrated rig)."""
+
+    def spoil(folder: Path) -> list[str]:
+        lines = (folder / "observations.csv").read_text().splitlines()
+        rows = [lines[0], *(line for line in lines[1:] if keep(line.split(",")))]
+        (folder / "bad-observations.csv").write_text("\n".join(rows) + "\n")
+        result, views = str(folder / "result.yaml"), str(folder / "bad-observations.csv")
+        return ["refine", "--cameras", str(folder / "cameras.yaml"), "--result", result, "--observations", views,
+                "--output", str(folder / "out" / "r.yaml")]  # fmt: skip
+
+    return spoil
+
+
+def _other_rig(folder: Path) -> list[str]:
+    """``report`` of this rig's result on another simulated rig (the same camera names and image sizes)."""
+    other = folder / "other"
+    assert main(["-q", "simulate", "paper", "--seed", "8", "--true-focal", "2.3", "--out", str(other)]) == 0
+    return ["report", "--result", str(folder / "result.yaml"), "--observations", str(other / "observations.csv"),
+            "--cameras", str(other / "cameras.yaml"), "--out", str(folder / "out" / "report")]  # fmt: skip
+
+
+def _drop_metrics(document: dict) -> None:  # type: ignore[type-arg]
+    del document["metrics"]
+
+
+def _scale_rotation(document: dict) -> None:  # type: ignore[type-arg]
+    document["cameras"]["cam1"]["rotation"][0] = [2 * v for v in document["cameras"]["cam1"]["rotation"][0]]
+
+
+def _nan_rotation(document: dict) -> None:  # type: ignore[type-arg]
+    document["cameras"]["cam1"]["rotation"][0][0] = float("nan")
+
+
+def _no_cameras(document: dict) -> None:  # type: ignore[type-arg]
+    document["cameras"] = {}
+
+
+def _unknown_reference(document: dict) -> None:  # type: ignore[type-arg]
+    document["reference_camera"] = "cam9"
+
+
 CASES: dict[str, tuple[Spoil, str]] = {
     # cameras.yaml
     "cameras missing": (lambda f: _calibrate(f, cameras="none.yaml"), "none.yaml: cannot read: No such file"),
@@ -290,6 +417,113 @@ CASES: dict[str, tuple[Spoil, str]] = {
     "detect topic with a broken brace": (_detect("/{camera/image_raw"), "--topic '/{camera/image_raw'"),
     "detect topic shared by the cameras": (_detect("/cam0/image_raw"), "gives every camera the same topic"),
     "detect bag missing": (_detect("/{camera}/image_raw"), "no-bag"),
+    # the surfaces added since (issue 25): --floor
+    "floor file line not a frame": (
+        _floor(_floor_file(b"12\nabc\n")),
+        "floor.txt, row 2: expected a frame id, got 'abc'",
+    ),
+    "floor empty text": (_floor(lambda f: ""), "--floor '' names no frame"),
+    "floor file empty": (_floor(_floor_file(b"")), "floor.txt: names no frame"),
+    "floor file missing": (_floor(lambda f: str(f / "floor_frames.txt")), "floor_frames.txt: no such file"),
+    "floor a folder": (_floor(lambda f: str(f)), "is a folder, not a floor_frames.txt"),
+    "floor file binary": (_floor(_floor_file(PNG)), "floor.txt: not UTF-8 text"),
+    "floor frames of the waved take": (_floor(lambda f: "0-29"), "the wand was not lying still"),
+    # the wand and given intrinsics
+    "wand L1 L2 and points_mm": (
+        _cameras(_yaml_replace("wand: {L1: 400.0, L2: 200.0}", "wand: {L1: 200, L2: 400, points_mm: [0, 400, 600]}")),
+        "wand: give L1 and L2 or points_mm, not both",
+    ),
+    "given focal 25 % too large": (
+        _given_intrinsics(_scaled_focal),
+        "camera 'cam1': the views disagree with its given intrinsics",
+    ),
+    "given principal point outside the image": (
+        _given_intrinsics(lambda g: {**g, "K": [[g["K"][0][0], 0, 900], [0, g["K"][1][1], 250], [0, 0, 1]]}),
+        "camera 'cam1' intrinsics: the principal point (900, 250) is outside its 640 x 480 image",
+    ),
+    "given D with a NaN": (
+        _given_intrinsics(lambda g: {**g, "D": [float("nan"), 0, 0, 0]}),
+        "intrinsics D must be a finite number, got nan",
+    ),
+    "camera_info not YAML": (
+        _camera_info(INFO.replace("image_height: 480", "image_height: [480")),
+        "cam0-info.yaml: not valid YAML",
+    ),
+    "camera_info with a short K": (
+        _camera_info(INFO.replace("0, 0, 1]}", "0]}")),
+        "cam0-info.yaml: camera_matrix data must be a list of 9 numbers",
+    ),
+    # export
+    "export of a result without cameras": (
+        _result_command("export", _result_document(_no_cameras)),
+        "bad-result.yaml: no cameras",
+    ),
+    "export with an unknown reference camera": (
+        _result_command("export", _result_document(_unknown_reference)),
+        "bad-result.yaml: its reference_camera 'cam9' is not one of its cameras (cam0, cam1)",
+    ),
+    "export of a rotation that is not one": (
+        _result_command("export", _result_document(_scale_rotation)),
+        "bad-result.yaml: camera 'cam1': its rotation is not a rotation matrix",
+    ),
+    "export of a truncated result": (
+        _result_command("export", _result_text(lambda t: t[: len(t) // 3])),
+        "bad-result.yaml: not valid YAML",
+    ),
+    "export of an empty result": (_result_command("export", _result_text(lambda t: "")), "bad-result.yaml: empty"),
+    "export of cameras.yaml": (
+        _result_command("export", lambda f: f / "cameras.yaml"),
+        "cameras.yaml: not a wand_calib_ros result file (a rig description?",
+    ),
+    "export of an OpenCV FileStorage": (
+        _result_command("export", _result_text(lambda t: "%YAML:1.0\n---\nK: !!opencv-matrix\n   rows: 3\n")),
+        "bad-result.yaml: an OpenCV FileStorage file, not a wand_calib_ros result",
+    ),
+    "export of an anipose TOML": (
+        _result_command("export", _result_text(lambda t: '[cam_0]\nname = "cam0"\nsize = [640, 480]\n')),
+        "(a TOML file? give the result YAML wand-calib wrote)",
+    ),
+    # refine
+    "refine of a result without metrics": (
+        _result_command("refine", _result_document(_drop_metrics)),
+        "bad-result.yaml: no metrics sigma_px",
+    ),
+    "refine of a NaN rotation": (
+        _result_command("refine", _result_document(_nan_rotation)),
+        "bad-result.yaml: camera 'cam1': its rotation must be finite numbers",
+    ),
+    "refine on 5 placements": (
+        _refine_views(lambda cells: int(cells[0]) < 5),
+        "only 5 placements show the whole wand to two cameras",
+    ),
+    "refine on one camera's rows": (
+        _refine_views(lambda cells: cells[1] == "cam0"),
+        "only 0 placements show the whole wand",
+    ),
+    # report
+    "report of another rig with the same camera names": (_other_rig, "does not fit these observations"),
+    "report out an existing file": (
+        lambda f: [*_report(lambda g: g / "result.yaml")(f)[:-1], str(f / "cameras.yaml")],
+        "cameras.yaml: it is a file; give a folder",
+    ),
+    # import
+    "import 0-based header": (
+        lambda f: (
+            (f / "p.csv").write_text("pt0_cam0_x,pt0_cam0_y\n1,2\n")
+            and [
+                "import",
+                "--format",
+                "xypts",
+                "--points",
+                str(f / "p.csv"),
+                "--cameras",
+                str(f / "cameras.yaml"),
+                "--out",
+                str(f / "out" / "o.csv"),
+            ]
+        ),
+        "markers and cameras count from 1",
+    ),
 }
 
 
@@ -317,8 +551,22 @@ def test_bad_input_is_one_line_and_exit_code_2(
     assert code == 2, err
     assert len(errors) == 1 and expected in errors[0], err
     assert "Traceback" not in err
+    assert _only_own_lines(err), err  # the error in one line: no continuation
+    for python in ("np.float64", "NoneType", "object has no attribute", "subscriptable", "_frame_ranges", "Errno"):
+        assert python not in errors[0], err
     assert _digests(folder) == before  # no input changed
     assert not (folder / "out").exists() or not any(p.is_file() for p in (folder / "out").rglob("*"))
+
+
+def _only_own_lines(err: str) -> bool:
+    """Whether stderr holds the package's lines only (each ``wand-calib: ...``) and Python's warnings
+    (a ``...Warning: ...`` line, then its indented source line)."""
+    lines = err.splitlines()
+    for i, line in enumerate(lines):
+        warning = "Warning: " in line or (i > 0 and "Warning: " in lines[i - 1] and line.startswith("  "))
+        if not (line.startswith("wand-calib: ") or warning):
+            return False
+    return True
 
 
 def test_the_catalogue_is_broad() -> None:

@@ -1,4 +1,5 @@
-"""Property tests: random bytes, documents and images at the parsers and the detector.
+"""Property tests: random bytes, documents and images at the parsers and the detector, spoilt inputs at
+the commands.
 
 Whatever comes in, the answer is a valid result or a typed error (FormatError, ImageError, ...),
 never another exception. Seeded (``derandomize``) so CI sees the same cases every run.
@@ -7,8 +8,10 @@ never another exception. Seeded (``derandomize``) so CI sees the same cases ever
 from __future__ import annotations
 
 import contextlib
+import io
 import string
 import tempfile
+from functools import cache
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +20,7 @@ import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from wand_calib_ros.cli import main
 from wand_calib_ros.collection.buffer import ObservationBuffer
 from wand_calib_ros.detection.blobs import BlobOptions
 from wand_calib_ros.detection.errors import DetectionError
@@ -158,3 +162,80 @@ def test_random_images_give_a_detection_or_an_image_error(
         return
     assert blobs.centres.shape[1:] == (2,)
     assert (detection.points is None) == (detection.reason is not None)
+
+
+@cache
+def _good_run() -> Path:
+    """A good run's files, made once: a simulated rig, its observations, its result and a point file."""
+    folder = Path(tempfile.mkdtemp(prefix="wand-calib-good-"))
+    assert main(["-q", "simulate", "paper", "--seed", "3", "--noise", "0.5", "--out", str(folder)]) == 0
+    files = ["--cameras", str(folder / "cameras.yaml"), "--observations", str(folder / "observations.csv")]
+    assert main(["-q", "calibrate", *files, "--output", str(folder / "result.yaml")]) == 0
+    observations = read_observations(folder / "observations.csv", RIG.camera_names)
+    header = [f"pt{p + 1}_cam{c + 1}_{a}" for p in range(3) for c in range(2) for a in "xy"]
+    rows = [",".join(f"{v:.3f}" for p in range(3) for c in range(2) for v in (u[c, p, 0], 480 - u[c, p, 1]))
+            for u in observations.uv]  # fmt: skip
+    (folder / "points.csv").write_text("\n".join([",".join(header), *rows]) + "\n")
+    return folder
+
+
+#: The commands whose error paths the property test drives: (name, the input files it may spoil, argv).
+COMMANDS = {
+    "calibrate": (("cameras.yaml", "observations.csv"), "calibrate --cameras {cameras} --observations "
+                  "{observations} --output {out}/result.yaml --floor 0-9"),
+    "export": (("result.yaml",), "export --result {result} --format opencv --out {out}/export"),
+    "refine": (("cameras.yaml", "result.yaml", "observations.csv"), "refine --cameras {cameras} --result "
+               "{result} --observations {observations} --output {out}/refined.yaml --moved cam1"),
+    "import": (("cameras.yaml", "points.csv"), "import --format xypts --points {points} --cameras "
+               "{cameras} --out {out}/observations.csv"),
+}  # fmt: skip
+
+
+def _spoilt(text: str, mutation: tuple[str, float, str]) -> str:
+    """``text`` with one mutation: cut at a fraction of it, a span replaced, or one YAML scalar replaced."""
+    kind, where, insert = mutation
+    at = int(where * len(text))
+    if kind == "cut":
+        return text[:at]
+    if kind == "replace":
+        return text[:at] + insert + text[at + len(insert) :]
+    lines = text.splitlines()  # a line's value after its first ': ' or ','
+    line = int(where * (len(lines) - 1))
+    separator = ": " if ": " in lines[line] else ","
+    head, found, _ = lines[line].partition(separator)
+    lines[line] = head + (found or separator) + insert
+    return "\n".join(lines) + "\n"
+
+
+mutations = st.tuples(
+    st.sampled_from(["cut", "replace", "value"]),
+    st.floats(0.0, 1.0),
+    st.one_of(st.text(string.printable, max_size=8), st.sampled_from(["nan", "-1", "0", "[]", "{}", "1e300", ".inf"])),
+)
+
+
+@settings(max_examples=80, derandomize=True, deadline=None)
+@given(command=st.sampled_from(sorted(COMMANDS)), which=st.integers(0, 2), mutation=mutations)
+def test_every_command_answers_a_spoilt_input_with_one_line_and_writes_nothing(
+    command: str, which: int, mutation: tuple[str, float, str]
+) -> None:
+    good = _good_run()
+    spoilable, template = COMMANDS[command]
+    name = spoilable[which % len(spoilable)]
+    with tempfile.TemporaryDirectory() as work:
+        folder = Path(work)
+        files = ("cameras.yaml", "observations.csv", "result.yaml", "points.csv")
+        paths = {f.split(".")[0]: str(good / f) for f in files}
+        (folder / name).write_text(_spoilt((good / name).read_text(), mutation), encoding="utf-8")
+        paths[name.split(".")[0]] = str(folder / name)
+        argv = template.format(**paths, out=folder / "out").split()
+        stderr = io.StringIO()
+        with contextlib.redirect_stderr(stderr):
+            code = main(["-q", *argv])
+        err = stderr.getvalue()
+        assert code in (0, 2) and "Traceback" not in err, err
+        if code == 2:
+            errors = [line for line in err.splitlines() if line.startswith("wand-calib: error: ")]
+            assert len(errors) == 1 and all(line.startswith("wand-calib: ") for line in err.splitlines()), err
+            written = [p for p in (folder / "out").rglob("*") if p.is_file()] if (folder / "out").exists() else []
+            assert not written, written

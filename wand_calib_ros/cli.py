@@ -24,6 +24,7 @@ from wand_calib_ros.core.result import CalibrationResult, CameraCalibration
 from wand_calib_ros.core.rig import WandSpec
 from wand_calib_ros.core.timing import TIMING_MODES
 from wand_calib_ros.errors import WandCalibError
+from wand_calib_ros.io.errors import FormatError
 from wand_calib_ros.io.export import FORMATS as EXPORT_FORMATS
 from wand_calib_ros.io.observations_csv import read_observations, write_observations
 from wand_calib_ros.io.outputs import check_writable
@@ -48,21 +49,39 @@ log = logging.getLogger("wand_calib_ros")
 HELDOUT_PLACEMENTS = 100
 
 
-def _frame_ranges(text: str) -> tuple[int, ...]:
-    """``120-160,300`` as frame ids, or a collector's floor_frames.txt (argparse type: a bad range is a
-    usage error naming it)."""
-    if Path(text).is_file():
-        return read_floor_frames(Path(text))
+def floor_frames(text: str) -> tuple[int, ...]:
+    """``--floor``: frame ids like ``120-160,300``, or a collector's floor_frames.txt (a path: it holds a
+    ``/``, a ``.``-suffix that is not a frame, or names an existing file).
+
+    Raises:
+        WandCalibError: one line naming the option or the file and what is wrong.
+    """
+    if not text.strip():
+        raise WandCalibError(f"--floor {text!r} names no frame (give frames like 120-160,300-340, or a file)")
+    path = Path(text)
+    if path.is_dir():
+        raise WandCalibError(f"--floor {text}: it is a folder, not a floor_frames.txt or frames like 120-160")
+    if path.is_file():
+        frames = read_floor_frames(path)
+        if not frames:
+            raise FormatError(path, "names no frame (one frame id per line)")
+        return frames
+    if "/" in text or "\\" in text or path.suffix.lower() in (".txt", ".csv"):
+        raise FormatError(path, "no such file (--floor takes a floor_frames.txt or frames like 120-160)")
     frames: list[int] = []
     for part in (p.strip() for p in text.split(",") if p.strip()):
         first, dash, last = part.partition("-")
         try:
             lo, hi = int(first), int(last) if dash else int(first)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"{part!r} is not a frame or a range of frames like 120-160") from None
+            raise WandCalibError(
+                f"--floor: {part!r} is not a frame, a range of frames like 120-160, or a floor_frames.txt"
+            ) from None
         if hi < lo:
-            raise argparse.ArgumentTypeError(f"{part!r}: the range ends before it starts")
+            raise WandCalibError(f"--floor: {part!r}: the range ends before it starts")
         frames.extend(range(lo, hi + 1))
+    if not frames:
+        raise WandCalibError(f"--floor {text!r} names no frame (give frames like 120-160,300-340, or a file)")
     return tuple(sorted(set(frames)))
 
 
@@ -91,8 +110,6 @@ def _parser() -> argparse.ArgumentParser:
     )
     cal.add_argument(
         "--floor",
-        type=_frame_ranges,
-        default=(),
         metavar="FRAMES",
         help="frames (e.g. 120-160,300-340, or a collector's floor_frames.txt) where the wand lies still on "
         "the floor, in two directions: they "
@@ -353,7 +370,7 @@ def _calibrate(args: argparse.Namespace) -> int:
         pair=PairOptions(seed=args.seed),
         max_placements=args.max_placements,
         time_offsets=args.time_offsets,
-        floor_frames=args.floor,
+        floor_frames=() if args.floor is None else floor_frames(args.floor),
         floor_origin=args.floor_origin,
         rolling_shutter=args.rolling_shutter,
     )
@@ -620,7 +637,13 @@ def _refine(args: argparse.Namespace) -> int:
     models = tuple(geometry[n].model for n in names)
     poses = tuple(geometry[n].pose for n in names)
     document = read_yaml(args.result)
-    sigma = float(document.get("metrics", {}).get("sigma_px", float("nan")))
+    try:
+        sigma = float(document["metrics"]["sigma_px"])
+    except (KeyError, TypeError, ValueError):
+        raise FormatError(
+            args.result, "no metrics sigma_px (the pixel noise new views are judged against): give the result file "
+            "wand-calib wrote"
+        ) from None  # fmt: skip
     if args.moved is None:
         moved, lines = judge_moved(names, models, poses, rig.wand, sigma, observations.uv)
         for line in lines:

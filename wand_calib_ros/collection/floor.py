@@ -45,12 +45,16 @@ def read_floor_frames(path: Path) -> tuple[int, ...]:
     """The frame ids of a floor file (empty when there is none).
 
     Raises:
-        FormatError: a line that is not a frame id (naming the file and line).
+        FormatError: a line that is not a frame id (naming the file and line), or a file that is not text.
     """
     if not path.exists():
         return ()
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise FormatError(path, "not UTF-8 text: not a floor_frames.txt (one frame id per line)") from None
     frames = []
-    for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
+    for number, line in enumerate(text.splitlines(), start=1):
         if not line.strip():
             continue
         try:

@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from wand_calib_ros.core.bundle_adjustment import N_CAMERA_PARAMS, BundleResult
 from wand_calib_ros.core.errors import PlausibilityError
 from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.core.rig import CameraSpec, RigSpec, WandObservations, WandSpec
@@ -44,6 +45,12 @@ RMS_FACTOR = 4.0
 MIN_BAD_RMS_PX = 1.0
 #: The wand's |AC| RMS error, as a fraction of its length, beyond which the scene is not rigid.
 WAND_ERROR_FRACTION = 0.05
+#: Given intrinsics held fixed contradict the views when freeing them would move the focal length by more
+#: than GIVEN_FOCAL_FRACTION of it, or the principal point by more than GIVEN_CENTRE_FRACTION of the image
+#: width, and by more than GIVEN_SIGMAS standard deviations.
+GIVEN_FOCAL_FRACTION = 0.02
+GIVEN_CENTRE_FRACTION = 0.02
+GIVEN_SIGMAS = 5.0
 
 
 def image_radius_ratio(spec: CameraSpec) -> float:
@@ -180,3 +187,44 @@ def check_result(rig: RigSpec, result: CalibrationResult) -> None:
             f"({100 * result.wand_length_rms_mm / rig.wand.L:.0f} %): the scene is not rigid; check L1, L2 "
             "and that each camera's views are of the same wand at the same time"
         )
+
+
+def check_given_intrinsics(rig: RigSpec, result: BundleResult) -> None:
+    """Given intrinsics held fixed must not be contradicted by the views: for each such camera, the
+    linearised estimate with its focal length and principal point freed (the adjustment's own normal
+    equations, :meth:`~wand_calib_ros.core.bundle_adjustment.CameraSystem.step`) may move them by only
+    a little (GIVEN_FOCAL_FRACTION, GIVEN_CENTRE_FRACTION) or within GIVEN_SIGMAS of its standard deviations.
+
+    Raises:
+        PlausibilityError: naming the camera, its given values and what the views say.
+    """
+    system = result.system
+    if system is None:
+        return
+    n_cameras = len(rig.cameras)
+    free = np.zeros((n_cameras, N_CAMERA_PARAMS), dtype=bool)
+    free[:, system.columns] = result.camera_std[:, system.columns] > 0  # what the adjustment estimated
+    for c, spec in enumerate(rig.cameras):
+        if not spec.holds_intrinsics:
+            continue
+        released = free.copy()
+        released[c, [0, 5, 6]] = True  # k1, u0, v0
+        step = system.step(released)[c]
+        std = np.sqrt(np.clip(np.diag(system.covariance(released, result.sigma)), 0, None))
+        std = std.reshape(n_cameras, N_CAMERA_PARAMS)[c]
+        model = result.state.models[c]
+        focal = float(step[0] / model.k[0])
+        centre = float(np.hypot(step[5], step[6]))
+        centre_std = float(np.hypot(std[5], std[6]))
+        if (abs(focal) > GIVEN_FOCAL_FRACTION and abs(step[0]) > GIVEN_SIGMAS * std[0]) or (
+            centre > GIVEN_CENTRE_FRACTION * spec.image_size[0] and centre > GIVEN_SIGMAS * centre_std
+        ):
+            fx = float(model.focal_px[0])
+            seen = model.principal_point + step[5:7]
+            raise PlausibilityError(
+                f"camera '{spec.name}': the views disagree with its given intrinsics: they put its focal length at "
+                f"fx {fx * (1 + focal):.0f} +- {fx * std[0] / model.k[0]:.0f} px against the given {fx:.0f} "
+                f"({100 * focal:+.0f} %) and its principal point at ({seen[0]:.0f}, {seen[1]:.0f}) against "
+                f"({model.principal_point[0]:.0f}, {model.principal_point[1]:.0f}): check that K is this camera's "
+                "and for this image size, or give them as a start (fixed: false)"
+            )

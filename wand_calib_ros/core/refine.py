@@ -59,6 +59,7 @@ from wand_calib_ros.core.model_order import (
     low_order_mask,
 )
 from wand_calib_ros.core.placements import fit_placements, triangulate_placements, unprojectable
+from wand_calib_ros.core.plausibility import check_given_intrinsics
 from wand_calib_ros.core.result import CalibrationResult, LensTrial
 from wand_calib_ros.core.rig import RigSpec, WandSpec, spread_subset
 from wand_calib_ros.core.timing import (
@@ -176,6 +177,7 @@ def refine_calibration(
     check_geometry(result.state.points(wand))
     check_camera_views(rig, uv, uv_used)
     check_uncertainty(rig, result)
+    check_given_intrinsics(rig, result)
     warnings: list[str] = []
     for model, spec in zip(result.state.models, rig.cameras, strict=True):
         if turns_over_in_image(model, spec.max_view_angle):

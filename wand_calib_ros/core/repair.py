@@ -16,7 +16,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.bumps import BumpMonitor, noise_levels, pair_dof, pair_squares
+from wand_calib_ros.core.bumps import WINDOW, BumpMonitor, noise_levels, pair_dof, pair_squares
 from wand_calib_ros.core.bundle_adjustment import (
     CAMERA_PARAM_NAMES,
     N_CAMERA_PARAMS,
@@ -37,6 +37,8 @@ FloatArray = NDArray[np.float64]
 
 #: Fewest new placements (seen whole by two unmoved cameras and by the moved one) a repair needs.
 MIN_PLACEMENTS = 10
+#: Fewest new views of the whole wand a camera pair must share for its agreement to be judged.
+MIN_JUDGED = 20
 #: How much better (log-likelihood, in units of the fits' chi-square) a start after the first frame must
 #: explain the frames than the first: below it, every frame counts as after the move.
 CHANGE_EVIDENCE = 10.0
@@ -78,10 +80,32 @@ def judge_moved(
     uv: FloatArray,
 ) -> tuple[tuple[int, ...], list[str]]:
     """Which cameras the views ``uv`` (F, C, K, 2) show moved since a calibration of pixel noise
-    ``sigma_px`` (per coordinate): their indices and one message each (:class:`BumpMonitor`)."""
+    ``sigma_px`` (per coordinate): their indices and one message each (:class:`BumpMonitor`); a camera
+    no pair of which shares MIN_JUDGED views of the whole wand cannot be judged, and is named.
+
+    Raises:
+        InsufficientDataError: no camera pair shares MIN_JUDGED views, or ``sigma_px`` is not a noise.
+    """
+    if not (np.isfinite(sigma_px) and sigma_px > 0):
+        raise InsufficientDataError(
+            f"the calibration's pixel noise is {sigma_px}: new views cannot be judged against it"
+        )
+    complete = np.all(np.isfinite(uv), axis=(2, 3))
+    shared = complete.T.astype(np.int64) @ complete.astype(np.int64)
+    np.fill_diagonal(shared, 0)
+    if shared.max(initial=0) < MIN_JUDGED:
+        raise InsufficientDataError(
+            f"only {int((complete.sum(axis=1) >= 2).sum())} placements show the whole wand to two cameras in the new "
+            f"views; judging whether a camera moved needs {MIN_JUDGED} that a camera pair shares ({WINDOW} best): "
+            "wave the wand longer, or name the camera that moved (--moved)"
+        )
+    unjudged = [names[c] for c in range(len(names)) if shared[c].max(initial=0) < MIN_JUDGED]
     monitor = BumpMonitor(names, models, poses, wand, noise_levels(sigma_px, len(names)))
     monitor.add(uv)
-    return monitor.moved(), monitor.messages()
+    notes = [
+        f"{name}: not judged, it shares fewer than {MIN_JUDGED} whole-wand views with any camera" for name in unjudged
+    ]
+    return monitor.moved(), [*monitor.messages(), *notes]
 
 
 def since_move(

@@ -30,6 +30,10 @@ MIN_DIRECTION_SPREAD_DEG = 20.0
 LAY_RADIUS_MM = 50.0
 #: The fewest still placements a floor needs.
 MIN_FLOOR_PLACEMENTS = 2
+#: Floor points further than this RMS (mm) from one plane were not on the floor (the wand was waved).
+MAX_FLOOR_RESIDUAL_MM = 20.0
+#: At least this fraction of the floor placements must repeat a lay (the wand held still).
+MIN_STILL_FRACTION = 0.5
 
 
 @dataclass(frozen=True, eq=False)
@@ -76,6 +80,7 @@ def fit_floor(points: FloatArray, camera_centres: FloatArray, *, origin: str = "
             f"the floor needs the wand laid still in at least {MIN_FLOOR_PLACEMENTS} placements seen by two "
             f"cameras; got {usable.shape[0]}"
         )
+    _require_still(usable)
     flat = usable.reshape(-1, 3)
     centroid = flat.mean(axis=0)
     _, singular, vt = np.linalg.svd(flat - centroid, full_matrices=False)
@@ -100,6 +105,12 @@ def fit_floor(points: FloatArray, camera_centres: FloatArray, *, origin: str = "
     x = _on_plane((first[-1] - first[0])[None], normal)[0]
     rotation = np.stack([x, np.cross(normal, x), normal])  # rows: the world axes in the reference frame
     residual = float(np.sqrt(np.mean(((flat - centroid) @ normal) ** 2)))
+    if residual > MAX_FLOOR_RESIDUAL_MM:
+        raise DegenerateDataError(
+            f"the floor frames' wand points lie {residual:.0f} mm RMS off one plane (at most "
+            f"{MAX_FLOOR_RESIDUAL_MM:g}): the wand was not lying still on the floor in them; give the frames where "
+            "it does"
+        )
     in_plane = float(np.sqrt((singular[0] ** 2 + singular[1] ** 2) / 2.0))  # RMS spread x sqrt(n)
     return WorldFrame(
         Pose(rotation, -rotation @ anchor),
@@ -108,6 +119,27 @@ def fit_floor(points: FloatArray, camera_centres: FloatArray, *, origin: str = "
         residual * float(np.sqrt(1.0 / lay.sum() + 1.0 / flat.shape[0])),  # the anchor's noise, the plane's offset
         int(usable.shape[0]),
     )
+
+
+def _require_still(points: FloatArray) -> None:
+    """Refuse floor placements most of which repeat no other (within LAY_RADIUS_MM, the same direction):
+    the wand moved from frame to frame, it was not laid still.
+
+    Args:
+        points: (P, K, 3) the floor placements' markers.
+    """
+    direction = points[:, -1] - points[:, 0]
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    near = np.linalg.norm(points[:, None, 0] - points[None, :, 0], axis=-1) < LAY_RADIUS_MM
+    alike = (direction @ direction.T) > 0.99
+    repeated = ((near & alike).sum(axis=1) >= 2).sum()  # each counts itself
+    if repeated < MIN_STILL_FRACTION * len(points):
+        moved = np.linalg.norm(np.diff(points[:, 0], axis=0), axis=1)
+        raise DegenerateDataError(
+            f"the wand was not lying still in the floor frames: {repeated} of {len(points)} placements repeat "
+            f"another within {LAY_RADIUS_MM:g} mm (from one frame to the next it moved by a median "
+            f"{float(np.median(moved)):.0f} mm); give the frames where it lies still on the floor"
+        )
 
 
 def _on_plane(vectors: FloatArray, normal: FloatArray) -> FloatArray:

@@ -291,7 +291,8 @@ def _parse(
             if first[0] != stamp:
                 raise FormatError(
                     path,
-                    f"camera '{camera}' frame {frame}: stamp {stamp!r} differs from {first[0]!r} in row {first[1]}; "
+                    f"camera '{camera}' frame {frame}: stamp {float(stamp)!r} differs from {float(first[0])!r} in row "
+                    f"{first[1]}; "
                     "the points of one image share its stamp",
                     row=row_number,
                 )
@@ -351,8 +352,9 @@ def _check_stamp_order(
             what = "repeats" if steps[bad[0]] == 0 else "goes backwards"
             raise FormatError(
                 path,
-                f"camera '{name}': its stamp {what} from frame {frame_ids[first]} ({stamps[first, c]!r} s) to frame "
-                f"{frame_ids[second]} ({stamps[second, c]!r} s); each image is one frame, frames in time order",
+                f"camera '{name}': its stamp {what} from frame {frame_ids[first]} ({float(stamps[first, c])!r} s) to "
+                f"frame {frame_ids[second]} ({float(stamps[second, c])!r} s); each image is one frame, frames in time "
+                "order",
                 row=view_stamps[(int(order[second]), c)][1],
             )
 

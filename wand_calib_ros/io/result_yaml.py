@@ -283,14 +283,20 @@ def read_result(path: str | Path) -> tuple[str, dict[str, CameraGeometry]]:
 
     The timing is read in the file's unit: ``time_offset_s`` / ``rolling_shutter_readout_s``, or their
     ``_frames`` forms.
+
+    Raises:
+        FormatError: one line naming the file and what it is not (a rig description, an empty file, a
+            camera without its model or pose, a rotation that is not one, ...).
     """
     path = Path(path)
-    data = read_yaml(path)
+    data = result_document(path)
     where = "the file"
     try:
         cameras = {}
         for name, entry in data["cameras"].items():
             where = f"camera '{name}'"
+            pose = Pose(entry["rotation"], entry["translation"])
+            _check_pose(path, str(name), pose)
             cameras[str(name)] = CameraGeometry(
                 CameraModel(
                     entry["k"],
@@ -300,15 +306,47 @@ def read_result(path: str | Path) -> tuple[str, dict[str, CameraGeometry]]:
                     str(entry.get("camera_model", EQUIDISTANT)),
                     entry.get("lens_terms"),
                 ),
-                Pose(entry["rotation"], entry["translation"]),
+                pose,
                 float(entry.get("time_offset_s", entry.get("time_offset_frames", 0.0))),
                 float(entry.get("rolling_shutter_readout_s", entry.get("rolling_shutter_readout_frames", 0.0))),
             )
-        return str(data["reference_camera"]), cameras
     except KeyError as error:
         raise FormatError(path, f"not a wand_calib_ros result file: {where} has no {error}") from None
     except (TypeError, ValueError, AttributeError, ModelError) as error:
         raise FormatError(path, f"not a wand_calib_ros result file: {where}: {error}") from None
+    reference = str(data.get("reference_camera"))
+    if reference not in cameras:
+        raise FormatError(path, f"its reference_camera {reference!r} is not one of its cameras ({', '.join(cameras)})")
+    return reference, cameras
+
+
+def result_document(path: Path) -> dict[str, Any]:
+    """The mapping of a result YAML with a non-empty ``cameras`` mapping (FormatError naming what it is not)."""
+    data = read_yaml(path)
+    if data is None:
+        raise FormatError(path, "empty: not a wand_calib_ros result file")
+    if not isinstance(data, dict):
+        raise FormatError(path, f"not a wand_calib_ros result file (a YAML {type(data).__name__}, not a mapping)")
+    cameras = data.get("cameras")
+    if isinstance(cameras, list) and "wand" in data:
+        raise FormatError(path, "not a wand_calib_ros result file (a rig description? its cameras are a list)")
+    if not isinstance(cameras, dict):
+        raise FormatError(path, "not a wand_calib_ros result file: no cameras mapping")
+    if not cameras:
+        raise FormatError(path, "no cameras in the result")
+    return data
+
+
+def _check_pose(path: Path, name: str, pose: Pose) -> None:
+    """A camera's pose must be finite and its rotation a rotation (orthonormal, determinant 1)."""
+    if not (np.all(np.isfinite(pose.rotation)) and np.all(np.isfinite(pose.translation))):
+        raise FormatError(path, f"camera '{name}': its rotation must be finite numbers, and its translation")
+    deviation = float(np.max(np.abs(pose.rotation.T @ pose.rotation - np.eye(3))))
+    if deviation > 1e-6 or np.linalg.det(pose.rotation) < 0:
+        raise FormatError(
+            path, f"camera '{name}': its rotation is not a rotation matrix (R^T R differs from I by {deviation:.2g}, "
+            f"det {np.linalg.det(pose.rotation):.3g})"
+        )  # fmt: skip
 
 
 def with_cameras_replaced(

@@ -43,7 +43,8 @@ def _number(path: Path, where: str, value: Any, *, positive: bool = True) -> flo
     except (TypeError, ValueError):
         raise FormatError(path, f"{where} must be a number, got {value!r}") from None
     if not math.isfinite(number) or (positive and number <= 0):
-        raise FormatError(path, f"{where} must be a positive number, got {value!r}")
+        kind = "a positive number" if positive else "a finite number"
+        raise FormatError(path, f"{where} must be {kind}, got {value!r}")
     return number
 
 
@@ -71,7 +72,7 @@ def _camera_info_intrinsics(path: Path, label: str, file: Any) -> dict[str, Any]
         raise FormatError(path, f"{label} intrinsics: no such camera_info file {info_path}")
     info = read_yaml(info_path)
     try:
-        return {
+        given = {
             "K": info["camera_matrix"]["data"],
             "D": info["distortion_coefficients"]["data"],
             "distortion_model": info.get("distortion_model", "plumb_bob"),
@@ -82,6 +83,13 @@ def _camera_info_intrinsics(path: Path, label: str, file: Any) -> dict[str, Any]
             info_path, "not a ROS camera_info YAML: needs image_width, image_height, camera_matrix.data, "
             "distortion_coefficients.data"
         ) from None  # fmt: skip
+    _matrix(info_path, "camera_matrix data", given["K"], 9)  # its own faults named in its own file
+    if not isinstance(given["D"], list):
+        raise FormatError(info_path, f"distortion_coefficients data must be a list of numbers, got {given['D']!r}")
+    for value in given["D"]:
+        _number(info_path, "distortion_coefficients data", value, positive=False)
+    _pair(info_path, "image_width, image_height", given["image_size"])
+    return given
 
 
 def _intrinsics(
@@ -115,6 +123,12 @@ def _intrinsics(
     if D is None:
         raise FormatError(path, f"{label} intrinsics D must be a list of numbers, got {given['D']!r}")
     D_values = np.array([_number(path, f"{label} intrinsics D", v, positive=False) for v in D])
+    inside = (K[:2, 2] >= -0.5) & (K[:2, 2] <= np.asarray(image_size) - 0.5)
+    if not inside.all():
+        raise FormatError(
+            path, f"{label} intrinsics: the principal point ({K[0, 2]:g}, {K[1, 2]:g}) is outside its "
+            f"{image_size[0]} x {image_size[1]} image: is K this camera's, for this image size?"
+        )  # fmt: skip
     try:
         model = known_model(model_name, K, D_values, np.asarray(m), image_size, name=label, camera_model=camera_model)
     except ModelError as error:
@@ -141,6 +155,8 @@ def _wand(path: Path, wand_data: Any) -> WandSpec:
     usage = "'wand' must be a mapping with L1 and L2 in mm, e.g. {L1: 400.0, L2: 200.0}, or points_mm: [0, 400, 600]"
     if not isinstance(wand_data, dict):
         raise FormatError(path, usage)
+    if "points_mm" in wand_data and ("L1" in wand_data or "L2" in wand_data):
+        raise FormatError(path, "wand: give L1 and L2 or points_mm, not both (they may disagree)")
     try:
         if "points_mm" in wand_data:
             points = wand_data["points_mm"]

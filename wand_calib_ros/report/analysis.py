@@ -130,6 +130,33 @@ def session_history(folder: Path) -> tuple[EstimateHistory | None, tuple[Session
     )
 
 
+#: A result whose camera reprojects the observations (their median residual: outliers aside) worse than
+#: this many times the RMS it reports (and MISFIT_PX) is not a result of these observations.
+MISFIT_FACTOR = 10.0
+MISFIT_PX = 5.0
+
+
+def _require_fit(
+    path: Path, document: dict[str, Any], names: tuple[str, ...], problem: BundleProblem, res: FloatArray
+) -> None:
+    """The result must describe the cameras that took these observations (not another rig's of the same names).
+
+    Raises:
+        FormatError: naming the camera that reprojects them worst and what the result says of it.
+    """
+    for c, name in enumerate(names):
+        mine = res[problem.camera == c]
+        if mine.size == 0:
+            continue
+        typical = float(np.nanmedian(np.linalg.norm(mine, axis=1))) / np.sqrt(2 * np.log(2))  # per coordinate,
+        stated = float(document["cameras"][name].get("rms_reprojection_px", np.nan))  # outliers aside
+        if not np.isfinite(typical) or typical > max(MISFIT_FACTOR * stated, MISFIT_PX):
+            raise FormatError(
+                path, f"does not fit these observations: camera '{name}' reprojects them {typical:.1f} px (typical, "
+                f"per coordinate) where the result says {stated:.2f} px RMS (a result of another rig or take?)"
+            )  # fmt: skip
+
+
 def prepare(rig: RigSpec, observations: WandObservations, result_path: Path) -> ReportData:
     """Recompute residuals and statistics of a result file for the report.
 
@@ -165,6 +192,7 @@ def prepare(rig: RigSpec, observations: WandObservations, result_path: Path) -> 
     problem = BundleProblem.from_dense(rig.wand, uv, None if timing is None else timing.subset(ok))
     timed = _fit(state, problem)
     wand_points, res = timed.state.points(rig.wand), timed.residuals
+    _require_fit(result_path, document, names, problem, res)
     world = wand_points[problem.placement, problem.point]
     sigma = float(document.get("metrics", {}).get("sigma_px", np.nan))
     _, rejected_views = gate_views(uv, np.nan_to_num(res, nan=np.inf), VIEW_GATE_SIGMAS * sigma)

@@ -12,6 +12,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from wand_calib_ros.core.rig import RigSpec, WandObservations
+from wand_calib_ros.io.errors import OutputError
 from wand_calib_ros.report.analysis import ReportData, prepare
 from wand_calib_ros.report.figures import FIGURES
 
@@ -121,7 +122,13 @@ def _events(data: ReportData) -> str:
 
 
 def write_report(rig: RigSpec, observations: WandObservations, result_path: Path, out: Path) -> Path:
-    """Write ``out/index.html`` (self-contained) and one PNG per figure; returns the HTML path."""
+    """Write ``out/index.html`` (self-contained) and one PNG per figure; returns the HTML path.
+
+    Raises:
+        OutputError: ``out`` is a file.
+    """
+    if out.exists() and not out.is_dir():
+        raise OutputError(out, "it is a file; give a folder for the report")
     data = prepare(rig, observations, result_path)
     out.mkdir(parents=True, exist_ok=True)
     sections = []
