@@ -50,8 +50,8 @@ HELDOUT_PLACEMENTS = 100
 
 
 def floor_frames(text: str) -> tuple[int, ...]:
-    """``--floor``: frame ids like ``120-160,300``, or a collector's floor_frames.txt (a path: it holds a
-    ``/``, a ``.``-suffix that is not a frame, or names an existing file).
+    """``--floor``: frame ids like ``120-160,300``, or a collector's floor_frames.txt (a path: it names an
+    existing file, or holds a ``/`` or ends in ``.txt`` or ``.csv``).
 
     Raises:
         WandCalibError: one line naming the option or the file and what is wrong.
