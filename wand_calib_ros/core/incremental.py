@@ -31,8 +31,14 @@ from numpy.typing import NDArray
 
 from wand_calib_ros.core.bundle_adjustment import N_CAMERA_PARAMS, BundleProblem, BundleState
 from wand_calib_ros.core.camera_model import N_INTRINSIC, CameraModel, unproject
-from wand_calib_ros.core.errors import CoreError, InsufficientDataError
-from wand_calib_ros.core.essential import decompose_essential, epipolar_angles, linear_essential, minimal_solutions
+from wand_calib_ros.core.errors import CoreError, DegenerateDataError, InsufficientDataError
+from wand_calib_ros.core.essential import (
+    decompose_essential,
+    epipolar_angles,
+    linear_essential,
+    minimal_solutions,
+    wand_scale,
+)
 from wand_calib_ros.core.gating import robust_adjustment
 from wand_calib_ros.core.geometry import Pose, skew, wand_directions
 from wand_calib_ros.core.placements import triangulate_placements
@@ -159,33 +165,12 @@ def pair_pose(
     unit, front = decompose_essential(essential, b0[inlier].reshape(-1, 3), paired[inlier].reshape(-1, 3))
     if front < 0.8 * inlier.sum() * k:
         return None
-    lengths = _wand_lengths(unit, b0[inlier], paired[inlier])
-    lengths = lengths[np.isfinite(lengths) & (lengths > 0)]
-    if lengths.size == 0:
+    try:
+        scale, _ = wand_scale(unit, b0[inlier], paired[inlier], wand.L)
+    except DegenerateDataError:  # no placement triangulates
         return None
-    scale = float(np.median(wand.L / lengths))
     pose = Pose(unit.rotation, unit.translation * scale)
     return Fit(pose, swap, np.arange(n), int(inlier.sum() * k))
-
-
-def _wand_lengths(pose: Pose, b0: FloatArray, b1: FloatArray) -> FloatArray:
-    """(N,) |first marker - last marker| of each view pair triangulated with ``pose`` (its scale)."""
-    points = []
-    for end in (0, -1):
-        rays = [b0[:, end], b1[:, end] @ pose.rotation]  # in camera 0's frame: R^T m
-        points.append(_closest_points(rays, [np.zeros(3), pose.center]))
-    return np.asarray(np.linalg.norm(points[1] - points[0], axis=1), dtype=np.float64)
-
-
-def _closest_points(rays: list[FloatArray], centres: list[FloatArray]) -> FloatArray:
-    """(N, 3) the points closest to two rays each ((N, 3) directions in the reference frame, (3,) centres)."""
-    lhs = np.zeros((rays[0].shape[0], 3, 3))
-    rhs = np.zeros((rays[0].shape[0], 3))
-    for w, c in zip(rays, centres, strict=True):
-        projector = np.eye(3) - w[:, :, None] * w[:, None, :]
-        lhs += projector
-        rhs += projector @ c
-    return np.asarray(np.linalg.solve(lhs, rhs[..., None])[..., 0], dtype=np.float64)
 
 
 def _resection_errors(

@@ -162,6 +162,14 @@ def from_pinhole(
     return from_opencv_pinhole(K, d, m_camera, image_size, RATIONAL_POLYNOMIAL if rational else PLUMB_BOB)
 
 
+def _other_model(name: str, given: str, asked: str) -> ModelError:
+    """The error of intrinsics given in one model for a camera the rig asks to calibrate in another."""
+    return ModelError(
+        f"{name}: its intrinsics are given in the {given} model but camera_model is {asked}: give them in that "
+        "model, or drop camera_model"
+    )
+
+
 def known_model(
     distortion_model: str,
     camera_matrix: FloatArray,
@@ -194,20 +202,14 @@ def known_model(
         raise ModelError(f"{name}: distortion coefficients must be finite numbers")
     if distortion_model in EQUIDISTANT_NAMES:
         if camera_model not in (None, EQUIDISTANT):
-            raise ModelError(
-                f"{name}: its intrinsics are given in the equidistant model but camera_model is {camera_model}: "
-                "give them in that model, or drop camera_model"
-            )
+            raise _other_model(name, EQUIDISTANT, camera_model)
         return from_equidistant(K, distortion, m, image_size)
     if distortion_model in PINHOLE_RADTAN:
         if camera_model == EQUIDISTANT:
             return from_pinhole_radtan(K, distortion, m, image_size, name=name)[0]
         own = RATIONAL_POLYNOMIAL if distortion_model == RATIONAL_POLYNOMIAL else PLUMB_BOB
         if camera_model == PLUMB_BOB and own == RATIONAL_POLYNOMIAL:
-            raise ModelError(
-                f"{name}: its intrinsics are given in the rational_polynomial model but camera_model is plumb_bob: "
-                "give them in that model, or drop camera_model"
-            )
+            raise _other_model(name, own, camera_model)
         return from_pinhole(own if camera_model is None else camera_model, K, distortion, m, image_size, name=name)
     raise ModelError(
         f"{name}: distortion model {distortion_model!r} is not supported; give {EQUIDISTANT} (OpenCV fisheye), "

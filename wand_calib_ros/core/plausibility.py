@@ -189,11 +189,14 @@ def check_result(rig: RigSpec, result: CalibrationResult) -> None:
         )
 
 
-def check_given_intrinsics(rig: RigSpec, result: BundleResult) -> None:
+def check_given_intrinsics(rig: RigSpec, result: BundleResult, free: NDArray[np.bool_]) -> None:
     """Given intrinsics held fixed must not be contradicted by the views: for each such camera, the
     linearised estimate with its focal length and principal point freed (the adjustment's own normal
     equations, :meth:`~wand_calib_ros.core.bundle_adjustment.CameraSystem.step`) may move them by only
     a little (GIVEN_FOCAL_FRACTION, GIVEN_CENTRE_FRACTION) or within GIVEN_SIGMAS of its standard deviations.
+
+    Args:
+        result: the final adjustment, of the (C, 20) parameters ``free``.
 
     Raises:
         PlausibilityError: naming the camera, its given values and what the views say.
@@ -202,8 +205,6 @@ def check_given_intrinsics(rig: RigSpec, result: BundleResult) -> None:
     if system is None:
         return
     n_cameras = len(rig.cameras)
-    free = np.zeros((n_cameras, N_CAMERA_PARAMS), dtype=bool)
-    free[:, system.columns] = result.camera_std[:, system.columns] > 0  # what the adjustment estimated
     for c, spec in enumerate(rig.cameras):
         if not spec.holds_intrinsics:
             continue

@@ -177,7 +177,7 @@ def refine_calibration(
     check_geometry(result.state.points(wand))
     check_camera_views(rig, uv, uv_used)
     check_uncertainty(rig, result)
-    check_given_intrinsics(rig, result)
+    check_given_intrinsics(rig, result, free_mask(n_cameras, reference, fixed))
     warnings: list[str] = []
     for model, spec in zip(result.state.models, rig.cameras, strict=True):
         if turns_over_in_image(model, spec.max_view_angle):

@@ -32,6 +32,7 @@ from wand_calib_ros.core.geometry import Pose, wand_directions
 from wand_calib_ros.core.placements import triangulate_placements
 from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.core.rig import WandSpec
+from wand_calib_ros.core.vision_graph import covisibility
 
 FloatArray = NDArray[np.float64]
 
@@ -91,7 +92,7 @@ def judge_moved(
             f"the calibration's pixel noise is {sigma_px}: new views cannot be judged against it"
         )
     complete = np.all(np.isfinite(uv), axis=(2, 3))
-    shared = complete.T.astype(np.int64) @ complete.astype(np.int64)
+    shared = covisibility(complete)
     np.fill_diagonal(shared, 0)
     if shared.max(initial=0) < MIN_JUDGED:
         raise InsufficientDataError(
