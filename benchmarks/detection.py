@@ -11,9 +11,10 @@ import time
 import cv2
 import numpy as np
 
-from wand_calib_ros.core.rig import CameraSpec
+from wand_calib_ros.core.initialise.intrinsics_init import nominal_bearings
+from wand_calib_ros.core.model.rig import CameraSpec
 from wand_calib_ros.detection.blobs import BlobOptions
-from wand_calib_ros.detection.recording import detect_image, nominal_model
+from wand_calib_ros.detection.recording import detect_image
 from wand_calib_ros.detection.wand import WandOptions
 from wand_calib_ros.sim.render import RenderOptions, render_image
 
@@ -23,7 +24,7 @@ def main() -> None:
     rng = np.random.default_rng(0)
     for size, target in (((640, 480), 1000), ((1280, 1024), 250)):
         spec = CameraSpec("cam", size, (5.6, 5.6), 1.8, 92.5)
-        model = nominal_model(spec)
+        model = nominal_bearings(spec)
         images = []
         for _ in range(50):
             start = rng.uniform([50, 50], [size[0] - 250, size[1] - 150])

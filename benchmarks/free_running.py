@@ -1,4 +1,4 @@
-"""Free-running cameras against their synchronised twins: the README's accuracy table.
+"""Free-running cameras against their synchronised twins: the table in docs/timing.md.
 
 Run: .venv/bin/python benchmarks/free_running.py [--seeds 12]
 

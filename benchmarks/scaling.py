@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wand_calib_ros.core.metrics import camera_errors, rereference
+from wand_calib_ros.core.judge.metrics import camera_errors, rereference
 from wand_calib_ros.io.result_yaml import read_result
 
 DEFAULT_CASES = (

@@ -29,8 +29,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))
 from rigs import errors_against_truth, in_truth_frame, rms, truth_bundle
 
 from wand_calib_ros.core.errors import DegenerateDataError, InsufficientDataError
+from wand_calib_ros.core.model.rig import RigSpec
 from wand_calib_ros.core.pipeline import calibrate
-from wand_calib_ros.core.rig import RigSpec
 from wand_calib_ros.sim.scenarios import SCENARIOS, Scenario, simulate
 
 KINDS = ("focal", "principal point", "E_r", "E_t", "D_RMS")

@@ -32,8 +32,8 @@ from typing import Any
 
 #: (module, function, stage): the functions timed, in the order a calibration reaches them.
 STAGES = (
-    ("wand_calib_ros.cli", "load_rig", "read cameras.yaml"),
-    ("wand_calib_ros.cli", "read_observations", "read the CSV"),
+    ("wand_calib_ros.commands.calibrate", "load_rig", "read cameras.yaml"),
+    ("wand_calib_ros.commands.calibrate", "read_observations", "read the CSV"),
     ("wand_calib_ros.core.pipeline", "check_views", "plausibility of the views"),
     ("wand_calib_ros.core.pipeline", "timing_input", "timing input"),
     ("wand_calib_ros.core.pipeline", "build_vision_graph", "vision graph"),
@@ -48,14 +48,14 @@ STAGES = (
     ("wand_calib_ros.core.pipeline", "check_result", "plausibility of the result"),
     ("wand_calib_ros.core.pipeline", "noise_wand_error", "quality verdict"),
     ("wand_calib_ros.core.pipeline", "clock_offsets", "clock offsets from residuals"),
-    ("wand_calib_ros.cli", "write_calibration", "write result.yaml"),
+    ("wand_calib_ros.commands.calibrate", "write_calibration", "write result.yaml"),
 )
 #: Counted inside the stages: (module, function, label).
 INNER = (
-    ("wand_calib_ros.core.bundle_adjustment", "bundle_adjust", "bundle_adjust"),
-    ("wand_calib_ros.core.bundle_adjustment", "_evaluate", "residuals and normal equations"),
-    ("wand_calib_ros.core.normal_equations", "reduced_system", "Schur complement"),
-    ("wand_calib_ros.core.pairwise", "initialise_pair", "pair initialisations"),
+    ("wand_calib_ros.core.adjust.bundle_adjustment", "bundle_adjust", "bundle_adjust"),
+    ("wand_calib_ros.core.adjust.bundle_adjustment", "_evaluate", "residuals and normal equations"),
+    ("wand_calib_ros.core.adjust.normal_equations", "reduced_system", "Schur complement"),
+    ("wand_calib_ros.core.initialise.pairwise", "initialise_pair", "pair initialisations"),
 )
 
 

@@ -8,7 +8,7 @@ from functools import cache
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.bundle_adjustment import (
+from wand_calib_ros.core.adjust.bundle_adjustment import (
     CAMERA_PARAM_NAMES,
     INTRINSICS,
     BundleProblem,
@@ -17,13 +17,13 @@ from wand_calib_ros.core.bundle_adjustment import (
     bundle_adjust,
     default_free_mask,
 )
-from wand_calib_ros.core.camera_model import CameraModel
-from wand_calib_ros.core.geometry import Pose
-from wand_calib_ros.core.metrics import camera_errors, heldout_wand_rms, rereference
-from wand_calib_ros.core.model_order import zeroed
+from wand_calib_ros.core.adjust.model_order import zeroed
+from wand_calib_ros.core.judge.metrics import camera_errors, heldout_wand_rms, rereference
+from wand_calib_ros.core.model.camera_model import CameraModel
+from wand_calib_ros.core.model.geometry import Pose
+from wand_calib_ros.core.model.result import CalibrationResult
+from wand_calib_ros.core.model.rig import WandObservations
 from wand_calib_ros.core.pipeline import CalibrationOptions, calibrate
-from wand_calib_ros.core.result import CalibrationResult
-from wand_calib_ros.core.rig import WandObservations
 from wand_calib_ros.sim.clocks import TakeOptions, film, observe, take_trajectory
 from wand_calib_ros.sim.scenarios import SCENARIOS, Scenario, SimulatedData, simulate
 

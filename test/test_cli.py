@@ -121,7 +121,7 @@ def test_non_positive_wand_length(simulated: Path, tmp_path: Path, capsys) -> No
 def test_all_placements_degenerate(simulated: Path, tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
     obs = read_observations(simulated / "observations.csv")
     still = obs.uv[:1].repeat(60, axis=0) + np.random.default_rng(0).normal(scale=0.3, size=(60, *obs.uv.shape[1:]))
-    from wand_calib_ros.core.rig import WandObservations
+    from wand_calib_ros.core.model.rig import WandObservations
 
     write_observations(WandObservations(np.arange(60), obs.camera_names, still), tmp_path / "observations.csv")
     shutil.copy(simulated / "cameras.yaml", tmp_path)

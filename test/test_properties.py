@@ -22,9 +22,10 @@ from hypothesis import strategies as st
 
 from wand_calib_ros.cli import main
 from wand_calib_ros.collection.buffer import ObservationBuffer
+from wand_calib_ros.core.initialise.intrinsics_init import nominal_bearings
 from wand_calib_ros.detection.blobs import BlobOptions
 from wand_calib_ros.detection.errors import DetectionError
-from wand_calib_ros.detection.recording import detect_image, nominal_model
+from wand_calib_ros.detection.recording import detect_image
 from wand_calib_ros.detection.wand import WandOptions
 from wand_calib_ros.errors import WandCalibError
 from wand_calib_ros.io.observations_csv import read_observations
@@ -135,7 +136,7 @@ def test_random_buffer_files_resume_or_are_refused(content: bytes, tail: bytes) 
         assert buffer.next_frame >= 0
 
 
-MODEL = nominal_model(RIG.cameras[0])
+MODEL = nominal_bearings(RIG.cameras[0])
 ENCODINGS = ["mono8", "mono16", "bgr8", "rgb8", "bayer_rggb8", "rgba8", "32FC1", "jpeg", ""]
 
 

@@ -1,5 +1,11 @@
 """wand_calib_ros: multi-camera wand calibration (Fu, Quan & Cai) for ROS 2.
 
+Layers, lowest first; each imports only those before it (``test/test_layout.py``): ``errors``,
+``core`` (the method: model, adjust, judge, initialise, after), ``io`` (files), ``report``,
+``collection`` (live buffering, sync, coverage, the running estimate), ``detection`` (images to wand
+points), ``sim`` (synthetic rigs), ``commands`` (one module per subcommand), ``cli`` (the ``wand-calib``
+command built from them) and ``nodes`` (ROS 2, the only layer importing rclpy).
+
 Importing the package tunes two process-wide settings for a calibration's workload, each left alone
 when the user set it:
 

@@ -10,8 +10,9 @@ import pytest
 from rigs import in_truth_frame, rms
 
 from wand_calib_ros.collection.coverage import CoverageTracker
-from wand_calib_ros.collection.estimate import MIN_FRAMES, RunningEstimate, calibrate_round, converged, round_input
-from wand_calib_ros.core.metrics import camera_errors
+from wand_calib_ros.collection.estimate import MIN_FRAMES, RunningEstimate, converged, round_input
+from wand_calib_ros.collection.estimate_round import calibrate_round
+from wand_calib_ros.core.judge.metrics import camera_errors
 from wand_calib_ros.core.pipeline import CalibrationOptions, calibrate
 from wand_calib_ros.sim.clocks import TakeOptions, film, observe, take_trajectory
 from wand_calib_ros.sim.scenarios import SCENARIOS

@@ -13,8 +13,8 @@ import pytest
 from rigs import errors_against_truth, fixed_of, in_truth_frame, scenario_data, truth_bundle
 
 from wand_calib_ros.core.errors import DegenerateDataError, InsufficientDataError
+from wand_calib_ros.core.model.rig import WandObservations
 from wand_calib_ros.core.pipeline import calibrate
-from wand_calib_ros.core.rig import WandObservations
 
 RATIO = 1.15
 
@@ -146,7 +146,7 @@ def test_a_camera_whose_chained_start_is_off_is_corrected_not_dropped() -> None:
 
 
 def test_a_camera_left_without_views_is_an_error_naming_it() -> None:
-    from wand_calib_ros.core.degeneracy import check_camera_views
+    from wand_calib_ros.core.judge.degeneracy import check_camera_views
 
     scenario, data, _ = scenario_data("paper", 1)
     used = data.observations.uv.copy()

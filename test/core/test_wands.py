@@ -12,8 +12,8 @@ import pytest
 from rigs import errors_against_truth, fixed_of, in_truth_frame, truth_bundle
 
 from wand_calib_ros.core.errors import ModelError
+from wand_calib_ros.core.model.rig import WandSpec
 from wand_calib_ros.core.pipeline import calibrate
-from wand_calib_ros.core.rig import WandSpec
 from wand_calib_ros.sim.scenarios import SCENARIOS, simulate
 
 FIVE = WandSpec((0.0, 120.0, 250.0, 400.0, 600.0))

@@ -169,7 +169,7 @@ def test_a_wand_with_an_led_cut_by_the_border_is_not_written() -> None:
 
 
 def test_a_wand_whose_ends_look_alike_is_refused_by_the_detector() -> None:
-    from wand_calib_ros.core.rig import WandSpec
+    from wand_calib_ros.core.model.rig import WandSpec
     from wand_calib_ros.detection.errors import UnsupportedWandError
 
     assert WandOptions.for_wand(WandSpec.from_lengths(400, 200)).ratio == 2.0
@@ -180,7 +180,7 @@ def test_a_wand_whose_ends_look_alike_is_refused_by_the_detector() -> None:
 
 
 def test_a_two_led_wand_is_the_images_two_blobs_and_a_third_blob_rejects_the_view() -> None:
-    from wand_calib_ros.core.rig import WandSpec
+    from wand_calib_ros.core.model.rig import WandSpec
 
     options = WandOptions.for_wand(WandSpec((0.0, 600.0)))
     two = _blobs([[100.0, 200.0], [300.0, 250.0]])

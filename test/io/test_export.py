@@ -11,10 +11,11 @@ import tomllib
 import yaml
 
 from wand_calib_ros.cli import main
-from wand_calib_ros.core.camera_model import project
-from wand_calib_ros.core.geometry import Pose
+from wand_calib_ros.core.model.camera_model import project
+from wand_calib_ros.core.model.geometry import Pose
 from wand_calib_ros.io.errors import ExportError
-from wand_calib_ros.io.export import ExportedCamera, export
+from wand_calib_ros.io.export import export
+from wand_calib_ros.io.export.cameras import ExportedCamera
 from wand_calib_ros.io.result_yaml import camera_info_dict
 from wand_calib_ros.sim.scenarios import SCENARIOS
 
@@ -212,7 +213,7 @@ def test_the_export_command_writes_a_result_in_each_format(tmp_path: Path, capsy
 
 
 def test_dlt_coefficients_of_pinhole_cameras_project_as_we_do_with_the_bottom_left_origin(tmp_path: Path) -> None:
-    from wand_calib_ros.core.known_intrinsics import from_pinhole_radtan
+    from wand_calib_ros.core.model.known_intrinsics import from_pinhole_radtan
     from wand_calib_ros.io.export.dlt import MAX_PINHOLE_ERROR_PX
 
     rng = np.random.default_rng(3)

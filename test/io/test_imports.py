@@ -10,7 +10,7 @@ import pytest
 import yaml
 
 from wand_calib_ros.cli import main
-from wand_calib_ros.core.rig import WandSpec
+from wand_calib_ros.core.model.rig import WandSpec
 from wand_calib_ros.io.errors import FormatError
 from wand_calib_ros.io.imports.xypts import read_xypts
 from wand_calib_ros.io.observations_csv import read_observations

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wand_calib_ros.core.rig import WandObservations
+from wand_calib_ros.core.model.rig import WandObservations
 from wand_calib_ros.io.errors import FormatError
 from wand_calib_ros.io.observations_csv import read_observations, write_observations
 

@@ -10,7 +10,7 @@ import pytest
 import yaml
 from rigs import scenario_data, timed_take
 
-from wand_calib_ros.core.camera_model import (
+from wand_calib_ros.core.model.camera_model import (
     PLUMB_BOB,
     RATIONAL_POLYNOMIAL,
     CameraModel,
@@ -18,8 +18,8 @@ from wand_calib_ros.core.camera_model import (
     project,
     to_opencv_fisheye,
 )
+from wand_calib_ros.core.model.rig import RigSpec, WandSpec
 from wand_calib_ros.core.pipeline import calibrate
-from wand_calib_ros.core.rig import RigSpec, WandSpec
 from wand_calib_ros.io.errors import FormatError
 from wand_calib_ros.io.result_yaml import camera_info_dict, read_result, write_calibration, write_result, yaml_text
 from wand_calib_ros.io.rig_yaml import load_rig, save_rig

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from wand_calib_ros.core.rig import RigSpec
+from wand_calib_ros.core.model.rig import RigSpec
 from wand_calib_ros.io.errors import FormatError
 from wand_calib_ros.io.rig_yaml import load_rig, save_rig
 from wand_calib_ros.sim.scenarios import mixed_pair_scenario

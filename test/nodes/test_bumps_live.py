@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from conftest import LATCHED, Ros, points_rig, wait_until
 
-from wand_calib_ros.core.geometry import Pose
-from wand_calib_ros.core.metrics import rereference
+from wand_calib_ros.core.judge.metrics import rereference
+from wand_calib_ros.core.model.geometry import Pose
 from wand_calib_ros.io.result_yaml import read_result
 from wand_calib_ros.sim.scenarios import paper_three_camera_scenario, simulate
 

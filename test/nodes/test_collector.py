@@ -146,7 +146,7 @@ def test_calibrate_answers_clearly_when_busy_short_of_data_or_reset(ros: Ros, tm
 def test_a_two_led_wand_live_from_images_to_the_calibration(ros: Ros, tmp_path: Path) -> None:
     from dataclasses import replace
 
-    from wand_calib_ros.core.rig import WandSpec
+    from wand_calib_ros.core.model.rig import WandSpec
     from wand_calib_ros.sim.scenarios import paper_three_camera_scenario
 
     scenario = replace(paper_three_camera_scenario(), wand=WandSpec((0.0, 600.0)))

@@ -21,8 +21,8 @@ import numpy as np
 import pytest
 from conftest import wait_until
 
-from wand_calib_ros.core.geometry import Pose
-from wand_calib_ros.core.metrics import rereference
+from wand_calib_ros.core.judge.metrics import rereference
+from wand_calib_ros.core.model.geometry import Pose
 from wand_calib_ros.io.bags import write_image_bag
 from wand_calib_ros.io.rig_yaml import save_rig
 from wand_calib_ros.sim.clocks import TakeOptions, film, take_trajectory

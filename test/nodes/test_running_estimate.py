@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from conftest import LATCHED, Ros, wait_until
 
-from wand_calib_ros.core.rig import WandObservations
+from wand_calib_ros.core.model.rig import WandObservations
 from wand_calib_ros.io.observations_csv import read_observations
 from wand_calib_ros.io.result_yaml import read_result
 from wand_calib_ros.io.rig_yaml import save_rig

@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 import yaml
 
-from wand_calib_ros.core.geometry import Pose
-from wand_calib_ros.core.metrics import rereference
+from wand_calib_ros.core.judge.metrics import rereference
+from wand_calib_ros.core.model.geometry import Pose
+from wand_calib_ros.core.model.result import CalibrationResult
 from wand_calib_ros.core.pipeline import CalibrationOptions, calibrate
-from wand_calib_ros.core.result import CalibrationResult
 from wand_calib_ros.io.observations_csv import read_observations
 from wand_calib_ros.io.rig_yaml import load_rig
 

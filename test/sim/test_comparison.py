@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from wand_calib_ros.core.metrics import camera_errors
+from wand_calib_ros.core.judge.metrics import camera_errors
 from wand_calib_ros.sim.comparison import compare, error_summary, markdown_table
 
 

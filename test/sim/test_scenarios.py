@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wand_calib_ros.core.camera_model import radius
-from wand_calib_ros.core.intrinsics_init import PROJECTIONS
-from wand_calib_ros.core.vision_graph import covisibility
+from wand_calib_ros.core.initialise.intrinsics_init import PROJECTIONS
+from wand_calib_ros.core.initialise.vision_graph import covisibility
+from wand_calib_ros.core.model.camera_model import radius
 from wand_calib_ros.sim.scenarios import (
     SCENARIOS,
     equisolid_taylor,

@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wand_calib_ros.collection.recovery import TornTail, backup_path, cut_torn_tail
-from wand_calib_ros.core.rig import RigSpec, WandObservations
+from wand_calib_ros.core.model.rig import RigSpec, WandObservations
 from wand_calib_ros.io.errors import FormatError
 from wand_calib_ros.io.observations_csv import header, observation_rows, read_observations
 from wand_calib_ros.io.outputs import check_writable

@@ -17,8 +17,8 @@ import networkx as nx
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.rig import RigSpec
-from wand_calib_ros.detection.recording import nominal_model
+from wand_calib_ros.core.initialise.intrinsics_init import nominal_bearings
+from wand_calib_ros.core.model.rig import RigSpec
 
 FloatArray = NDArray[np.float64]
 
@@ -110,7 +110,7 @@ class CoverageTracker:
         self.max_theta = np.zeros(n)
         self.directions = np.zeros((n, DIRECTIONS), dtype=np.int64)
         self.lengths = np.zeros((n, LENGTH_BINS), dtype=np.int64)
-        self._bearings = [nominal_model(spec) for spec in rig.cameras]
+        self._bearings = [nominal_bearings(spec) for spec in rig.cameras]
         self.reach = np.array([self._reach(c) for c in range(n)])
 
     def _reach(self, c: int) -> float:

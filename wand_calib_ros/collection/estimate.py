@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import multiprocessing
 import threading
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from multiprocessing.connection import Connection
@@ -23,12 +22,11 @@ from multiprocessing.process import BaseProcess
 
 import numpy as np
 
+from wand_calib_ros.collection.estimate_round import Round
 from wand_calib_ros.collection.estimate_worker import serve
-from wand_calib_ros.core.pipeline import CalibrationOptions, calibrate
-from wand_calib_ros.core.result import CalibrationResult
-from wand_calib_ros.core.rig import RigSpec, WandObservations, spread_subset
-from wand_calib_ros.core.rig_scene import RigScene, rig_scene
-from wand_calib_ros.errors import WandCalibError
+from wand_calib_ros.core.model.result import CalibrationResult
+from wand_calib_ros.core.model.rig import RigSpec, WandObservations, spread_subset
+from wand_calib_ros.core.pipeline import CalibrationOptions
 
 #: Placements one round calibrates at most (about 0.3 s for 3 cameras, 2 s for 16, measured here).
 MAX_PLACEMENTS = 400
@@ -36,25 +34,6 @@ MAX_PLACEMENTS = 400
 MIN_FRAMES = 30
 #: An uncertainty still falls when it dropped by more than this fraction since the previous round.
 IMPROVING = 0.05
-
-
-@dataclass(frozen=True, eq=False)
-class Round:
-    """What the worker sends back for one round.
-
-    Attributes:
-        result: the calibration (None: it failed, see ``failure``).
-        scene: its cameras and placements for RViz (None with ``result``).
-        failure: why there is no result, in the pipeline's words.
-        frames: frames of the buffer the round saw.
-        seconds: its computing time, s.
-    """
-
-    result: CalibrationResult | None
-    scene: RigScene | None
-    failure: str | None
-    frames: int
-    seconds: float
 
 
 @dataclass(frozen=True, eq=False)
@@ -71,17 +50,6 @@ class Estimate:
     round: Round
     finished: float
     improving: dict[str, bool]
-
-
-def calibrate_round(rig: RigSpec, observations: WandObservations, options: CalibrationOptions, frames: int) -> Round:
-    """One round (in the worker process): calibrate, judge, draw; a failure becomes its message."""
-    started = time.perf_counter()
-    try:
-        result = calibrate(rig, observations, options)
-    except (WandCalibError, ValueError, np.linalg.LinAlgError) as error:
-        return Round(None, None, str(error), frames, time.perf_counter() - started)
-    scene = rig_scene(result, rig.camera_names, observations.uv)
-    return Round(result, scene, None, frames, time.perf_counter() - started)
 
 
 def round_input(rig: RigSpec, observations: WandObservations, max_placements: int) -> WandObservations | None:

@@ -13,7 +13,7 @@ from multiprocessing.connection import Connection
 def serve(connection: Connection) -> None:
     """One round per request (the arguments of ``calibrate_round``) until the pipe closes or says None."""
     os.nice(19)  # before the imports: loading scipy takes a core for a second
-    from wand_calib_ros.collection.estimate import calibrate_round
+    from wand_calib_ros.collection.estimate_round import calibrate_round
 
     while True:
         try:

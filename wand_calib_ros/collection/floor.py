@@ -3,7 +3,7 @@
 Each ``/set_floor`` call opens a window of ``hold_s`` seconds; the frames the buffer stores while
 it is open are floor frames (stored even though the wand is still) and their ids are appended to
 ``FLOOR_FILE`` next to the buffer, one per line. ``/calibrate`` reads that file and fits the world
-frame to those frames (:mod:`wand_calib_ros.core.world_frame`).
+frame to those frames (:mod:`wand_calib_ros.core.after.world_frame`).
 """
 
 from __future__ import annotations

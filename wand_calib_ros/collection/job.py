@@ -20,14 +20,15 @@ import numpy.random
 
 from wand_calib_ros.collection.coverage import CoverageStatus, CoverageThresholds, CoverageTracker
 from wand_calib_ros.collection.errors import CoverageError
+from wand_calib_ros.core.after.repair import judge_moved, repair_moved, repaired_result
+from wand_calib_ros.core.judge.quality import judge, noise_wand_error
+from wand_calib_ros.core.model.result import CalibrationResult
+from wand_calib_ros.core.model.rig import RigSpec, WandObservations
 from wand_calib_ros.core.pipeline import CalibrationOptions, calibrate
-from wand_calib_ros.core.quality import judge, noise_wand_error
-from wand_calib_ros.core.repair import judge_moved, repair_moved, repaired_result
-from wand_calib_ros.core.result import CalibrationResult
-from wand_calib_ros.core.rig import RigSpec, WandObservations
 from wand_calib_ros.errors import WandCalibError
 from wand_calib_ros.io.errors import ExportError
-from wand_calib_ros.io.export import WORLD_FORMATS, cameras_of, export
+from wand_calib_ros.io.export import WORLD_FORMATS, export
+from wand_calib_ros.io.export.cameras import cameras_of
 from wand_calib_ros.io.outputs import check_writable
 from wand_calib_ros.io.result_yaml import calibration_paths, write_calibration
 

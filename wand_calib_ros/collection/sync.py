@@ -27,12 +27,12 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.rig import WandObservations
-from wand_calib_ros.core.timing import frame_period
+from wand_calib_ros.core.adjust.timing import frame_period
+from wand_calib_ros.core.model.rig import WandObservations
 
 FloatArray = NDArray[np.float64]
 
-#: Stamps a camera's period is learned from (:func:`~wand_calib_ros.core.timing.frame_period`).
+#: Stamps a camera's period is learned from (:func:`~wand_calib_ros.core.adjust.timing.frame_period`).
 RATE_WINDOW = 30
 #: Images per camera before its rate counts for choosing the anchor.
 WARMUP_IMAGES = 4

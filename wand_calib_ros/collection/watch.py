@@ -1,7 +1,7 @@
 """After a calibration, watch the rig for a camera that moved, off the node's executor.
 
 The collector offers every frame it stores; once a second :meth:`BumpWatch.step` hands what came in to
-one worker thread, which feeds a :class:`~wand_calib_ros.core.bumps.BumpMonitor` (levels from the
+one worker thread, which feeds a :class:`~wand_calib_ros.core.after.bumps.BumpMonitor` (levels from the
 calibration's pixel noise) and keeps its verdict for /diagnostics and the log.
 """
 
@@ -13,9 +13,9 @@ from concurrent.futures import Future, ThreadPoolExecutor
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.bumps import BumpMonitor, noise_levels
-from wand_calib_ros.core.result import CalibrationResult
-from wand_calib_ros.core.rig import RigSpec
+from wand_calib_ros.core.after.bumps import BumpMonitor, noise_levels
+from wand_calib_ros.core.model.result import CalibrationResult
+from wand_calib_ros.core.model.rig import RigSpec
 
 FloatArray = NDArray[np.float64]
 

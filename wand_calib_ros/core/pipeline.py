@@ -8,22 +8,15 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.camera_model import CameraModel
-from wand_calib_ros.core.diagnostics import clock_offsets, clock_warnings
+from wand_calib_ros.core.adjust.timing import align_views, offset_warnings, rate_warnings, timing_input
+from wand_calib_ros.core.after.world_frame import floor_of
 from wand_calib_ros.core.errors import CalibrationFailedError, CoreError, InsufficientDataError
-from wand_calib_ros.core.incremental import place_cameras
-from wand_calib_ros.core.lens_choice import model_starts, nominal_model
-from wand_calib_ros.core.metrics import rereference
-from wand_calib_ros.core.multi_camera import RigInitialisation, initialise_rig
-from wand_calib_ros.core.pairwise import PairOptions
-from wand_calib_ros.core.plausibility import check_result, check_rig, check_views
-from wand_calib_ros.core.quality import judge, noise_wand_error
-from wand_calib_ros.core.refine import refine_calibration
-from wand_calib_ros.core.result import CalibrationResult
-from wand_calib_ros.core.rig import RigSpec, WandObservations, spread_subset
-from wand_calib_ros.core.timing import align_views, offset_warnings, rate_warnings, timing_input
-from wand_calib_ros.core.two_markers import consistent_labels, continuous_in_image
-from wand_calib_ros.core.vision_graph import (
+from wand_calib_ros.core.initialise.incremental import place_cameras
+from wand_calib_ros.core.initialise.lens_choice import model_starts, nominal_model
+from wand_calib_ros.core.initialise.multi_camera import RigInitialisation, initialise_rig
+from wand_calib_ros.core.initialise.pairwise import PairOptions
+from wand_calib_ros.core.initialise.two_markers import consistent_labels, continuous_in_image
+from wand_calib_ros.core.initialise.vision_graph import (
     DisconnectedRigError,
     VisionGraph,
     build_vision_graph,
@@ -31,7 +24,14 @@ from wand_calib_ros.core.vision_graph import (
     covisibility,
     reference_index,
 )
-from wand_calib_ros.core.world_frame import floor_of
+from wand_calib_ros.core.judge.diagnostics import clock_offsets, clock_warnings
+from wand_calib_ros.core.judge.metrics import rereference
+from wand_calib_ros.core.judge.plausibility import check_result, check_rig, check_views
+from wand_calib_ros.core.judge.quality import judge, noise_wand_error
+from wand_calib_ros.core.model.camera_model import CameraModel
+from wand_calib_ros.core.model.result import CalibrationResult
+from wand_calib_ros.core.model.rig import RigSpec, WandObservations, spread_subset
+from wand_calib_ros.core.refine import refine_calibration
 
 log = logging.getLogger(__name__)
 
@@ -75,7 +75,7 @@ def calibrate(
     through the vision graph (Section III-B) and refined by one global bundle
     adjustment. With every camera's intrinsics given, or where the graph's pairs do not
     chain every camera (a sparse take), the cameras are placed one by one instead
-    (:mod:`~wand_calib_ros.core.incremental`). Placements must be seen completely (every
+    (:mod:`~wand_calib_ros.core.initialise.incremental`). Placements must be seen completely (every
     marker of the wand) by at least two cameras; the initialisation uses complete views
     only, the bundle adjustment every point seen.
 
@@ -232,7 +232,7 @@ def _placed(
     *,
     nominal: bool = False,
 ) -> RigInitialisation:
-    """The cameras placed one by one from known intrinsics (:mod:`~wand_calib_ros.core.incremental`)."""
+    """The cameras placed one by one from known intrinsics (:mod:`~wand_calib_ros.core.initialise.incremental`)."""
     focal_px = min(float(np.min(model.focal_px)) for model in models)
     threshold = options.ransac_threshold_px / focal_px * (NOMINAL_SLACK if nominal else 1.0)
     poses = place_cameras(rig, uv, models, reference, threshold_rad=threshold, seed=options.seed)

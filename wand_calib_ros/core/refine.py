@@ -2,14 +2,14 @@
 a robust pass to find the outliers, least squares with the model order the data support, the placements
 set aside brought back, the final adjustment, the checks, the result.
 
-Each concern has its module: :mod:`~wand_calib_ros.core.gating` (outliers),
-:mod:`~wand_calib_ros.core.model_order` (distortion terms and timing parameters kept),
-:mod:`~wand_calib_ros.core.degeneracy` (data that cannot determine a calibration) and
-:mod:`~wand_calib_ros.core.assembly` (the result and its warnings).
+Each concern has its module: :mod:`~wand_calib_ros.core.adjust.gating` (outliers),
+:mod:`~wand_calib_ros.core.adjust.model_order` (distortion terms and timing parameters kept),
+:mod:`~wand_calib_ros.core.judge.degeneracy` (data that cannot determine a calibration) and
+:mod:`~wand_calib_ros.core.adjust.assembly` (the result and its warnings).
 
 Works for any number of cameras once every camera has initial intrinsics and
 a pose in the reference frame. Cameras that are not synchronised get their time
-offsets and readout times estimated with everything else (:mod:`wand_calib_ros.core.timing`).
+offsets and readout times estimated with everything else (:mod:`wand_calib_ros.core.adjust.timing`).
 """
 
 from __future__ import annotations
@@ -20,8 +20,8 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.assembly import assemble
-from wand_calib_ros.core.bundle_adjustment import (
+from wand_calib_ros.core.adjust.assembly import assemble
+from wand_calib_ros.core.adjust.bundle_adjustment import (
     INTRINSICS,
     TIMING,
     BundleProblem,
@@ -30,13 +30,7 @@ from wand_calib_ros.core.bundle_adjustment import (
     bundle_adjust,
     default_free_mask,
 )
-from wand_calib_ros.core.camera_model import (
-    CameraModel,
-    radius_limit,
-    turns_over_in_image,
-)
-from wand_calib_ros.core.degeneracy import check_camera_views, check_geometry, check_uncertainty, require
-from wand_calib_ros.core.gating import (
+from wand_calib_ros.core.adjust.gating import (
     HUBER_SIGMAS,
     VIEW_GATE_SIGMAS,
     ac_length_errors,
@@ -48,9 +42,7 @@ from wand_calib_ros.core.gating import (
     robust_adjustment,
     subset_state,
 )
-from wand_calib_ros.core.geometry import Pose, wand_directions
-from wand_calib_ros.core.lens_choice import choose_models
-from wand_calib_ros.core.model_order import (
+from wand_calib_ros.core.adjust.model_order import (
     OrderOnAllPlacements,
     adjust_with_model_selection,
     free_mask,
@@ -58,11 +50,8 @@ from wand_calib_ros.core.model_order import (
     low_order,
     low_order_mask,
 )
-from wand_calib_ros.core.placements import fit_placements, triangulate_placements, unprojectable
-from wand_calib_ros.core.plausibility import check_given_intrinsics
-from wand_calib_ros.core.result import CalibrationResult, LensTrial
-from wand_calib_ros.core.rig import RigSpec, WandSpec, spread_subset
-from wand_calib_ros.core.timing import (
+from wand_calib_ros.core.adjust.placements import fit_placements, triangulate_placements, unprojectable
+from wand_calib_ros.core.adjust.timing import (
     ClockModel,
     TimingInput,
     align_views,
@@ -70,6 +59,17 @@ from wand_calib_ros.core.timing import (
     refresh_motion,
     start_clocks,
 )
+from wand_calib_ros.core.initialise.lens_choice import choose_models
+from wand_calib_ros.core.judge.degeneracy import check_camera_views, check_geometry, check_uncertainty, require
+from wand_calib_ros.core.judge.plausibility import check_given_intrinsics
+from wand_calib_ros.core.model.camera_model import (
+    CameraModel,
+    radius_limit,
+    turns_over_in_image,
+)
+from wand_calib_ros.core.model.geometry import Pose, wand_directions
+from wand_calib_ros.core.model.result import CalibrationResult, LensTrial
+from wand_calib_ros.core.model.rig import RigSpec, WandSpec, spread_subset
 
 FloatArray = NDArray[np.float64]
 log = logging.getLogger(__name__)
@@ -101,7 +101,7 @@ def refine_calibration(
         rig: the rig description (cameras in the order of ``uv``'s axis 1).
         uv: (P, C, 3, 2) observed pixels, NaN where not seen.
         models: initial intrinsics per camera (k3..k5 are reset to zero as in the paper; see
-            :data:`~wand_calib_ros.core.model_order.LOW_ORDER_FIXED` for the pinhole models).
+            :data:`~wand_calib_ros.core.adjust.model_order.LOW_ORDER_FIXED` for the pinhole models).
         poses: initial poses per camera in the reference camera's frame.
         reference: index of the reference camera.
         initial_projections: per camera, the Step 1 projection it started from.
@@ -109,7 +109,7 @@ def refine_calibration(
         min_placements: fewest placements the bundle adjustment accepts.
         timing: when the cameras saw the placements (None: synchronised cameras, frames in no time order).
         start_uv: (P, C, 3, 2) the views moved to their placements' times (free-running cameras, see
-            :func:`wand_calib_ros.core.timing.align_views`) for the gate and the starting placements;
+            :func:`wand_calib_ros.core.adjust.timing.align_views`) for the gate and the starting placements;
             None: ``uv``. The adjustments model the timing on the observed pixels.
     """
     wand = rig.wand

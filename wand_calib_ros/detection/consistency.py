@@ -12,9 +12,9 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.placements import triangulate_placements
-from wand_calib_ros.core.result import CalibrationResult
-from wand_calib_ros.core.rig import WandObservations, WandSpec
+from wand_calib_ros.core.adjust.placements import triangulate_placements
+from wand_calib_ros.core.model.result import CalibrationResult
+from wand_calib_ros.core.model.rig import WandObservations, WandSpec
 
 FloatArray = NDArray[np.float64]
 

@@ -19,14 +19,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wand_calib_ros.collection.sync import frames_to_observations, group_by_stamps
-from wand_calib_ros.core.camera_model import CameraModel
-from wand_calib_ros.core.errors import CoreError
-from wand_calib_ros.core.intrinsics_init import initial_model, lens_candidates
-from wand_calib_ros.core.rig import CameraSpec, RigSpec, WandObservations
+from wand_calib_ros.core.initialise.intrinsics_init import nominal_bearings
+from wand_calib_ros.core.model.bearings import BearingTable
+from wand_calib_ros.core.model.camera_model import CameraModel
+from wand_calib_ros.core.model.rig import CameraSpec, RigSpec, WandObservations
 from wand_calib_ros.detection.blobs import BlobOptions, Blobs, find_blobs, to_gray
 from wand_calib_ros.detection.errors import ImageError
 from wand_calib_ros.detection.wand import (
-    BearingTable,
     WandDetection,
     WandOptions,
     identify_wand,
@@ -79,14 +78,6 @@ def detect_image(
     return blobs, identify_wand(blobs, wand_options, model)
 
 
-def nominal_model(spec: CameraSpec) -> BearingTable | None:
-    """Bearings under the camera's Step 1 model (best classic projection at the nominal focal length)."""
-    try:
-        return BearingTable(initial_model(spec, lens_candidates(spec)[0]))
-    except CoreError:
-        return None
-
-
 class Labelled(NamedTuple):
     """One image's outcome once its labels are decided.
 
@@ -121,7 +112,7 @@ class CameraStream:
         self.spec = spec
         self.wand_options = wand_options
         self.blob_options = blob_options
-        self.model = nominal_model(spec)
+        self.model = nominal_bearings(spec)
         self.labeller = StreamLabeller(max_hold_ns)
         self.stats = CameraStats()
         self._pending: deque[WandDetection] = deque()  # pushed, not yet released (release keeps the order)

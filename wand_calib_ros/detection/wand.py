@@ -18,8 +18,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.camera_model import CameraModel, monotonic_limit, radius, unproject
-from wand_calib_ros.core.rig import WandSpec
+from wand_calib_ros.core.model.bearings import BearingTable
+from wand_calib_ros.core.model.camera_model import CameraModel, unproject
+from wand_calib_ros.core.model.rig import WandSpec
 from wand_calib_ros.detection.blobs import Blobs
 from wand_calib_ros.detection.errors import UnsupportedWandError
 
@@ -133,24 +134,6 @@ def _score(
     ratio_error = abs(float(np.log(ratio / options.ratio)))
     score = off_line / options.collinearity + 0.25 * ratio_error
     return score, np.stack([a, b, c]), ratio
-
-
-class BearingTable:
-    """Fast approximate unprojection for the collinearity test: theta(r) tabulated once per camera."""
-
-    def __init__(self, model: CameraModel, samples: int = 4096) -> None:
-        self.model = model
-        limit = monotonic_limit(model.k)
-        self.theta = np.linspace(0.0, limit, samples)
-        self.radius = radius(model.k, self.theta)
-
-    def __call__(self, uv: FloatArray) -> FloatArray:
-        """(N, 3) unit bearings of (N, 2) pixels (radii beyond the table are clamped)."""
-        xy = (uv - self.model.principal_point) / self.model.m
-        r = np.hypot(xy[:, 0], xy[:, 1])
-        theta = np.interp(r, self.radius, self.theta)
-        scale = np.where(r > 0, np.sin(theta) / np.where(r > 0, r, 1.0), 1.0 / self.model.k[0])
-        return np.column_stack([xy * scale[:, None], np.cos(theta)])
 
 
 def identify_wand(

@@ -23,7 +23,7 @@ from typing import TextIO
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.rig import ALL_POINT_LABELS, POINT_LABELS, WandObservations
+from wand_calib_ros.core.model.rig import ALL_POINT_LABELS, POINT_LABELS, WandObservations
 from wand_calib_ros.io.errors import FormatError
 
 COLUMNS = ("frame", "camera", "point", "u", "v")

@@ -34,10 +34,10 @@ from typing import Any
 import numpy as np
 import yaml
 
-from wand_calib_ros.core.camera_model import EQUIDISTANT, CameraModel, to_opencv
 from wand_calib_ros.core.errors import ModelError
-from wand_calib_ros.core.geometry import Pose
-from wand_calib_ros.core.result import CalibrationResult
+from wand_calib_ros.core.model.camera_model import EQUIDISTANT, CameraModel, to_opencv
+from wand_calib_ros.core.model.geometry import Pose
+from wand_calib_ros.core.model.result import CalibrationResult
 from wand_calib_ros.io.errors import FormatError
 from wand_calib_ros.io.outputs import write_together
 from wand_calib_ros.io.rig_yaml import wand_dict
@@ -181,7 +181,7 @@ def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
 
 
 def _quality_dict(result: CalibrationResult) -> dict[str, Any] | None:
-    """The verdict (README "Quality"): grade, world and image errors, what limits the grade."""
+    """The verdict (docs/quality-and-repair.md): grade, world and image errors, what limits the grade."""
     verdict = result.quality
     if verdict is None:
         return None

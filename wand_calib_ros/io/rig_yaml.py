@@ -26,11 +26,11 @@ from typing import Any
 import numpy as np
 import yaml
 
-from wand_calib_ros.core.camera_model import CAMERA_MODELS, EQUIDISTANT, CameraModel, to_opencv
 from wand_calib_ros.core.errors import ModelError
-from wand_calib_ros.core.intrinsics_init import FISHEYE_PROJECTIONS, PROJECTIONS
-from wand_calib_ros.core.known_intrinsics import known_model
-from wand_calib_ros.core.rig import LENS_CLASSES, CameraSpec, RigSpec, WandSpec
+from wand_calib_ros.core.initialise.intrinsics_init import FISHEYE_PROJECTIONS, PROJECTIONS
+from wand_calib_ros.core.model.camera_model import CAMERA_MODELS, EQUIDISTANT, CameraModel, to_opencv
+from wand_calib_ros.core.model.known_intrinsics import known_model
+from wand_calib_ros.core.model.rig import LENS_CLASSES, CameraSpec, RigSpec, WandSpec
 from wand_calib_ros.io.errors import FormatError
 from wand_calib_ros.io.text import read_yaml
 

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.result import CalibrationResult
+from wand_calib_ros.core.model.result import CalibrationResult
 from wand_calib_ros.io.errors import FormatError
 
 ESTIMATES_FILE = "estimates.csv"

@@ -39,7 +39,7 @@ from typing import Any
 
 from geometry_msgs.msg import TransformStamped
 
-try:  # any ROS install has tf2_msgs; the PyPI wheels do not (README: "Camera poses on /tf_static")
+try:  # any ROS install has tf2_msgs; the PyPI wheels do not (docs/live.md: "Camera poses on /tf_static")
     from tf2_msgs.msg import TFMessage
 except ImportError:  # pragma: no cover - depends on the ROS install
     TFMessage = None
@@ -54,11 +54,11 @@ from visualization_msgs.msg import MarkerArray
 from wand_calib_ros.collection.buffer import BUFFER_FILE, has_rows
 from wand_calib_ros.collection.floor import FLOOR_FILE, read_floor_frames
 from wand_calib_ros.collection.job import CalibrationFiles, refine_calibration, run_calibration, summary
+from wand_calib_ros.core.adjust.timing import TIMING_MODES
+from wand_calib_ros.core.after.rig_scene import rig_scene
+from wand_calib_ros.core.model.result import CalibrationResult
+from wand_calib_ros.core.model.rig import WandObservations
 from wand_calib_ros.core.pipeline import CalibrationOptions
-from wand_calib_ros.core.result import CalibrationResult
-from wand_calib_ros.core.rig import WandObservations
-from wand_calib_ros.core.rig_scene import rig_scene
-from wand_calib_ros.core.timing import TIMING_MODES
 from wand_calib_ros.errors import WandCalibError
 from wand_calib_ros.io.export import FORMATS
 from wand_calib_ros.io.observations_csv import read_observations

@@ -25,6 +25,7 @@ workflow. Only message and parameter translation lives here.
 
 from __future__ import annotations
 
+import functools
 import os
 import sys
 import threading
@@ -35,7 +36,8 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PolygonStamped, TransformStamped
-from rclpy.clock import Clock, ClockType
+from rclpy.clock import Clock
+from rclpy.clock_type import ClockType
 from rclpy.context import Context
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -50,9 +52,9 @@ from wand_calib_ros.collection.floor import FLOOR_FILE, FloorWindow, append_floo
 from wand_calib_ros.collection.recovery import backup_path
 from wand_calib_ros.collection.sync import FrameSynchroniser, SyncedFrame
 from wand_calib_ros.collection.watch import BumpWatch
+from wand_calib_ros.core.model.result import CalibrationResult
+from wand_calib_ros.core.model.rig import WandObservations
 from wand_calib_ros.core.pipeline import CalibrationOptions
-from wand_calib_ros.core.result import CalibrationResult
-from wand_calib_ros.core.rig import WandObservations
 from wand_calib_ros.detection.recording import CameraStream, Labelled
 from wand_calib_ros.detection.wand import WandOptions
 from wand_calib_ros.io.images import image_array
@@ -188,10 +190,10 @@ class CollectorNode(Node):
         for name, endpoint in self.endpoints.items():
             if values["input"] == "images":
                 qos = image_qos(values["image_qos"])
-                self.create_subscription(Image, endpoint.image_topic, lambda m, n=name: self._on_image(n, m), qos)
+                self.create_subscription(Image, endpoint.image_topic, functools.partial(self._on_image, name), qos)
             else:
                 self.create_subscription(
-                    PolygonStamped, endpoint.points_topic, lambda m, n=name: self._on_points(n, m), POINTS_QOS
+                    PolygonStamped, endpoint.points_topic, functools.partial(self._on_points, name), POINTS_QOS
                 )
         self.create_service(Trigger, "reset", self._on_reset)
         self.floor = FloorWindow(float(values["floor_hold_s"]))
@@ -368,7 +370,7 @@ class CollectorNode(Node):
             status = self.coverage.status()
             counts = self._counts()
             sync, stored = self.sync.stats, self.buffer.stats
-            rig_values = {
+            rig_values: dict[str, int | str] = {
                 "frames_stored": len(self.buffer.frames),
                 "frames_synchronised": sync.frames,
                 "frames_all_cameras": sync.complete,
@@ -432,8 +434,8 @@ class CollectorNode(Node):
             self.calibrated, self._auto_state = False, None
         if self.estimates is not None:  # the next round starts cold on the new buffer
             self.estimates.restart()
-        kept = "it was empty" if backup is None else f"backup {backup}"
-        response.success, response.message = True, f"buffer cleared; {kept}"
+        saved = "it was empty" if backup is None else f"backup {backup}"
+        response.success, response.message = True, f"buffer cleared; {saved}"
         self.get_logger().info(response.message)
         return response
 

@@ -55,7 +55,7 @@ def run_demo(out: Path, scenario: str, frames: int, seed: int, rate: float) -> i
     collector = start("wand_calib_ros.nodes.collector", params, domain_id=domain_id, log=out / "collector.log")
     try:
         started = time.monotonic()
-        replay = {"bag": str(out / "bag"), "cameras_file": params["cameras_file"], "rate": rate}
+        replay: dict[str, str | float] = {"bag": str(out / "bag"), "cameras_file": params["cameras_file"], "rate": rate}
         played = start("wand_calib_ros.nodes.replay", replay, domain_id=domain_id, log=out / "replay.log").wait()
         print(f"replayed {out / 'bag'} at {rate:g}x in {time.monotonic() - started:.1f} s (exit {played})")
         answer = subprocess.run(

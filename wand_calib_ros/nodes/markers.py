@@ -1,4 +1,4 @@
-"""A :class:`~wand_calib_ros.core.rig_scene.RigScene` as visualization_msgs/MarkerArray for RViz (no maths here).
+"""A :class:`~wand_calib_ros.core.after.rig_scene.RigScene` as visualization_msgs/MarkerArray for RViz (no maths here).
 
 Namespaces: ``frustums`` (one LINE_LIST per camera, its pose the camera's in the parent frame, so a
 marker's pose is the camera's), ``names`` (the cameras' names at their centres), ``wand`` (the newest
@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
-from wand_calib_ros.core.rig_scene import RigScene
+from wand_calib_ros.core.after.rig_scene import RigScene
 from wand_calib_ros.nodes.messages import camera_in_parent
 
 #: A frustum's edges as index pairs into its five points (apex, then the image's four corners).

@@ -23,8 +23,8 @@ from std_msgs.msg import Header
 from wand_calib_ros.collection.coverage import CoverageStatus
 from wand_calib_ros.collection.estimate import Estimate
 from wand_calib_ros.collection.sync import FrameSynchroniser, SyncedFrame
-from wand_calib_ros.core.geometry import Pose
-from wand_calib_ros.core.result import CalibrationResult
+from wand_calib_ros.core.model.geometry import Pose
+from wand_calib_ros.core.model.result import CalibrationResult
 from wand_calib_ros.io.result_yaml import camera_info_dict
 
 
@@ -39,7 +39,7 @@ def time_message(nanoseconds: int) -> Time:
     return Time(sec=sec, nanosec=nanosec)
 
 
-def array_to_image(pixels: NDArray, stamp: int, frame_id: str, encoding: str = "mono8") -> Image:
+def array_to_image(pixels: NDArray[np.uint8], stamp: int, frame_id: str, encoding: str = "mono8") -> Image:
     """sensor_msgs/Image of an 8-bit (H, W) or (H, W, channels) array (filled from bytes: fast)."""
     message = Image()
     message.header.stamp = time_message(stamp)
@@ -261,6 +261,7 @@ def heat_map_message(counts: NDArray[np.int64], image_size: tuple[int, int], sta
     level = np.sqrt(counts / max(float(counts.max()), 1.0)) * 255
     picture = cv2.applyColorMap(level.astype(np.uint8), cv2.COLORMAP_INFERNO)
     picture[counts == 0] = (96, 0, 0)  # never seen: dark blue, apart from "seen a little"
-    message = array_to_image(cv2.resize(picture, size, interpolation=cv2.INTER_NEAREST), 0, frame_id, "bgr8")
+    resized = np.asarray(cv2.resize(picture, size, interpolation=cv2.INTER_NEAREST), dtype=np.uint8)
+    message = array_to_image(resized, 0, frame_id, "bgr8")
     message.header.stamp = stamp
     return message

@@ -51,6 +51,7 @@ from rclpy.context import Context
 from rclpy.executors import Executor, ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
+from rclpy.utilities import try_shutdown
 
 from wand_calib_ros.errors import WandCalibError
 
@@ -135,7 +136,7 @@ def _quiet_half_built_executors(unraisable: Any) -> None:
 def _shutdown(context: Context) -> None:
     """Shut the context down unless the signal handler is doing it at the same moment."""
     with contextlib.suppress(RuntimeError):  # "rcl_shutdown already called"
-        rclpy.try_shutdown(context=context)
+        try_shutdown(context=context)
 
 
 #: Parameters rclpy itself reads or may be given for any node.

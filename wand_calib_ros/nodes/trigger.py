@@ -14,6 +14,7 @@ import rclpy
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.utilities import try_shutdown
 from std_srvs.srv import Trigger
 
 
@@ -40,7 +41,7 @@ def call_trigger(service: str, timeout_s: float, context: Context | None = None)
         executor.shutdown()
         node.destroy_node()
         if own:
-            rclpy.try_shutdown(context=context)
+            try_shutdown(context=context)
         spinner.join(timeout=5)
 
 

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.bundle_adjustment import (
+from wand_calib_ros.core.adjust.bundle_adjustment import (
     N_CAMERA_PARAMS,
     BundleProblem,
     BundleResult,
@@ -25,14 +25,14 @@ from wand_calib_ros.core.bundle_adjustment import (
     PlacementTiming,
     bundle_adjust,
 )
-from wand_calib_ros.core.camera_model import CameraModel
+from wand_calib_ros.core.adjust.gating import VIEW_GATE_SIGMAS, gate_views
+from wand_calib_ros.core.adjust.placements import triangulate_placements
+from wand_calib_ros.core.adjust.timing import Timeline, align_views, smooth_motion, timeline
 from wand_calib_ros.core.errors import CoreError
-from wand_calib_ros.core.gating import VIEW_GATE_SIGMAS, gate_views
-from wand_calib_ros.core.geometry import Pose, wand_directions
-from wand_calib_ros.core.placements import triangulate_placements
-from wand_calib_ros.core.rig import RigSpec, WandObservations
-from wand_calib_ros.core.timing import Timeline, align_views, smooth_motion, timeline
-from wand_calib_ros.core.vision_graph import VisionGraph, build_vision_graph, covisibility
+from wand_calib_ros.core.initialise.vision_graph import VisionGraph, build_vision_graph, covisibility
+from wand_calib_ros.core.model.camera_model import CameraModel
+from wand_calib_ros.core.model.geometry import Pose, wand_directions
+from wand_calib_ros.core.model.rig import RigSpec, WandObservations
 from wand_calib_ros.io.errors import FormatError
 from wand_calib_ros.io.result_yaml import read_result
 from wand_calib_ros.io.session_csv import (

@@ -13,8 +13,8 @@ import networkx as nx
 import numpy as np
 from matplotlib.figure import Figure
 
-from wand_calib_ros.core.camera_model import radial_basis, radius_mm
-from wand_calib_ros.core.intrinsics_init import PROJECTIONS
+from wand_calib_ros.core.initialise.intrinsics_init import PROJECTIONS
+from wand_calib_ros.core.model.camera_model import radial_basis, radius_mm
 from wand_calib_ros.report.analysis import ReportData
 
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
-from wand_calib_ros.core.rig import RigSpec, WandObservations
+from wand_calib_ros.core.model.rig import RigSpec, WandObservations
 from wand_calib_ros.io.errors import OutputError
 from wand_calib_ros.report.analysis import ReportData, prepare
 from wand_calib_ros.report.figures import FIGURES

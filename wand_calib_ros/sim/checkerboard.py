@@ -17,9 +17,10 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
-from wand_calib_ros.core.camera_model import CameraModel, from_opencv_fisheye, project
 from wand_calib_ros.core.errors import CalibrationFailedError
-from wand_calib_ros.core.geometry import Pose
+from wand_calib_ros.core.model.camera_model import CameraModel, from_opencv_fisheye, project
+from wand_calib_ros.core.model.geometry import Pose
+from wand_calib_ros.core.model.rig import CameraSpec
 from wand_calib_ros.sim.scenarios import Scenario, visible
 
 FloatArray = NDArray[np.float64]
@@ -122,7 +123,9 @@ class BaselineResult:
     rms_px: tuple[float, ...]
 
 
-def _fisheye_calibrate(true_spec, views: BoardViews, criteria: tuple) -> tuple[FloatArray, FloatArray, float]:  # type: ignore[no-untyped-def]
+def _fisheye_calibrate(
+    true_spec: CameraSpec, views: BoardViews, criteria: tuple[int, int, float]
+) -> tuple[FloatArray, FloatArray, float]:
     objects = [views.object_points[None, :, :].astype(np.float64)] * views.image_points.shape[0]
     images = [v[0][None, :, :].astype(np.float64) for v in views.image_points]
     guess = np.array(
@@ -139,7 +142,11 @@ def _fisheye_calibrate(true_spec, views: BoardViews, criteria: tuple) -> tuple[F
         )
     except cv2.error as failure:
         raise CalibrationFailedError(f"OpenCV fisheye calibration of {true_spec.name} failed: {failure}") from None
-    return k, d, float(error) / np.sqrt(2.0)  # OpenCV's RMS is 2D; report per coordinate
+    return (
+        np.asarray(k, dtype=float),
+        np.asarray(d, dtype=float),
+        float(error) / np.sqrt(2.0),
+    )  # OpenCV's RMS is 2D; report per coordinate
 
 
 def calibrate_checkerboard(
@@ -183,5 +190,5 @@ def calibrate_checkerboard(
             )
         except cv2.error as failure:
             raise CalibrationFailedError(f"OpenCV stereo calibration cam0-{c} failed: {failure}") from None
-        poses.append(Pose(result[5], np.asarray(result[6]).ravel()))
+        poses.append(Pose(np.asarray(result[5], dtype=float), np.asarray(result[6], dtype=float).ravel()))
     return BaselineResult(tuple(models), tuple(poses), tuple(rms))

@@ -15,8 +15,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wand_calib_ros.collection.sync import frames_to_observations, group_by_stamps
-from wand_calib_ros.core.camera_model import project
-from wand_calib_ros.core.rig import WandObservations
+from wand_calib_ros.core.model.camera_model import project
+from wand_calib_ros.core.model.rig import WandObservations
 from wand_calib_ros.sim.motion import WavedWand, shared_volume, waved_wand
 from wand_calib_ros.sim.scenarios import Scenario, visibility
 

@@ -11,9 +11,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wand_calib_ros.core.camera_model import CameraModel
-from wand_calib_ros.core.geometry import Pose
-from wand_calib_ros.core.metrics import camera_errors, heldout_wand_rms, rereference
+from wand_calib_ros.core.judge.metrics import camera_errors, heldout_wand_rms, rereference
+from wand_calib_ros.core.model.camera_model import CameraModel
+from wand_calib_ros.core.model.geometry import Pose
 from wand_calib_ros.core.pipeline import calibrate
 from wand_calib_ros.sim.checkerboard import calibrate_checkerboard
 from wand_calib_ros.sim.scenarios import SCENARIOS, Scenario, simulate

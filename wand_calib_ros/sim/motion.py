@@ -15,8 +15,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.geometry import tangent_basis
-from wand_calib_ros.core.rig import WandSpec
+from wand_calib_ros.core.model.geometry import tangent_basis
+from wand_calib_ros.core.model.rig import WandSpec
 from wand_calib_ros.sim.scenarios import Scenario, sample_placements
 
 FloatArray = NDArray[np.float64]

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.rig import WandObservations
+from wand_calib_ros.core.model.rig import WandObservations
 
 #: The corruptions: A and C swapped, one point replaced by a spurious blob, one point off by 20 px.
 KINDS = ("swap", "blob", "gross")

@@ -15,8 +15,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.camera_model import project
-from wand_calib_ros.core.rig import WandObservations
+from wand_calib_ros.core.model.camera_model import project
+from wand_calib_ros.core.model.rig import WandObservations
 from wand_calib_ros.sim.clocks import CameraTake, film, observe, stamp_ns, synchronised_clocks
 from wand_calib_ros.sim.motion import WandMotion, waved_wand
 from wand_calib_ros.sim.scenarios import Scenario, sample_placements, visibility

@@ -14,10 +14,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.camera_model import PLUMB_BOB, CameraModel, from_opencv_pinhole, project
-from wand_calib_ros.core.geometry import Pose, rotation_from_rotvec
-from wand_calib_ros.core.intrinsics_init import PROJECTIONS
-from wand_calib_ros.core.rig import CameraSpec, RigSpec, WandObservations, WandSpec
+from wand_calib_ros.core.initialise.intrinsics_init import PROJECTIONS
+from wand_calib_ros.core.model.camera_model import PLUMB_BOB, CameraModel, from_opencv_pinhole, project
+from wand_calib_ros.core.model.geometry import Pose, rotation_from_rotvec
+from wand_calib_ros.core.model.rig import CameraSpec, RigSpec, WandObservations, WandSpec
 
 FloatArray = NDArray[np.float64]
 
@@ -138,7 +138,9 @@ def paper_fisheye_scenario(
     cameras = []
     for i in range(n_cameras):
         spec = CameraSpec(f"cam{i}", (640, 480), (5.6, 5.6), nominal_focal_mm, 92.5)
-        model = CameraModel(equisolid_taylor(true_focal_mm), spec.m, principal_point, spec.image_size)
+        model = CameraModel(
+            equisolid_taylor(true_focal_mm), spec.m, np.asarray(principal_point, dtype=float), spec.image_size
+        )
         cameras.append(TrueCamera(spec, model, poses[i], np.radians(92.5)))
     volume = np.array([[-350.0, -350.0, 700.0], [350.0, 350.0, 1000.0]])
     return Scenario("paper", WandSpec.from_lengths(400.0, 200.0), tuple(cameras), volume, n_placements)
@@ -172,13 +174,17 @@ def _conventional_camera(
         model = from_opencv_pinhole(camera_matrix, np.array(_PLUMB_BOB_LENSES[pinhole]), spec.m, spec.image_size)
         return TrueCamera(spec, model, pose, np.radians(48.0))
     k = fit_radial(_barrel_perspective, 4.3, np.radians(48.0))
-    return TrueCamera(spec, CameraModel(k, spec.m, principal_point, spec.image_size), pose, np.radians(48.0))
+    return TrueCamera(
+        spec, CameraModel(k, spec.m, np.asarray(principal_point, dtype=float), spec.image_size), pose, np.radians(48.0)
+    )
 
 
 def _fisheye_camera(name: str, pose: Pose, principal_point: tuple[float, float]) -> TrueCamera:
     spec = CameraSpec(name, (658, 492), (5.6, 5.6), 1.8, 92.5)
     k = fit_radial("equidistant", 1.82, np.radians(95.0)) + np.array([0.0, 0.012, -0.002, 0.0, 0.0])
-    return TrueCamera(spec, CameraModel(k, spec.m, principal_point, spec.image_size), pose, np.radians(92.5))
+    return TrueCamera(
+        spec, CameraModel(k, spec.m, np.asarray(principal_point, dtype=float), spec.image_size), pose, np.radians(92.5)
+    )
 
 
 #: Pose of the second camera in the paper's real two-camera experiments (Table 1).
@@ -285,7 +291,7 @@ def mocap_scenario(*, n_cameras: int = 16, n_placements: int = 10_000, cone_deg:
     for i, pose in enumerate(poses):
         spec = CameraSpec(f"cam{i:02d}", (1280, 1024), (4.8, 4.8), 6.0, 35.0)
         k = fit_radial(_barrel_perspective, 6.1 + 0.02 * (i % 5), np.radians(38.0))
-        principal = (640.0 + 4 * ((i * 7) % 5) - 8, 512.0 + 3 * ((i * 3) % 5) - 6)
+        principal = np.array([640.0 + 4 * ((i * 7) % 5) - 8, 512.0 + 3 * ((i * 3) % 5) - 6])
         cameras.append(TrueCamera(spec, CameraModel(k, spec.m, principal, spec.image_size), pose, np.radians(38.0)))
     first = world_poses[0]
     corners = np.array([[x, y, z] for x in (-2000.0, 2000.0) for y in (-2000.0, 0.0) for z in (-2000.0, 2000.0)])
@@ -323,7 +329,7 @@ def stage_scenario(*, n_rings: int = 4, per_ring: int = 16, n_placements: int = 
         view_deg = 50.0 if focal < 5 else 35.0
         spec = CameraSpec(f"cam{i:02d}", (1280, 1024), (4.8, 4.8), focal, view_deg)
         k = fit_radial(_barrel_perspective, focal * (1.0 + 0.004 * (i % 5)), np.radians(view_deg + 3.0))
-        principal = (640.0 + 4 * ((i * 7) % 5) - 8, 512.0 + 3 * ((i * 3) % 5) - 6)
+        principal = np.array([640.0 + 4 * ((i * 7) % 5) - 8, 512.0 + 3 * ((i * 3) % 5) - 6])
         model = CameraModel(k, spec.m, principal, spec.image_size)
         cameras.append(TrueCamera(spec, model, pose, np.radians(view_deg + 3.0)))
     half = np.array([ZONE_MM / 2 * n_rings, 1000.0, 2500.0])

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wand_calib_ros.core.metrics import camera_errors
+from wand_calib_ros.core.judge.metrics import camera_errors
 from wand_calib_ros.core.pipeline import calibrate
 from wand_calib_ros.errors import WandCalibError
 from wand_calib_ros.sim.scenarios import Scenario, paper_fisheye_scenario, simulate
@@ -115,8 +115,9 @@ def run_sweep(
                 result = calibrate(scenario.rig, data.observations)
             except WandCalibError as error:
                 log.warning("%s %s cameras value %g run %d failed: %s", sweep.name, n_cameras, value, run, error)
+                nan = float("nan")
                 rows.extend(
-                    SweepRow(sweep.name, n_cameras, value, run, c.spec.name, *([float("nan")] * 6), str(error))
+                    SweepRow(sweep.name, n_cameras, value, run, c.spec.name, nan, nan, nan, nan, nan, nan, str(error))
                     for c in scenario.cameras
                 )
                 continue

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from wand_calib_ros.core.metrics import camera_errors, heldout_wand_rms, rereference
-from wand_calib_ros.core.rig import WandSpec
+from wand_calib_ros.core.judge.metrics import camera_errors, heldout_wand_rms, rereference
+from wand_calib_ros.core.model.rig import WandSpec
 from wand_calib_ros.io.observations_csv import read_observations
 from wand_calib_ros.io.result_yaml import CameraGeometry, read_result
 

@@ -16,31 +16,11 @@ freemocap ``calibration.toml``), ``kalibr`` (camchain YAML), ``camera_info`` (RO
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 
-from wand_calib_ros.core.camera_model import CameraModel
-from wand_calib_ros.core.geometry import Pose
-from wand_calib_ros.core.result import CalibrationResult
+from wand_calib_ros.io.export import anipose, camera_info, dlt, kalibr, opencv
+from wand_calib_ros.io.export.cameras import ExportedCamera
 from wand_calib_ros.io.outputs import write_together
-
-
-@dataclass(frozen=True, eq=False)
-class ExportedCamera:
-    """One camera as the formats need it: name, intrinsics and pose (X_cam = R X_ref + T, mm)."""
-
-    name: str
-    model: CameraModel
-    pose: Pose
-
-
-def cameras_of(result: CalibrationResult, *, in_world: bool = False) -> list[ExportedCamera]:
-    """A result's cameras, the reference first; poses in the world frame when ``in_world`` and the
-    result has one (a floor was given), else relative to the reference camera."""
-    order = sorted(result.cameras, key=lambda c: c.name != result.reference_camera)
-    world = result.world if in_world else None
-    return [ExportedCamera(c.name, c.model, c.pose if world is None else world.camera_in_world(c.pose)) for c in order]
-
 
 #: The format names :func:`export` takes.
 FORMATS = ("opencv", "anipose", "kalibr", "camera_info", "dlt")
@@ -54,8 +34,6 @@ Writer = Callable[[Sequence[ExportedCamera]], dict[str, str]]
 
 def formats() -> dict[str, Writer]:
     """Every format by name."""
-    from wand_calib_ros.io.export import anipose, camera_info, dlt, kalibr, opencv
-
     return {
         "opencv": opencv.documents,
         "anipose": anipose.documents,

@@ -13,8 +13,8 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 
-from wand_calib_ros.core.camera_model import EQUIDISTANT, to_opencv
-from wand_calib_ros.io.export import ExportedCamera
+from wand_calib_ros.core.model.camera_model import EQUIDISTANT, to_opencv
+from wand_calib_ros.io.export.cameras import ExportedCamera
 
 FILE = "calibration.toml"
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from wand_calib_ros.io.export import ExportedCamera
+from wand_calib_ros.io.export.cameras import ExportedCamera
 from wand_calib_ros.io.result_yaml import camera_info_dict, yaml_text
 
 

@@ -19,9 +19,9 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.camera_model import CameraModel, angle_of_radius, unproject
+from wand_calib_ros.core.model.camera_model import CameraModel, angle_of_radius, unproject
 from wand_calib_ros.io.errors import ExportError
-from wand_calib_ros.io.export import ExportedCamera
+from wand_calib_ros.io.export.cameras import ExportedCamera
 
 FILE = "dlt_coefficients.csv"
 #: Largest image distance (px) between a camera and the pinhole its DLT coefficients describe.

@@ -17,9 +17,9 @@ from typing import Any
 import numpy as np
 import yaml
 
-from wand_calib_ros.core.camera_model import EQUIDISTANT, PLUMB_BOB, OpenCVCamera, to_opencv
+from wand_calib_ros.core.model.camera_model import EQUIDISTANT, PLUMB_BOB, OpenCVCamera, to_opencv
 from wand_calib_ros.io.errors import ExportError
-from wand_calib_ros.io.export import ExportedCamera
+from wand_calib_ros.io.export.cameras import ExportedCamera
 
 FILE = "camchain.yaml"
 

@@ -15,8 +15,8 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 
-from wand_calib_ros.core.camera_model import EQUIDISTANT, to_opencv
-from wand_calib_ros.io.export import ExportedCamera
+from wand_calib_ros.core.model.camera_model import EQUIDISTANT, to_opencv
+from wand_calib_ros.io.export.cameras import ExportedCamera
 
 
 def documents(cameras: Sequence[ExportedCamera]) -> dict[str, str]:

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wand_calib_ros.core.rig import RigSpec, WandObservations
+from wand_calib_ros.core.model.rig import RigSpec, WandObservations
 from wand_calib_ros.io.errors import FormatError
 
 _COLUMN = re.compile(r"^pt(\d+)_cam(\d+)_([xy])$", re.IGNORECASE)

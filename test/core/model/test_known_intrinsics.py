@@ -1,0 +1,120 @@
+"""Intrinsics users already have: exact from OpenCV fisheye, converted from plumb_bob or refused, and the
+calibration with them given: extrinsics at least as good as estimating everything (several seeds)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import cv2
+import numpy as np
+import pytest
+from rigs import errors_against_truth, in_truth_frame, rms, scenario_data
+
+from wand_calib_ros.core.errors import ModelError
+from wand_calib_ros.core.model.camera_model import project, to_opencv_fisheye
+from wand_calib_ros.core.model.known_intrinsics import MAX_CONVERSION_ERROR_PX, from_pinhole_radtan, known_model
+from wand_calib_ros.core.model.rig import RigSpec
+from wand_calib_ros.core.pipeline import calibrate
+from wand_calib_ros.sim.scenarios import Scenario
+
+K = np.array([[800.0, 0.0, 640.0], [0.0, 804.0, 512.0], [0.0, 0.0, 1.0]])
+M = np.array([1000 / 5.3, 1000 / 5.3])
+SIZE = (1280, 1024)
+
+
+def _rays_in_image(K: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rays up to 80 deg and their pixels by OpenCV's own (forward) pinhole model, those inside the image."""
+    theta, phi = np.meshgrid(np.radians(np.linspace(0, 80, 81)), np.radians(np.arange(0, 360, 5)))
+    rays = np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)], -1).reshape(-1, 3)
+    pixels = cv2.projectPoints(rays, np.zeros(3), np.zeros(3), K, d)[0].reshape(-1, 2)
+    radius = np.linalg.norm(rays[:, :2] / rays[:, 2:], axis=1)
+    inside = np.all((pixels >= -0.5) & (pixels <= np.array(SIZE) - 0.5), axis=1) & (radius < 2.0)
+    return rays[inside], pixels[inside]
+
+
+def test_opencv_fisheye_parameters_convert_exactly() -> None:
+    scenario, _, _ = scenario_data("mixed", 0, noise=1.0)
+    for camera in scenario.cameras:
+        opencv = to_opencv_fisheye(camera.model)
+        spec = camera.spec
+        model = known_model("equidistant", opencv.camera_matrix, opencv.distortion, spec.m, spec.image_size)
+        rays = np.array([[0.3, -0.2, 1.0], [-0.5, 0.4, 0.6], [0.01, 0.02, 1.0]])
+        assert np.abs(project(model, rays) - project(camera.model, rays)).max() < 1e-9
+
+
+@pytest.mark.parametrize("distortion", [[-0.15, 0.03, 0.0, 0.0, -0.002], [0.05, -0.01, 0.0, 0.0], [-0.05, 0.0, 0, 0]])
+def test_plumb_bob_converts_within_the_stated_error_over_the_whole_image(distortion: list[float]) -> None:
+    d = np.array(distortion)
+    model, stated = from_pinhole_radtan(K, d, M, SIZE)
+    rays, pixels = _rays_in_image(K, d)
+    assert len(rays) > 1000
+    error = np.linalg.norm(project(model, rays) - pixels, axis=1).max()
+    assert error <= stated + 1e-3 and stated <= MAX_CONVERSION_ERROR_PX
+    assert model.focal_px[1] / model.focal_px[0] == pytest.approx(804.0 / 800.0)  # m_v follows K's fy/fx
+
+
+def test_plumb_bob_that_does_not_convert_is_refused_with_the_reason() -> None:
+    with pytest.raises(ModelError, match=r"cam2: the plumb_bob intrinsics differ .* by 2\.\d+ px .*tangential"):
+        from_pinhole_radtan(K, np.array([-0.05, 0.0, 0.001, 0.0005]), M, SIZE, name="cam2")
+    with pytest.raises(ModelError, match=r"folds back at 5[0-9] deg, inside the image"):
+        from_pinhole_radtan(K, np.array([-0.3, 0.1, 0.0, 0.0, -0.02]), M, SIZE)
+    with pytest.raises(ModelError, match="distortion model 'kannala' is not supported"):
+        known_model("kannala", K, np.zeros(4), M, SIZE)
+    with pytest.raises(ModelError, match="K must be"):
+        known_model("equidistant", np.eye(3) * -1, np.zeros(4), M, SIZE)
+
+
+def _given(scenario: Scenario, fixed: bool = True, cameras: tuple[int, ...] | None = None) -> RigSpec:
+    chosen = range(len(scenario.cameras)) if cameras is None else cameras
+    specs = tuple(
+        replace(spec, intrinsics=camera.model, intrinsics_fixed=fixed) if c in chosen else spec
+        for c, (spec, camera) in enumerate(zip(scenario.rig.cameras, scenario.cameras, strict=True))
+    )
+    return replace(scenario.rig, cameras=specs)
+
+
+@pytest.mark.parametrize("name", ["paper", "mixed"])
+def test_extrinsics_with_the_true_intrinsics_given_are_at_least_as_good(name: str) -> None:
+    errors: dict[str, list[float]] = {key: [] for key in ("full E_r", "given E_r", "full E_t", "given E_t")}
+    for seed in range(4):
+        scenario, data, held = scenario_data(name, seed, noise=1.0)
+        estimated = calibrate(scenario.rig, data.observations)
+        full = errors_against_truth(scenario, held, *in_truth_frame(estimated, scenario))
+        result = calibrate(_given(scenario), data.observations)
+        given = errors_against_truth(scenario, held, *in_truth_frame(result, scenario))
+        for camera in result.cameras:
+            true_model = next(c.model for c in scenario.cameras if c.spec.name == camera.name)
+            assert np.array_equal(camera.model.intrinsic_vector(), true_model.intrinsic_vector())  # held exactly
+            assert camera.intrinsics == "given"
+            assert not any(k.startswith(("k", "u0", "v0")) for k in camera.parameter_std)
+        for kind in ("E_r", "E_t"):
+            errors[f"full {kind}"] += [v for k, v in full.items() if k.endswith(kind)]
+            errors[f"given {kind}"] += [v for k, v in given.items() if k.endswith(kind)]
+    assert rms(errors["given E_r"]) <= rms(errors["full E_r"]), errors
+    assert rms(errors["given E_t"]) <= rms(errors["full E_t"]), errors
+
+
+def test_one_camera_given_the_others_estimated_and_given_as_a_start() -> None:
+    scenario, data, held = scenario_data("paper3", 0, noise=1.0)
+    result = calibrate(_given(scenario, cameras=(1,)), data.observations)
+    assert [c.intrinsics for c in sorted(result.cameras, key=lambda c: c.name)] == ["estimated", "given", "estimated"]
+    assert result.camera("cam0").initial_projection != "given" and result.camera("cam1").initial_projection == "given"
+    start = calibrate(_given(scenario, fixed=False), data.observations)
+    assert {c.intrinsics for c in start.cameras} == {"given_start"}
+    assert all("k1" in c.parameter_std for c in start.cameras)  # refined from the given start
+    full = errors_against_truth(scenario, held, *in_truth_frame(calibrate(scenario.rig, data.observations), scenario))
+    refined = errors_against_truth(scenario, held, *in_truth_frame(start, scenario))
+    assert refined["D_RMS"] <= 1.2 * full["D_RMS"]
+
+
+def test_given_intrinsics_that_contradict_the_rig_description_are_named() -> None:
+    from wand_calib_ros.core.errors import PlausibilityError
+    from wand_calib_ros.core.judge.plausibility import check_rig
+
+    scenario, _, _ = scenario_data("paper", 0, noise=1.0)
+    wrong = scenario.cameras[1].model.with_intrinsic_vector(
+        scenario.cameras[1].model.intrinsic_vector() * [3, 3, 3, 3, 3, 1, 1]
+    )
+    rig = replace(scenario.rig, cameras=(scenario.rig.cameras[0], replace(scenario.rig.cameras[1], intrinsics=wrong)))
+    with pytest.raises(PlausibilityError, match=r"camera 'cam1': its given intrinsics \(fx \d+ px\) mean a focal"):
+        check_rig(rig)

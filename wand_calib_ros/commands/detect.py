@@ -1,0 +1,130 @@
+"""``wand-calib detect``: the wand found in a rosbag2 of camera images, written as an observations CSV."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from wand_calib_ros.core.model.rig import RigSpec, WandObservations
+from wand_calib_ros.core.pipeline import calibrate
+from wand_calib_ros.detection.blobs import Blobs
+from wand_calib_ros.detection.recording import CameraStats
+from wand_calib_ros.detection.wand import WandDetection
+from wand_calib_ros.errors import WandCalibError
+from wand_calib_ros.io.bags import ImageFrame
+from wand_calib_ros.io.observations_csv import write_observations
+from wand_calib_ros.io.outputs import check_writable
+from wand_calib_ros.io.rig_yaml import load_rig
+
+log = logging.getLogger("wand_calib_ros")
+
+HELP = "detect the wand in a rosbag2 of camera images"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The command's arguments."""
+    parser.add_argument("bag", type=Path, help="rosbag2 directory (mcap or sqlite3)")
+    parser.add_argument("--cameras", required=True, type=Path, help="rig description (cameras.yaml)")
+    parser.add_argument("--output", required=True, type=Path, help="observations CSV to write")
+    parser.add_argument("--topic", default="/{camera}/image_raw", help="topic pattern (default /{camera}/image_raw)")
+    parser.add_argument(
+        "--sync-tolerance-ms",
+        type=float,
+        default=0.0,
+        help="images further apart never form a frame (default 0: half the frame period)",
+    )
+    parser.add_argument("--debug-dir", type=Path, help="write overlay images (blobs, chosen A/B/C) here")
+    parser.add_argument("--debug-every", type=int, default=30, help="overlay every N-th image per camera (default 30)")
+
+
+def _image_topics(pattern: str, names: tuple[str, ...]) -> dict[str, str]:
+    """Each camera's image topic from ``--topic`` (``{camera}`` is the camera's name)."""
+    try:
+        topics = {name: pattern.format(camera=name) for name in names}
+    except (KeyError, IndexError) as error:
+        raise WandCalibError(
+            f"--topic {pattern!r}: {{{error.args[0]}}} is not a field; the only one is {{camera}} "
+            "(e.g. /{camera}/image_raw)"
+        ) from None
+    except ValueError as error:
+        raise WandCalibError(f"--topic {pattern!r}: {error} (the field is {{camera}}; {{{{ is a brace)") from None
+    if len(set(topics.values())) < len(topics):
+        raise WandCalibError(
+            f"--topic {pattern!r} gives every camera the same topic {topics[names[0]]}: put {{camera}} in it, "
+            "or one camera's images would be written as another's"
+        )
+    return topics
+
+
+def run(args: argparse.Namespace) -> int:
+    from wand_calib_ros.detection.recording import detect_recording
+    from wand_calib_ros.io.bags import count_images, read_image_frames
+
+    cv2.setNumThreads(1)  # per-image work is small: OpenCV's thread pool only adds overhead here
+    rig = load_rig(args.cameras)
+    topics = _image_topics(args.topic, rig.camera_names)
+    check_writable([args.output])  # before reading the bag
+    started = time.perf_counter()
+    seen: dict[str, int] = {}
+    if args.debug_dir is not None:
+        args.debug_dir.mkdir(parents=True, exist_ok=True)
+
+    expected = count_images(args.bag, topics)
+    show_progress = not args.quiet and expected > 0
+
+    def inspect(frame: ImageFrame, blobs: Blobs | None, detection: WandDetection | None, reason: str | None) -> None:
+        count = seen[frame.camera] = seen.get(frame.camera, 0) + 1
+        total = sum(seen.values())
+        if show_progress and (total % 100 == 0 or total == expected):
+            done = min(total / expected, 1.0)
+            rate = total / max(time.perf_counter() - started, 1e-9)
+            bar = "#" * round(30 * done) + "-" * (30 - round(30 * done))
+            end = "\n" if total >= expected else ""
+            print(f"\rdetect [{bar}] {total}/{expected} images, {rate:.0f}/s", end=end, file=sys.stderr, flush=True)
+        if args.debug_dir is not None and (count - 1) % max(args.debug_every, 1) == 0:
+            from wand_calib_ros.detection.overlay import draw_overlay
+
+            picture = draw_overlay(frame.image, frame.encoding, blobs, detection, reason)
+            cv2.imwrite(str(args.debug_dir / f"{frame.camera}_{frame.stamp_ns}.png"), picture)
+
+    observations, stats, ambiguous = detect_recording(
+        read_image_frames(args.bag, topics), rig, tolerance_ns=int(args.sync_tolerance_ms * 1e6), inspect=inspect
+    )
+    if ambiguous and len(rig.cameras) >= 2:
+        observations = _settle_across_cameras(rig, observations, ambiguous, stats)
+    args.output.parent.mkdir(parents=True, exist_ok=True)
+    write_observations(observations, args.output)
+    print(f"detected the wand in {args.bag} -> {args.output} ({time.perf_counter() - started:.1f} s)")
+    for name, counts in stats.items():
+        reasons = ", ".join(f"{reason} {n}" for reason, n in sorted(counts.rejected.items())) or "none"
+        print(f"  {name}: {counts.images} images, {counts.detected} with the wand; rejected: {reasons}")
+    return 0
+
+
+def _settle_across_cameras(
+    rig: RigSpec,
+    observations: WandObservations,
+    ambiguous: list[tuple[int, str, NDArray[np.float64], float]],
+    stats: dict[str, CameraStats],
+) -> WandObservations:
+    """Label views that neither their image nor time settled, with a calibration of the settled ones."""
+    from wand_calib_ros.detection.consistency import label_across_cameras
+
+    try:
+        result = calibrate(rig, observations)
+    except WandCalibError as error:
+        log.info("no calibration to settle %d ambiguous views across cameras: %s", len(ambiguous), error)
+        return observations
+    observations, settled = label_across_cameras(observations, ambiguous, result, rig.wand)
+    for camera in settled:
+        stats[camera].rejected["ambiguous"] -= 1
+        stats[camera].detected += 1
+    log.info("%d of %d ambiguous views settled by the other cameras", len(settled), len(ambiguous))
+    return observations

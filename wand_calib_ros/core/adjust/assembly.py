@@ -1,0 +1,202 @@
+"""The calibration result from the final adjustment: per camera figures and standard deviations, the
+plain-language warnings on what the data leave weak, the wand-length statistics, the timing summary."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wand_calib_ros.core.adjust.bundle_adjustment import (
+    CAMERA_PARAM_NAMES,
+    BundleProblem,
+    BundleResult,
+    BundleState,
+    residuals,
+)
+from wand_calib_ros.core.adjust.gating import VIEW_GATE_SIGMAS
+from wand_calib_ros.core.adjust.model_order import FixedParameters, free_mask
+from wand_calib_ros.core.adjust.placements import triangulate_placements
+from wand_calib_ros.core.adjust.timing import (
+    ClockModel,
+)
+from wand_calib_ros.core.model.camera_model import (
+    CameraModel,
+    angle_of_radius,
+    max_image_radius_mm,
+    radial_basis,
+)
+from wand_calib_ros.core.model.result import CalibrationResult, CameraCalibration, LensTrial, TimingSummary
+from wand_calib_ros.core.model.rig import CameraSpec, RigSpec
+
+FloatArray = NDArray[np.float64]
+
+#: Image coverage: grid cells per side and the fraction that should see the wand.
+COVERAGE_GRID = 8
+
+
+MIN_COVERAGE = 0.25
+#: Uncertainty of r(theta) at the widest observed angle (px) above which a camera gets a warning.
+WEAK_CURVE_PX = 0.5
+#: A camera whose observations stop below this fraction of the angle its image reaches gets a warning.
+COVERAGE_FRACTION = 0.8
+
+
+def radial_std_px(model: CameraModel, covariance: FloatArray, theta: float) -> float:
+    """Standard deviation (px) of the image radius m*r(theta) from the (5, 5) covariance of k1..k5."""
+    gradient = float(np.max(model.m)) * radial_basis(model, theta)
+    return float(np.sqrt(max(float(gradient @ covariance @ gradient), 0.0)))
+
+
+def coverage_warnings(
+    spec: CameraSpec, model: CameraModel, max_theta: float, result: BundleResult, camera: int, uv: FloatArray
+) -> list[str]:
+    """Plain-language warnings about what one camera's data leave weak.
+
+    Args:
+        uv: (P, 3, 2) the camera's points in the adjustment (NaN where not seen).
+    """
+    out = []
+    points = uv.reshape(-1, 2)
+    points = points[np.all(np.isfinite(points), axis=1)]
+    width, height = spec.image_size
+    cell = np.clip((points / [width, height] * COVERAGE_GRID).astype(np.int64), 0, COVERAGE_GRID - 1)
+    covered = np.unique(cell[:, 0] * COVERAGE_GRID + cell[:, 1]).size / COVERAGE_GRID**2
+    if covered < MIN_COVERAGE:
+        out.append(
+            f"{spec.name}: the wand covered only {100 * covered:.0f} % of the image ({COVERAGE_GRID}x{COVERAGE_GRID} "
+            "cells); wave it through the rest of the view"
+        )
+    if spec.holds_intrinsics:  # given and held: nothing about its lens is extrapolated from these views
+        return out
+    band = radial_std_px(model, result.camera_block(camera, slice(0, 5)), max_theta)
+    if band > WEAK_CURVE_PX:
+        out.append(
+            f"{spec.name}: the distortion curve is uncertain by {band:.1f} px at {np.degrees(max_theta):.0f} deg, "
+            "the widest angle observed; add wand placements near the image border"
+        )
+    image_theta = float(angle_of_radius(model, np.array(max_image_radius_mm(model))))
+    reach = min(spec.max_view_angle, image_theta if np.isfinite(image_theta) else spec.max_view_angle)
+    if max_theta < COVERAGE_FRACTION * reach:
+        out.append(
+            f"{spec.name}: the wand was seen only up to {np.degrees(max_theta):.0f} deg off-axis while the image "
+            f"reaches {np.degrees(reach):.0f} deg; the distortion beyond is extrapolated (wave the wand near the "
+            "image corners)"
+        )
+    return out
+
+
+def max_off_axis(result: BundleResult, problem: BundleProblem) -> FloatArray:
+    """(C,) largest off-axis angle (rad) each camera observes at the solution (0 for a camera without views)."""
+    state = result.state
+    points = state.points(problem.wand)[problem.placement, problem.point]
+    rotations = np.stack([pose.rotation for pose in state.poses])[problem.camera]
+    translations = np.stack([pose.translation for pose in state.poses])[problem.camera]
+    in_cam = np.einsum("mij,mj->mi", rotations, points) + translations
+    angles = np.arctan2(np.hypot(in_cam[:, 0], in_cam[:, 1]), in_cam[:, 2])
+    out = np.zeros(problem.n_cameras)
+    np.maximum.at(out, problem.camera, angles)
+    return out
+
+
+def assemble(
+    rig: RigSpec,
+    uv: FloatArray,
+    problem: BundleProblem,
+    result: BundleResult,
+    reference: int,
+    fixed: FixedParameters,
+    initial_projections: tuple[str, ...],
+    lens_trials: tuple[LensTrial, ...],
+    rejected: int,
+    rejected_views: NDArray[np.int64],
+    warnings: list[str],
+    clocks: ClockModel,
+) -> CalibrationResult:
+    state = result.state
+    max_theta = max_off_axis(result, problem)
+    free = free_mask(problem.n_cameras, reference, fixed)
+    n_cameras = problem.n_cameras
+    counts = np.bincount(problem.camera, minlength=n_cameras)
+    squares = np.bincount(problem.camera, np.sum(result.residuals**2, axis=1), minlength=n_cameras)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rms_px = np.sqrt(squares / (2 * counts))  # over u and v; NaN for a camera without points
+    blocks = np.unique(problem.placement * n_cameras + problem.camera)  # (placement, camera) pairs seen
+    view_counts = np.bincount(blocks % n_cameras, minlength=n_cameras)
+    cameras = []
+    for c, spec in enumerate(rig.cameras):
+        std = {name: float(result.camera_std[c, i]) for i, name in enumerate(CAMERA_PARAM_NAMES) if free[c, i]}
+        warnings.extend(coverage_warnings(spec, state.models[c], max_theta[c], result, c, uv[:, c]))
+        views = int(view_counts[c])
+        if rejected_views[c]:
+            warnings.append(
+                f"{spec.name}: {rejected_views[c]} of {views + rejected_views[c]} views rejected as outliers "
+                f"(a point more than {VIEW_GATE_SIGMAS:g} sigma = {VIEW_GATE_SIGMAS * result.sigma:.1f} px off)"
+            )
+        cameras.append(
+            CameraCalibration(
+                spec.name,
+                state.models[c],
+                state.poses[c],
+                float(rms_px[c]),
+                int(counts[c]),
+                std,
+                float(np.degrees(max_theta[c])),
+                initial_projections[c],
+                tuple(CAMERA_PARAM_NAMES[i] for i in sorted(fixed.per_camera[c])),
+                views,
+                int(rejected_views[c]),
+                result.camera_block(c, slice(0, 5)).copy(),
+                float(state.camera_timing[c, 0]),
+                float(state.camera_timing[c, 1]),
+                "estimated" if spec.intrinsics is None else "given" if spec.intrinsics_fixed else "given_start",
+            )
+        )
+    points = triangulate_placements(state.models, state.poses, synchronised_pixels(state, problem, uv))
+    lengths = np.linalg.norm(points[:, -1] - points[:, 0], axis=-1)
+    lengths = lengths[np.isfinite(lengths)]
+    order = [reference] + [c for c in range(len(cameras)) if c != reference]
+    return CalibrationResult(
+        reference_camera=rig.cameras[reference].name,
+        cameras=tuple(cameras[c] for c in order),
+        wand=rig.wand,
+        wand_length_rms_mm=float(np.sqrt(np.mean((rig.wand.L - lengths) ** 2))),
+        wand_length_mean_mm=float(np.mean(lengths)),
+        wand_length_std_mm=float(np.std(lengths)),
+        sigma_px=result.sigma,
+        dof=result.dof,
+        placements_used=problem.n_placements,
+        placements_rejected=rejected,
+        iterations=result.iterations,
+        lens_trials=lens_trials,
+        warnings=tuple(warnings),
+        timing=timing_summary(rig, clocks, fixed),
+    )
+
+
+def timing_summary(rig: RigSpec, clocks: ClockModel, fixed: FixedParameters) -> TimingSummary | None:
+    """How the result treated the cameras' timing (None without timing input)."""
+    line = clocks.line
+    if line is None:
+        return None
+    return TimingSummary(
+        line.unit,
+        "estimated" if fixed.timing[:, 0].any() else "fixed",
+        {spec.name: "estimated" if fixed.timing[c, 1] else "fixed" for c, spec in enumerate(rig.cameras)},
+        line.frame_period,
+        clocks.notes,
+    )
+
+
+def synchronised_pixels(state: BundleState, problem: BundleProblem, uv: FloatArray) -> FloatArray:
+    """(P, C, 3, 2) the observations moved to their placement's time (the modelled motion removed).
+
+    Triangulating these gives the wand as one instant saw it; without timing they are ``uv``.
+    """
+    if problem.timing is None:
+        return uv
+    shift = residuals(state, problem) - residuals(state, replace(problem, timing=None))
+    out = np.array(uv, dtype=np.float64)
+    out[problem.placement, problem.camera, problem.point] -= shift
+    return out

@@ -1,0 +1,158 @@
+"""Outliers: the paper's |AC| gate on placements, the robust (Huber) adjustment, the per-view gate,
+and the re-admission of placements set aside once the cameras are solved."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wand_calib_ros.core.adjust.bundle_adjustment import (
+    DECIDING_SETTLED,
+    BundleProblem,
+    BundleResult,
+    BundleState,
+    PlacementTiming,
+    bundle_adjust,
+    residuals,
+)
+from wand_calib_ros.core.adjust.placements import fit_placements
+from wand_calib_ros.core.model.rig import RigSpec, WandSpec
+
+#: Fewest views a camera must keep in the final bundle adjustment (its 11 parameters need several).
+MIN_CAMERA_VIEWS = 5
+
+FloatArray = NDArray[np.float64]
+log = logging.getLogger(__name__)
+
+#: The paper's gate: placements whose |AC| is off by more than this fraction of L are dropped.
+GATE_FRACTION = 0.01
+#: ... unless that is within this many robust standard deviations of the |AC| errors (high noise).
+GATE_SIGMAS = 5.0
+#: Floor of the robust noise estimate, px (detections are never better than this).
+MIN_SIGMA_PX = 0.02
+#: Huber threshold of the robust pass, in robust sigmas.
+HUBER_SIGMAS = 2.0
+#: A camera view with a point further than this many robust sigmas from its reprojection is an outlier.
+VIEW_GATE_SIGMAS = 5.0
+
+
+def ac_length_errors(points: FloatArray, wand: WandSpec) -> FloatArray:
+    """(P,) L - |A^r C^r| in mm (first marker to last)."""
+    return wand.L - np.linalg.norm(points[:, -1] - points[:, 0], axis=-1)
+
+
+def gate_threshold(errors: FloatArray, wand: WandSpec) -> float:
+    """The |AC| gate in mm: the paper's 1 % of L, widened to 5 robust sigmas when noise is high."""
+    finite = errors[np.isfinite(errors)]
+    mad_sigma = 1.4826 * float(np.median(np.abs(finite - np.median(finite)))) if finite.size else 0.0
+    return max(GATE_FRACTION * wand.L, GATE_SIGMAS * mad_sigma)
+
+
+def gate_placements(rig: RigSpec, uv: FloatArray, errors: FloatArray, threshold: float) -> NDArray[np.bool_]:
+    """(P,) placements the |AC| gate keeps.
+
+    A camera whose chained start is off (its pair saw a shared camera's intrinsics differently)
+    makes every placement it sees reconstruct too long or too short by about the same amount.
+    Should the gate leave it fewer than half its views, its placements are gated around their
+    own median error instead, so the bundle adjustment can correct the camera rather than drop it.
+    """
+    keep = np.isfinite(errors) & (np.abs(errors) <= threshold)
+    seen = np.all(np.isfinite(uv), axis=(2, 3))
+    for c, spec in enumerate(rig.cameras):
+        mine = seen[:, c] & np.isfinite(errors)
+        if (keep & mine).sum() >= max(MIN_CAMERA_VIEWS, mine.sum() // 2) or not mine.any():
+            continue
+        centre = float(np.median(errors[mine]))
+        local = gate_threshold(errors[mine] - centre, rig.wand)
+        rescued = mine & ~keep & (np.abs(errors - centre) <= local)
+        log.info(
+            "%s: its placements reconstruct %.1f mm off the wand length: %d gated around that instead",
+            spec.name,
+            -centre,
+            rescued.sum(),
+        )
+        keep |= rescued
+    return keep
+
+
+def robust_sigma(residuals: FloatArray) -> float:
+    """Per-coordinate noise from the median 2D residual norm (Rayleigh: median = 1.1774 sigma).
+
+    Never below MIN_SIGMA_PX, so noise-free data do not make every view an outlier.
+    """
+    return max(float(np.median(np.linalg.norm(residuals, axis=1)) / np.sqrt(2 * np.log(2))), MIN_SIGMA_PX)
+
+
+def gate_views(uv: FloatArray, residuals: FloatArray, threshold_px: float) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """Remove every camera view with a point whose residual exceeds ``threshold_px``.
+
+    Args:
+        uv: (P, C, 3, 2) pixels of the adjusted placements (NaN where not seen).
+        residuals: (M, 2) residuals of ``BundleProblem.from_dense(wand, uv)``.
+        threshold_px: largest 2D residual a view may have.
+
+    Returns:
+        The pixels with rejected views set to NaN, and the (P, C) mask of rejected views.
+    """
+    placement, camera, _ = np.nonzero(np.all(np.isfinite(uv), axis=-1))
+    worst = np.zeros(uv.shape[:2])
+    np.maximum.at(worst, (placement, camera), np.linalg.norm(residuals, axis=1))
+    rejected = worst > threshold_px
+    return np.where(rejected[..., None, None], np.nan, uv), rejected
+
+
+def enough_views(uv: FloatArray) -> NDArray[np.bool_]:
+    """(P,) placements seen completely by at least two cameras."""
+    return np.all(np.isfinite(uv), axis=(2, 3)).sum(axis=1) >= 2
+
+
+def subset_state(state: BundleState, mask: NDArray[np.bool_]) -> BundleState:
+    return BundleState(state.models, state.poses, state.wand_a[mask], state.wand_direction[mask], state.timing)
+
+
+def robust_adjustment(
+    state: BundleState, problem: BundleProblem, free: NDArray[np.bool_], *, scale_from: BundleState | None = None
+) -> tuple[BundleResult, float]:
+    """Huber adjustment with the loss scale from the initial state's robust noise estimate.
+
+    Args:
+        scale_from: the state whose residuals set the loss scale instead of ``state``'s (a warm
+            start that solves the same robust problem as an adjustment from ``scale_from``).
+
+    Returns:
+        The result and the robust estimate of the pixel noise: the residuals' robust
+        scale corrected for the degrees of freedom the fit absorbs (sqrt(m / (m - p))).
+    """
+    sigma = robust_sigma(residuals(state if scale_from is None else scale_from, problem))
+    # Only outliers are decided here: a loose tolerance is enough, the least-squares passes finish the job.
+    result = bundle_adjust(
+        state, problem, free, loss_scale=HUBER_SIGMAS * sigma, tolerance=1e-5, settled=DECIDING_SETTLED
+    )
+    m, p = result.dof
+    return result, robust_sigma(result.residuals) * np.sqrt(m / max(m - p, 1))
+
+
+def readmit(
+    rig: RigSpec, uv: FloatArray, result: BundleResult, timing: PlacementTiming | None
+) -> tuple[NDArray[np.bool_], FloatArray, BundleState]:
+    """Placements outside the adjustment that fit the solved cameras once their outlying views are removed.
+
+    Each placement is triangulated with the solved cameras, its five wand
+    parameters are fitted robustly (Huber) with the cameras held fixed, views
+    with a point beyond VIEW_GATE_SIGMAS sigma are dropped, and the placement
+    comes in if two complete views remain.
+
+    Returns:
+        (S,) mask over the given placements, the admitted ones' clean pixels
+        (A, C, 3, 2) and their fitted wand parameters.
+    """
+    admitted = np.zeros(uv.shape[0], dtype=bool)
+    sigma = max(result.sigma, MIN_SIGMA_PX)
+    # only deciding which views fit: a loose tolerance; the final adjustment refines everything
+    index, fitted = fit_placements(rig.wand, result.state, uv, timing, loss_scale=HUBER_SIGMAS * sigma)
+    clean, _ = gate_views(uv[index], fitted.residuals, VIEW_GATE_SIGMAS * sigma)
+    ok = enough_views(clean)
+    admitted[index[ok]] = True
+    return admitted, clean[ok], subset_state(fitted.state, ok)

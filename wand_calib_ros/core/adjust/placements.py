@@ -1,0 +1,116 @@
+"""The wand's placements with the cameras known: linear triangulation and a fit of each placement.
+
+Both work on dense (P, C, K, 2) pixels (NaN where a camera did not see a point) and
+return the wand in the reference frame (mm).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wand_calib_ros.core.adjust.bundle_adjustment import (
+    N_CAMERA_PARAMS,
+    BundleProblem,
+    BundleResult,
+    BundleState,
+    PlacementTiming,
+    bundle_adjust,
+)
+from wand_calib_ros.core.model.camera_model import CameraModel, unproject
+from wand_calib_ros.core.model.geometry import Pose, triangulate_rays, wand_directions
+from wand_calib_ros.core.model.rig import WandSpec
+
+FloatArray = NDArray[np.float64]
+
+
+def triangulate_placements(models: tuple[CameraModel, ...], poses: tuple[Pose, ...], uv: FloatArray) -> FloatArray:
+    """Linear n-view triangulation of every wand point.
+
+    Args:
+        models, poses: per camera intrinsics and pose (reference frame).
+        uv: (P, C, K, 2) pixels of the K markers, NaN where not seen.
+
+    Returns:
+        (P, K, 3) the markers in the reference frame (NaN where fewer than two views).
+    """
+    n_placements, n_cameras, n_markers = uv.shape[:3]
+    point, rays, centres = [], [], []
+    for c in range(n_cameras):  # only the pixels seen: a camera sees a fraction of the placements
+        placement, marker = np.nonzero(np.isfinite(uv[:, c, :, 0]) & np.isfinite(uv[:, c, :, 1]))
+        rotation = poses[c].rotation
+        point.append(placement * n_markers + marker)
+        rays.append(unproject(models[c], uv[placement, c, marker]) @ rotation)  # R^T m
+        centres.append(np.broadcast_to(poses[c].center, (placement.size, 3)))
+    points = triangulate_rays(np.concatenate(point), n_placements * n_markers, np.concatenate(rays),
+                              np.concatenate(centres))  # fmt: skip
+    return points.reshape(n_placements, uv.shape[2], 3)
+
+
+def unprojectable(
+    models: tuple[CameraModel, ...], poses: tuple[Pose, ...], uv: FloatArray, points: FloatArray
+) -> NDArray[np.bool_]:
+    """(P,) placements some camera sees although its model gives the placed markers no image (a pinhole
+    camera with a marker on or behind its image plane: the start is wrong there, not the view).
+
+    Args:
+        uv: (P, C, K, 2) pixels (NaN where not seen); ``points`` (P, K, 3) the markers, reference frame.
+    """
+    out = np.zeros(uv.shape[0], dtype=bool)
+    for c, (model, pose) in enumerate(zip(models, poses, strict=True)):
+        if not model.is_pinhole:
+            continue  # the fisheye model images every direction
+        seen = np.any(np.isfinite(uv[:, c, :, 0]), axis=1)
+        depth = pose.apply(points[seen])[..., 2]  # (S, K)
+        out[np.flatnonzero(seen)[np.any(~(depth > 0), axis=1)]] = True
+    return out
+
+
+def fit_placements(
+    wand: WandSpec,
+    cameras: BundleState,
+    uv: FloatArray,
+    timing: PlacementTiming | None = None,
+    *,
+    loss_scale: float | None = None,
+    max_iterations: int = 10,
+    tolerance: float = 1e-5,
+) -> tuple[NDArray[np.int64], BundleResult]:
+    """Each placement's wand (A and direction) fitted to its views with the cameras held fixed.
+
+    Placements are triangulated first; those seen completely by two cameras with a usable
+    triangulation are fitted (independent 5-parameter problems).
+
+    Args:
+        wand: the wand.
+        cameras: the cameras' models, poses and timing (its placements are ignored).
+        uv: (P, C, 3, 2) pixels.
+        timing: when each camera saw each placement and how the wand moved (None: simultaneous).
+        loss_scale: Huber threshold (px) of the fit, or None for least squares.
+        max_iterations, tolerance: of the Levenberg-Marquardt.
+
+    Returns:
+        The indices of the fitted placements and the fit (its state holds only them).
+    """
+    models, poses = cameras.models, cameras.poses
+    points = triangulate_placements(models, poses, uv)
+    usable = np.all(np.isfinite(points), axis=(1, 2)) & (np.linalg.norm(points[:, -1] - points[:, 0], axis=1) > 0)
+    usable &= np.all(np.isfinite(uv), axis=(2, 3)).sum(axis=1) >= 2
+    usable[usable] &= ~unprojectable(models, poses, uv[usable], points[usable])
+    index = np.flatnonzero(usable)
+    start = BundleState(
+        models, poses, points[index, 0], wand_directions(points[index, 0], points[index, -1]), cameras.timing
+    )
+    problem = BundleProblem.from_dense(wand, uv[index], None if timing is None else timing.subset(index))
+    if index.size == 0:
+        return index, BundleResult(start, np.zeros((0, 2)), 0, True, np.zeros((len(models), N_CAMERA_PARAMS)),
+                                   np.zeros((0, 0)), 0.0, (0, 0))  # fmt: skip
+    fitted = bundle_adjust(
+        start,
+        problem,
+        np.zeros((len(models), N_CAMERA_PARAMS), dtype=bool),
+        loss_scale=loss_scale,
+        max_iterations=max_iterations,
+        tolerance=tolerance,
+    )
+    return index, fitted
