@@ -250,3 +250,44 @@ def timed_calibration(
 
 def rms(values: list[float]) -> float:
     return float(np.sqrt(np.mean(np.square(values))))
+
+
+#: The floor tool of the floor tests and benchmark: an L-frame of three markers, 500 x 300 mm.
+L_FRAME = np.array([[0.0, 0.0, 0.0], [500.0, 0.0, 0.0], [0.0, 300.0, 0.0]])
+#: Placements of the rigs the floor is measured on (ring6: six mixed cameras on a 2.5 m ring; mocap16).
+FLOOR_PLACEMENTS = {"ring6": 2000, "mocap16": 10_000}
+
+
+@cache
+def floor_rig(name: str, seed: int) -> tuple[Scenario, CalibrationResult]:
+    """A floor rig calibrated at 1 px, the truth's reference camera kept (cached: treat as read-only)."""
+    scenario = SCENARIOS[name](n_placements=FLOOR_PLACEMENTS[name])
+    data = simulate(scenario, 1.0, np.random.default_rng(seed))
+    reference = scenario.cameras[0].spec.name  # the truth's frame
+    return scenario, calibrate(scenario.rig, data.observations, CalibrationOptions(reference_camera=reference))
+
+
+def floor_errors(name: str, *, tool: bool, seeds: range) -> dict[str, float]:
+    """RMS over seeds of :func:`~wand_calib_ros.sim.floor.world_errors`: two lays of 15 still frames, or the
+    L-frame seen in 15 frames with its points in any order per view, at 1 px."""
+    from wand_calib_ros.core.after.world_frame import floor_of
+    from wand_calib_ros.sim.floor import floor_lays, floor_tool, shuffled, world_errors
+
+    rows = []
+    for seed in seeds:
+        scenario, result = floor_rig(name, seed)
+        rng = np.random.default_rng([seed, 1])
+        truth = floor_tool(scenario, L_FRAME, 1.0, rng) if tool else floor_lays(scenario, 1.0, rng)
+        names = [c.spec.name for c in scenario.cameras]
+        assert result.camera_covariance is not None
+        floor = floor_of(
+            tuple(result.camera(n).model for n in names),
+            tuple(result.camera(n).pose for n in names),
+            shuffled(truth, rng) if tool else truth.observations.uv,
+            result.camera_covariance,
+            result.sigma_px,
+            positions_mm=scenario.wand.positions_mm,
+            tool_mm=L_FRAME if tool else None,
+        )
+        rows.append(world_errors(scenario, floor.world, floor.models, floor.poses, truth))
+    return {key: rms([row[key] for row in rows]) for key in rows[0]}

@@ -333,6 +333,16 @@ CASES: dict[str, tuple[Spoil, str]] = {
     ),
     "duplicate camera name": (_cameras(_yaml_replace("name: cam1", "name: cam0")), "cam0"),
     "one camera only": (_cameras(lambda t: t[: t.index("- name: cam1")]), "unknown camera 'cam1'; the rig has cam0"),
+    "floor tool on one line": (
+        _cameras(lambda t: t + "floor: {points_mm: [[0, 0, 0], [500, 0, 0], [250, 0, 0]]}\n"),
+        "floor points_mm lie on one line",
+    ),
+    "floor tool of more markers than the wand": (
+        _cameras(lambda t: t + "floor: {points_mm: [[0, 0, 0], [500, 0, 0], [0, 300, 0], [500, 300, 0]]}\n"),
+        "floor points_mm has 4 markers",
+    ),
+    "floor tool not points": (_cameras(lambda t: t + "floor: {points_mm: [0, 500]}\n"), "floor points_mm must be"),
+    "floor tool unknown key": (_cameras(lambda t: t + "floor: {points: [[0, 0, 0]]}\n"), "'floor' must be a mapping"),
     # observations CSV
     "observations missing": (lambda f: _calibrate(f, observations="none.csv"), "none.csv: cannot read: No such file"),
     "observations binary": (_bytes("observations.csv", PNG), "bad-observations.csv: not UTF-8 text"),

@@ -190,3 +190,40 @@ def test_a_two_led_wand_is_the_images_two_blobs_and_a_third_blob_rejects_the_vie
     assert identify_wand(three, options).reason == "competing_triples"
     close = _blobs([[100.0, 200.0], [101.0, 201.0]])
     assert identify_wand(close, options).reason == "not_collinear"
+
+
+def test_an_l_frame_is_the_floor_tools_blobs_as_found_and_the_calibrated_cameras_label_them() -> None:
+    from dataclasses import replace
+
+    from wand_calib_ros.core.after.world_frame import floor_of
+    from wand_calib_ros.detection.blobs import BlobOptions
+    from wand_calib_ros.detection.recording import detect_image
+    from wand_calib_ros.sim.floor import floor_tool
+    from wand_calib_ros.sim.render import render_image
+    from wand_calib_ros.sim.scenarios import SCENARIOS
+
+    scenario = SCENARIOS["ring6"](n_placements=10)
+    l_frame = np.array([[0.0, 0.0, 0.0], [500.0, 0.0, 0.0], [0.0, 300.0, 0.0]])
+    rig = replace(scenario.rig, floor_tool=tuple(tuple(p) for p in l_frame.tolist()))
+    rng = np.random.default_rng(5)
+    truth = floor_tool(scenario, l_frame, 0.0, rng)
+    detected = np.full_like(truth.observations.uv, np.nan)
+    for f, frame in enumerate(truth.observations.uv):
+        for c, camera in enumerate(scenario.cameras):
+            if not np.all(np.isfinite(frame[c])):
+                continue
+            image = render_image(camera.spec.image_size, frame[c], RenderOptions(), rng)
+            _, found = detect_image(image, "mono8", BlobOptions(), WandOptions.for_rig(rig), None)
+            assert found.tool and found.points is not None
+            nearest = np.linalg.norm(found.points[:, None] - frame[c][None], axis=-1).min(axis=1)
+            assert np.all(nearest < 0.3)  # the three blobs, in the order found
+            detected[f, c] = found.points
+            _, wand_only = detect_image(image, "mono8", BlobOptions(), WandOptions.for_wand(rig.wand), None)
+            assert wand_only.points is None  # no tool in the rig: three blobs that are no wand are rejected
+    assert np.isfinite(detected[..., 0]).sum() >= 3 * 15 * 3  # the three fisheyes see it in every frame
+    models, poses = tuple(c.model for c in scenario.cameras), tuple(c.pose for c in scenario.cameras)
+    exact = np.eye(len(models) * 20) * 1e-12
+    world = floor_of(models, poses, detected, exact, 0.1, positions_mm=rig.wand.positions_mm, tool_mm=l_frame).world
+    estimated, true = world.world_from_reference, truth.world_from_reference
+    assert np.linalg.norm(estimated.inverse().translation - true.inverse().translation) < 1.0
+    assert np.degrees(np.arccos(np.clip(estimated.rotation[2] @ true.rotation[2], -1.0, 1.0))) < 0.1

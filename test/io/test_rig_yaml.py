@@ -168,3 +168,14 @@ def test_known_intrinsics_that_cannot_be_used_are_named(tmp_path: Path, intrinsi
     with pytest.raises(FormatError, match=re.escape(message)) as raised:
         load_rig(tmp_path / "cameras.yaml")
     assert "cameras.yaml" in str(raised.value) or "wrong_size" in str(raised.value)
+
+
+def test_a_floor_tool_round_trips_and_is_the_floor_key(tmp_path: Path) -> None:
+    rig = replace(mixed_pair_scenario().rig, floor_tool=((0.0, 0.0, 0.0), (500.0, 0.0, 0.0), (0.0, 300.0, 0.0)))
+    save_rig(rig, tmp_path / "rig.yaml")
+    document = yaml.safe_load((tmp_path / "rig.yaml").read_text())
+    assert document["floor"] == {"points_mm": [[0.0, 0.0, 0.0], [500.0, 0.0, 0.0], [0.0, 300.0, 0.0]]}
+    assert load_rig(tmp_path / "rig.yaml") == rig
+    path = tmp_path / "cameras.yaml"
+    path.write_text(GOOD + "floor: {points_mm: [[0, 0, 0], [500, 0, 0], [0, 300, 0]]}\n")
+    assert load_rig(path).floor_tool == ((0.0, 0.0, 0.0), (500.0, 0.0, 0.0), (0.0, 300.0, 0.0))

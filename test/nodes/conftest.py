@@ -64,11 +64,17 @@ class PointsRig:
 
 
 def points_rig(
-    ros: Ros, scenario: Any, tmp_path: Any, collector_parameters: dict[str, Any], *, watch: bool = False
+    ros: Ros,
+    scenario: Any,
+    tmp_path: Any,
+    collector_parameters: dict[str, Any],
+    *,
+    watch: bool = False,
+    rig: Any = None,
 ) -> PointsRig:
     """A collector with ``input: points`` (plus ``collector_parameters``) and a separate calibrator on
-    ``scenario``'s rig, output in ``tmp_path/out``, coverage not required; ``watch``: the calibrator
-    hands its results to the collector (the bump watch)."""
+    ``scenario``'s rig (or ``rig``), output in ``tmp_path/out``, coverage not required; ``watch``: the
+    calibrator hands its results to the collector (the bump watch)."""
     import numpy as np
     from builtin_interfaces.msg import Time
     from geometry_msgs.msg import PolygonStamped
@@ -80,7 +86,7 @@ def points_rig(
     from wand_calib_ros.nodes.collector import POINTS_QOS, CollectorNode
     from wand_calib_ros.nodes.messages import points_message
 
-    save_rig(scenario.rig, tmp_path / "cameras.yaml")
+    save_rig(scenario.rig if rig is None else rig, tmp_path / "cameras.yaml")
     common = [
         Parameter("cameras_file", value=str(tmp_path / "cameras.yaml")),
         Parameter("output_dir", value=str(tmp_path / "out")),

@@ -162,9 +162,7 @@ def calibrate(
                 log.info("placing the cameras one by one failed too: %s", placed_error)
                 raise error from None
     if floor is not None:
-        models = tuple(result.camera(n).model for n in names)
-        poses = tuple(result.camera(n).pose for n in names)
-        result = replace(result, world=floor_of(models, poses, floor.uv, origin=options.floor_origin))
+        result = _with_floor(rig, result, floor, options.floor_origin)
     warnings = [*result.warnings, *rate_warnings(obs, timing.line), *offset_warnings(result)]
     result = replace(result, quality=judge(result, noise_wand_error(result, names, uv)))
     if result.timing is not None and result.timing.time_offsets == "estimated":
@@ -273,6 +271,26 @@ def _require_whole_views(names: tuple[str, ...], complete: NDArray[np.bool_]) ->
             f"camera(s) {', '.join(alone)} see the whole wand ({counts}) but never in a frame another camera "
             "sees it in too: wave it where they overlap"
         )
+
+
+def _with_floor(rig: RigSpec, result: CalibrationResult, floor: WandObservations, origin: str) -> CalibrationResult:
+    """The result with the world frame of the floor frames, its cameras adjusted with the floor."""
+    names = rig.camera_names
+    if result.camera_covariance is None:  # a result assembled without its adjustment's covariance
+        raise CalibrationFailedError("the floor needs the calibration's covariance, which this result lacks")
+    floor_fit = floor_of(
+        tuple(result.camera(n).model for n in names),
+        tuple(result.camera(n).pose for n in names),
+        floor.uv,
+        result.camera_covariance,
+        result.sigma_px,
+        positions_mm=rig.wand.positions_mm,
+        origin=origin,
+        tool_mm=None if rig.floor_tool is None else np.asarray(rig.floor_tool, dtype=float),
+    )
+    moved = {n: (floor_fit.models[c], floor_fit.poses[c]) for c, n in enumerate(names)}
+    cameras = tuple(replace(c, model=moved[c.name][0], pose=moved[c.name][1]) for c in result.cameras)
+    return replace(result, cameras=cameras, world=floor_fit.world)
 
 
 def _split_floor(

@@ -134,7 +134,7 @@ class CameraStream:
         if reason is not None or detection is None:
             self.stats.rejected[reason or "no_wand"] += 1
             return [Labelled(stamp_ns, None)]
-        if self.wand_options.n_points != 3:  # two: matched up by the calibration; more: ordered by their spacing
+        if self.wand_options.n_points != 3 or detection.tool:  # two or a tool: the calibration labels them
             self.stats.detected += 1
             return [*self.flush(), Labelled(stamp_ns, detection.points)]
         self._pending.append(detection)
@@ -184,7 +184,7 @@ def detect_recording(
         inspect: called for every image with its blobs, detection and rejection reason
             (progress reports, debug overlays).
     """
-    wand_options = WandOptions.for_wand(rig.wand)
+    wand_options = WandOptions.for_rig(rig)
     streams = {c.name: CameraStream(c, wand_options, blob_options, max_hold_ns=None) for c in rig.cameras}
     outcomes: list[tuple[str, Labelled]] = []
     for frame in sorted(frames, key=lambda f: f.stamp_ns):

@@ -13,14 +13,14 @@ and a tracker or another camera has to decide (:func:`resolve_with_previous`).
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
 from wand_calib_ros.core.model.bearings import BearingTable
 from wand_calib_ros.core.model.camera_model import CameraModel, unproject
-from wand_calib_ros.core.model.rig import WandSpec
+from wand_calib_ros.core.model.rig import RigSpec, WandSpec
 from wand_calib_ros.detection.blobs import Blobs
 from wand_calib_ros.detection.errors import UnsupportedWandError
 
@@ -47,6 +47,9 @@ class WandOptions:
             more markers).
         max_pattern_error: largest mean difference between the image's and the wand's normalised
             marker positions once the perspective foreshortening is fitted (four or more markers).
+        tool_markers: a floor tool's markers (0: the rig has none). An image of exactly that many blobs
+            that hold no wand is the tool's view, its blobs as found: the calibration labels them
+            (:mod:`wand_calib_ros.core.after.floor_tool`).
     """
 
     ratio: float = 2.0
@@ -57,6 +60,13 @@ class WandOptions:
     n_points: int = 3
     positions: tuple[float, ...] = ()
     max_pattern_error: float = 0.02
+    tool_markers: int = 0
+
+    @classmethod
+    def for_rig(cls, rig: RigSpec) -> WandOptions:
+        """The settings of a rig's wand (:meth:`for_wand`) and its floor tool."""
+        options = cls.for_wand(rig.wand)
+        return options if rig.floor_tool is None else replace(options, tool_markers=len(rig.floor_tool))
 
     @classmethod
     def for_wand(cls, wand: WandSpec) -> WandOptions:
@@ -89,6 +99,7 @@ class WandDetection:
         reason: None when found, else one of :data:`REASONS`.
         ambiguous: A and C could be swapped (image ratio near 1).
         image_ratio: |AB| / |BC| in the image.
+        tool: the points are a floor tool's markers in the order found (rows beyond them NaN), not the wand's.
     """
 
     points: FloatArray | None
@@ -96,6 +107,7 @@ class WandDetection:
     reason: str | None
     ambiguous: bool = False
     image_ratio: float = float("nan")
+    tool: bool = False
 
 
 def _score(
@@ -139,7 +151,8 @@ def _score(
 def identify_wand(
     blobs: Blobs, options: WandOptions = WandOptions(), model: CameraModel | BearingTable | None = None
 ) -> WandDetection:
-    """The most wand-like collinear triple among the blobs (see the module docstring).
+    """The most wand-like collinear triple among the blobs (see the module docstring), else a floor
+    tool's view when ``options.tool_markers`` says the rig has one and the image holds that many blobs.
 
     Args:
         blobs: the image's blobs.
@@ -147,6 +160,19 @@ def identify_wand(
         model: the camera's (nominal or calibrated) model, or its BearingTable: collinearity is
             then tested on the unit sphere, which keeps fisheye images of the wand straight.
     """
+    found = _find_wand(blobs, options, model)
+    n = blobs.centres.shape[0]
+    if found.points is not None or not options.tool_markers or n != options.tool_markers:
+        return found
+    if blobs.cut(list(range(n))):
+        return WandDetection(None, 0.0, "at_border")
+    points = np.full((max(options.n_points, n), 2), np.nan)
+    points[:n] = blobs.centres
+    return WandDetection(points, 1.0, None, tool=True)
+
+
+def _find_wand(blobs: Blobs, options: WandOptions, model: CameraModel | BearingTable | None) -> WandDetection:
+    """The most wand-like collinear triple among the blobs (see the module docstring)."""
     n = blobs.centres.shape[0]
     if n == 0:
         return WandDetection(None, 0.0, "no_blobs")

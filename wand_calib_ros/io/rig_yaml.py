@@ -240,7 +240,34 @@ def parse_rig(data: Any, path: str | Path = "<rig>") -> RigSpec:
     duplicates = sorted({n for n in names if names.count(n) > 1})
     if duplicates:
         raise FormatError(path, f"camera names must be unique; repeated: {', '.join(duplicates)}")
-    return RigSpec(wand, tuple(cameras))
+    return RigSpec(wand, tuple(cameras), _floor_tool(path, data.get("floor"), wand))
+
+
+def _floor_tool(path: Path, data: Any, wand: WandSpec) -> tuple[tuple[float, float, float], ...] | None:
+    """``floor: {points_mm: [[x, y, z], ...]}``: a floor tool's markers in the world frame it defines."""
+    if data is None:
+        return None
+    if not isinstance(data, dict) or set(data) != {"points_mm"}:
+        raise FormatError(
+            path, "'floor' must be a mapping with one key, points_mm: [[0, 0, 0], [500, 0, 0], [0, 300, 0]]"
+        )
+    try:
+        points = np.array(data["points_mm"], dtype=float)
+    except (TypeError, ValueError):
+        raise FormatError(
+            path, f"floor points_mm must be a list of [x, y, z] in mm, got {data['points_mm']!r}"
+        ) from None
+    if points.ndim != 2 or points.shape[1] != 3 or not np.all(np.isfinite(points)):
+        raise FormatError(path, f"floor points_mm must be a list of [x, y, z] in mm, got {data['points_mm']!r}")
+    if not 3 <= len(points) <= wand.n_points:
+        raise FormatError(
+            path, f"floor points_mm has {len(points)} markers: a floor tool needs 3 or more, and at most the wand's "
+            f"{wand.n_points} (its markers are the floor frames' points A, B, C, ...)"
+        )  # fmt: skip
+    spread = np.linalg.svd(points - points.mean(axis=0), compute_uv=False)
+    if spread[1] < 10.0:
+        raise FormatError(path, "floor points_mm lie on one line: a floor tool's markers must span the floor (an L)")
+    return tuple((float(x), float(y), float(z)) for x, y, z in points)
 
 
 def load_rig(path: str | Path) -> RigSpec:
@@ -275,7 +302,10 @@ def rig_to_dict(rig: RigSpec) -> dict[str, Any]:
                 "fixed": bool(spec.intrinsics_fixed),
             }
         cameras.append(item)
-    return {"wand": wand_dict(rig.wand), "cameras": cameras}
+    document: dict[str, Any] = {"wand": wand_dict(rig.wand), "cameras": cameras}
+    if rig.floor_tool is not None:
+        document["floor"] = {"points_mm": [[float(v) for v in point] for point in rig.floor_tool]}
+    return document
 
 
 def save_rig(rig: RigSpec, path: str | Path) -> None:

@@ -179,7 +179,7 @@ class CollectorNode(Node):
         self._auto_state: str | None = None  # auto_calibrate: None (not started), calibrating, failed ...
         self._auto_round: Estimate | None = None  # the round that started it
         self._moved_logged: dict[str, str] = {}
-        wand = WandOptions.for_wand(self.rig.wand)
+        wand = WandOptions.for_rig(self.rig)
         self.streams = {c.name: CameraStream(c, wand, max_hold_ns=hold_ns) for c in self.rig.cameras}
         self.received = dict.fromkeys(self.rig.camera_names, 0)
         self.malformed = dict.fromkeys(self.rig.camera_names, 0)

@@ -63,7 +63,7 @@ class DetectorNode(Node):
             raise SettingsError(f"parameter camera: {name!r} is not in {cameras_file} ({', '.join(rig.camera_names)})")
         endpoint = load_camera_endpoints(cameras_file)[name]
         spec = rig.cameras[rig.camera_names.index(name)]
-        self.stream = CameraStream(spec, WandOptions.for_wand(rig.wand), max_hold_ns=int(values["label_hold_ms"] * 1e6))
+        self.stream = CameraStream(spec, WandOptions.for_rig(rig), max_hold_ns=int(values["label_hold_ms"] * 1e6))
         self.frame_id = name
         qos = image_qos(values["image_qos"])
         self.publisher = self.create_publisher(PolygonStamped, endpoint.points_topic, POINTS_QOS)

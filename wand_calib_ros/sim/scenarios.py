@@ -50,6 +50,8 @@ class Scenario:
             not occluded): a sparse take, as a user digitising a video has it (None: every view).
         marker_loss: the probability that a recorded view lacks each of its markers (occluded, not
             digitised): views of some markers only.
+        floor: (3, 3) the room's floor in the reference frame: a point on it under the volume's centre,
+            its normal (up, towards the cameras) and the room's x direction on it (None: no floor).
     """
 
     name: str
@@ -61,6 +63,7 @@ class Scenario:
     led_cone_deg: float | None = None
     view_rates: tuple[float, ...] | None = None
     marker_loss: float = 0.0
+    floor: FloatArray | None = None
 
     @property
     def rig(self) -> RigSpec:
@@ -246,6 +249,13 @@ def _look_at(centre: FloatArray, target: FloatArray, down: FloatArray) -> Pose:
     return Pose(rotation, -rotation @ centre)
 
 
+def _floor_in(first: Pose, point: FloatArray) -> FloatArray:
+    """(3, 3) a floor through the world ``point`` (world y down) in the first camera's frame: point, up, x."""
+    return np.stack(
+        [first.apply(point), first.rotation @ np.array([0.0, -1.0, 0.0]), first.rotation @ np.array([1.0, 0.0, 0.0])]
+    )
+
+
 def _relative_to_first(poses: list[Pose]) -> list[Pose]:
     """Re-express world poses so the first camera is the reference (X_cam = R X_ref + T)."""
     first = poses[0]
@@ -275,7 +285,9 @@ def ring_scenario(*, n_placements: int = 600, radius_mm: float = 2500.0, cone_de
     # The 2 m cube around the ring centre, in camera 0's frame (camera 0 looks at the centre along +z).
     centre = world_poses[0].apply(np.zeros(3))
     volume = np.stack([centre - 1000.0, centre + 1000.0])
-    return Scenario("ring6", WandSpec.from_lengths(400.0, 200.0), tuple(cameras), volume, n_placements, 2, cone_deg)
+    floor = _floor_in(world_poses[0], np.array([0.0, 1000.0, 0.0]))  # the cube's bottom, 1 m under the cameras
+    wand = WandSpec.from_lengths(400.0, 200.0)
+    return Scenario("ring6", wand, tuple(cameras), volume, n_placements, 2, cone_deg, floor=floor)
 
 
 def mocap_scenario(*, n_cameras: int = 16, n_placements: int = 10_000, cone_deg: float = 75.0) -> Scenario:
@@ -297,7 +309,9 @@ def mocap_scenario(*, n_cameras: int = 16, n_placements: int = 10_000, cone_deg:
     corners = np.array([[x, y, z] for x in (-2000.0, 2000.0) for y in (-2000.0, 0.0) for z in (-2000.0, 2000.0)])
     in_first = first.apply(corners)
     volume = np.stack([in_first.min(axis=0), in_first.max(axis=0)])
-    return Scenario("mocap16", WandSpec.from_lengths(400.0, 200.0), tuple(cameras), volume, n_placements, 2, cone_deg)
+    floor = _floor_in(first, np.zeros(3))
+    wand = WandSpec.from_lengths(400.0, 200.0)
+    return Scenario("mocap16", wand, tuple(cameras), volume, n_placements, 2, cone_deg, floor=floor)
 
 
 #: The stage scenario's zones: one ring of cameras every ZONE_MM along x.

@@ -143,3 +143,39 @@ def test_floor_frames_of_a_recording_set_the_world_of_the_result_file(tmp_path, 
     assert main(["-q", "calibrate", *argv, "--output", str(tmp_path / "n.yaml")]) == 0
     assert yaml.safe_load((tmp_path / "n.yaml").read_text())["world"]["frame"] == "reference_camera"
     assert main(["-q", "calibrate", *argv, "--output", str(tmp_path / "x.yaml"), "--floor", "90000-90010"]) == 2
+
+
+def test_an_l_frame_in_cameras_yaml_sets_the_world_of_calibrate(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    from dataclasses import replace
+
+    from rigs import L_FRAME
+
+    from wand_calib_ros.cli import main
+    from wand_calib_ros.core.model.rig import WandObservations
+    from wand_calib_ros.io.observations_csv import write_observations
+    from wand_calib_ros.io.rig_yaml import save_rig
+    from wand_calib_ros.sim.floor import floor_tool, shuffled
+
+    base, data, _ = scenario_data("paper3", 2, noise=1.0)
+    point, normal, x, _ = _floor(base)
+    scenario = replace(base, floor=np.stack([point, normal, x]))
+    rng = np.random.default_rng(4)
+    truth = floor_tool(scenario, L_FRAME, 1.0, rng, first_frame=10_000)
+    tool = WandObservations(truth.observations.frames, truth.observations.camera_names, shuffled(truth, rng))
+    waved = data.observations
+    recording = WandObservations(
+        np.r_[waved.frames, tool.frames], waved.camera_names, np.concatenate([waved.uv, tool.uv])
+    )
+    save_rig(replace(scenario.rig, floor_tool=tuple(tuple(p) for p in L_FRAME.tolist())), tmp_path / "cameras.yaml")
+    write_observations(recording, tmp_path / "observations.csv")
+    argv = ["-q", "calibrate", "--cameras", str(tmp_path / "cameras.yaml"), "--observations"]
+    argv += [str(tmp_path / "observations.csv"), "--output", str(tmp_path / "r.yaml"), "--floor", "10000-10014"]
+    assert main(argv) == 0
+    world = yaml.safe_load((tmp_path / "r.yaml").read_text())["world"]
+    rotation, translation = np.array(world["rotation"]), np.array(world["translation"])
+    true = truth.world_from_reference
+    origin = float(np.linalg.norm(-rotation.T @ translation - true.inverse().translation))
+    tilt = float(np.degrees(np.arccos(np.clip(rotation[2] @ true.rotation[2], -1.0, 1.0))))
+    floor = world["floor"]
+    assert floor["placements"] == 15 and floor["origin_std_mm"] > 0 and floor["normal_std_deg"] > 0
+    assert origin < 5 * floor["origin_std_mm"] and tilt < 5 * floor["normal_std_deg"], (origin, tilt, floor)

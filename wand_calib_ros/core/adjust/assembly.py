@@ -172,6 +172,7 @@ def assemble(
         lens_trials=lens_trials,
         warnings=tuple(warnings),
         timing=timing_summary(rig, clocks, fixed),
+        camera_covariance=result.camera_covariance,
     )
 
 

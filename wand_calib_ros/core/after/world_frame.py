@@ -10,10 +10,14 @@ X_world = R_w X_ref + T_w.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from numpy.typing import NDArray
 
 from wand_calib_ros.core.adjust.placements import triangulate_placements
+from wand_calib_ros.core.after.floor_adjustment import adjust_floor
+from wand_calib_ros.core.after.floor_tool import label_tool_views, rigid_fit
 from wand_calib_ros.core.errors import DegenerateDataError, InsufficientDataError
 from wand_calib_ros.core.model.camera_model import CameraModel
 from wand_calib_ros.core.model.geometry import Pose
@@ -123,10 +127,142 @@ def _on_plane(vectors: FloatArray, normal: FloatArray) -> FloatArray:
     return flat / np.linalg.norm(flat, axis=1, keepdims=True)
 
 
+def lays_of(points: FloatArray) -> NDArray[np.intp]:
+    """(P,) the lay of each placement: placements whose A lies within LAY_RADIUS_MM of a lay's first one's,
+    pointing the same way, are that lay held still (0: the first placement's).
+
+    Args:
+        points: (P, K, 3) the placements' markers (A first, C last), mm.
+    """
+    direction = points[:, -1] - points[:, 0]
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    first: list[int] = []
+    lay = np.empty(len(points), dtype=np.intp)
+    for i in range(len(points)):
+        for j, f in enumerate(first):
+            if np.linalg.norm(points[i, 0] - points[f, 0]) < LAY_RADIUS_MM and direction[i] @ direction[f] > 0.99:
+                lay[i] = j
+                break
+        else:
+            lay[i] = len(first)
+            first.append(i)
+    return lay
+
+
+@dataclass(frozen=True, eq=False)
+class Floor:
+    """The world frame of the floor frames and the cameras adjusted with it.
+
+    Attributes:
+        world: the world frame (its standard deviations include the calibration's).
+        models, poses: the cameras of the joint adjustment (poses relative to the reference camera).
+    """
+
+    world: WorldFrame
+    models: tuple[CameraModel, ...]
+    poses: tuple[Pose, ...]
+
+
 def floor_of(
-    models: tuple[CameraModel, ...], poses: tuple[Pose, ...], uv: FloatArray, *, origin: str = "A"
-) -> WorldFrame:
-    """:func:`fit_floor` of (F, C, 3, 2) views of the wand on the floor, triangulated with calibrated cameras
-    (``poses`` relative to the reference camera)."""
-    points = triangulate_placements(models, poses, uv)
-    return fit_floor(points, np.array([pose.center for pose in poses]), origin=origin)
+    models: tuple[CameraModel, ...],
+    poses: tuple[Pose, ...],
+    uv: FloatArray,
+    covariance: FloatArray,
+    sigma_px: float,
+    *,
+    positions_mm: tuple[float, ...],
+    origin: str = "A",
+    tool_mm: FloatArray | None = None,
+) -> Floor:
+    """The world frame of (F, C, K, 2) views of the wand laid still on the floor, or of a floor tool.
+
+    The placements are triangulated with the calibrated cameras (``poses`` relative to the reference
+    camera). For the wand laid on the floor, a plane is fitted to them (:func:`fit_floor`: the checks and
+    the start); a tool's markers are aligned with their known positions (:func:`fit_tool`). The floor frame
+    is then adjusted with the cameras (:func:`~wand_calib_ros.core.after.floor_adjustment.adjust_floor`):
+    the floor's views are weighted like every other view, with the calibration's ``covariance`` and pixel
+    noise as the cameras' prior.
+
+    Args:
+        models, poses: the calibrated cameras.
+        uv: the floor frames' views: the wand's markers, or the tool's in any order per view (labelled here).
+        covariance: (C*20, C*20) the calibration's camera covariance (CalibrationResult.camera_covariance).
+        sigma_px: the calibration's pixel noise.
+        positions_mm: the wand's marker positions from A.
+        origin: for the wand: the first lay's "A" or its "centre".
+        tool_mm: (K, 3) a floor tool's markers in the world frame (None: the wand lies on the floor).
+    """
+    centres = np.array([pose.center for pose in poses])
+    if tool_mm is not None:
+        views = label_tool_views(models, poses, uv[:, :, : len(tool_mm)], tool_mm)
+        fitted = fit_tool(triangulate_placements(models, poses, views), tool_mm, centres)
+        solution = adjust_floor(
+            models, poses, covariance, sigma_px, views, fitted.world_from_reference.inverse(), tool_mm=tool_mm
+        )
+    else:
+        points = triangulate_placements(models, poses, uv)
+        fitted = fit_floor(points, centres, origin=origin)
+        usable = np.all(np.isfinite(points), axis=(1, 2))
+        lay = lays_of(points[usable])
+        positions = np.asarray(positions_mm, dtype=float)
+        if origin != "A":
+            positions = positions - positions[-1] / 2.0
+        starts = np.zeros((int(lay.max()) + 1, 3))
+        for j in range(1, len(starts)):
+            mean = fitted.world_from_reference.apply(points[usable][lay == j].mean(axis=0))
+            along = mean[-1] - mean[0]
+            psi = float(np.arctan2(along[1], along[0]))
+            anchor = mean[0] - positions[0] * np.array([np.cos(psi), np.sin(psi), 0.0])
+            starts[j] = anchor[0], anchor[1], psi
+        solution = adjust_floor(
+            models, poses, covariance, sigma_px, uv[usable], fitted.world_from_reference.inverse(),
+            lay_of_frame=lay, positions_mm=positions, lay_starts=starts,
+        )  # fmt: skip
+    world = WorldFrame(
+        solution.reference_from_world.inverse(),
+        fitted.residual_mm,
+        solution.normal_std_deg,
+        solution.origin_std_mm,
+        fitted.placements,
+    )
+    return Floor(world, solution.models, solution.poses)
+
+
+def fit_tool(points: FloatArray, tool_mm: FloatArray, camera_centres: FloatArray) -> WorldFrame:
+    """The world frame of a floor tool's triangulated markers: the rotation and translation that carry its
+    known positions onto them (least squares over the frames' mean; a still tool).
+
+    Args:
+        points: (F, K, 3) the tool's markers triangulated per frame, reference frame, mm (NaN: not seen).
+        tool_mm: (K, 3) their positions in the world frame, mm.
+        camera_centres: (C, 3) the cameras' centres (the tool's z must point towards them).
+
+    Raises:
+        InsufficientDataError: fewer than three of its markers were seen by two cameras.
+        DegenerateDataError: the markers are not where ``tool_mm`` puts them, or the cameras are under it.
+    """
+    seen: NDArray[np.bool_] = np.all(np.isfinite(points), axis=2)  # (F, K)
+    counts = seen.sum(axis=0)
+    known = counts > 0
+    if known.sum() < 3:
+        raise InsufficientDataError(
+            f"the floor tool needs three of its markers seen by two cameras in the floor frames; got {int(known.sum())}"
+        )
+    mean = np.where(seen[..., None], points, 0.0).sum(axis=0)[known] / counts[known, None]
+    model = tool_mm[known]
+    rotation, translation = rigid_fit(model, mean)
+    residual = float(np.sqrt(np.mean(np.sum((model @ rotation.T + translation - mean) ** 2, axis=1))))
+    if residual > MAX_FLOOR_RESIDUAL_MM:
+        raise DegenerateDataError(
+            f"the floor frames' markers lie {residual:.0f} mm RMS from where floor points_mm puts them (at most "
+            f"{MAX_FLOOR_RESIDUAL_MM:g}): check the tool's dimensions and that its markers are points A, B, C, ... "
+            "in the order of points_mm"
+        )
+    up = rotation[:, 2]
+    if float(np.median((camera_centres - translation) @ up)) <= 0:
+        raise DegenerateDataError(
+            "the floor tool's z (the cross product of its x and y markers) points away from the cameras: "
+            "list points_mm so that x, y and up form a right-handed frame"
+        )
+    reference_from_world = Pose(rotation, translation)
+    return WorldFrame(reference_from_world.inverse(), residual, 0.0, 0.0, int(seen.any(axis=1).sum()))

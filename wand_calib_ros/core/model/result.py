@@ -204,6 +204,10 @@ class CalibrationResult:
         world: the world frame of a floor fit (None: no floor given; poses stay relative to the
             reference camera).
         quality: the verdict in plain words (:mod:`wand_calib_ros.core.judge.quality`; None: not judged).
+        camera_covariance: (C*20, C*20) covariance of the camera parameters of the final adjustment, cameras
+            in the rig's order, 20 per camera in the bundle adjustment's order (CAMERA_PARAM_NAMES: k1..k5
+            mm, u0, v0 px, a left rotation vector rad, the translation mm, timing, t1, t2, d1..d3); zero rows
+            for fixed parameters (None: not kept, e.g. a result read from a file).
     """
 
     reference_camera: str
@@ -223,6 +227,7 @@ class CalibrationResult:
     timing: TimingSummary | None = None
     world: WorldFrame | None = None
     quality: Verdict | None = None
+    camera_covariance: FloatArray | None = None
 
     def camera(self, name: str) -> CameraCalibration:
         for camera in self.cameras:

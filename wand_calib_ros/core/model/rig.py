@@ -150,10 +150,19 @@ class CameraSpec:
 
 @dataclass(frozen=True)
 class RigSpec:
-    """The calibration input besides the observations."""
+    """The calibration input besides the observations.
+
+    Attributes:
+        wand: the wand's markers.
+        cameras: the cameras, in the order of the observations' axis 1.
+        floor_tool: K (x, y, z) the markers of a floor tool (an L-frame, a square of markers) in the world frame
+            it defines, mm: the floor frames show it instead of the wand laid on the floor (None: no tool).
+            Its markers are the views' points 0..K-1 (A, B, C, ...).
+    """
 
     wand: WandSpec
     cameras: tuple[CameraSpec, ...]
+    floor_tool: tuple[tuple[float, float, float], ...] | None = None
 
     @property
     def camera_names(self) -> tuple[str, ...]:

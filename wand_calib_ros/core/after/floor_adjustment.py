@@ -1,0 +1,232 @@
+"""The world frame adjusted together with the cameras: the floor's views weighted like every other view.
+
+The two-stage fit of :mod:`~wand_calib_ros.core.after.world_frame` (triangulate the still lays, fit a
+plane) takes the cameras as exact. This module re-estimates the floor with them. The unknowns are:
+
+- every free camera parameter of the calibration;
+- the floor frame, X_ref = R_f X_world + t_f;
+- each lay of the wand after the first, as (x, y) of its A on the floor and its angle psi about z.
+
+The first lay defines the origin (its A, or its centre) and the x axis. With a floor tool (an L-frame
+or a square of markers at known positions), the markers' world positions are given and only the floor
+frame is estimated.
+
+The residuals are:
+
+- the floor views' reprojection errors over the calibration's pixel noise sigma;
+- the calibration itself as a prior on the cameras, with its information matrix (the wand's placements
+  eliminated from the bundle adjustment's normal equations, sigma^-2 Sigma^-1).
+
+To first order, this is the bundle adjustment of the waved placements and the floor placements
+together. The floor's covariance, from the joint normal equations, so includes the calibration's.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wand_calib_ros.core.errors import DegenerateDataError
+from wand_calib_ros.core.model.camera_model import CameraModel, project
+from wand_calib_ros.core.model.geometry import Pose, rotation_from_rotvec
+
+FloatArray = NDArray[np.float64]
+
+#: Per camera parameter vector order of the calibration's covariance (CAMERA_PARAM_NAMES): k1..k5, u0, v0
+#: (0-6), the rotation vector (7-9), the translation (10-12), timing (13-14, no effect on a still wand),
+#: the pinhole models' t1, t2, d1..d3 (15-19).
+N_PARAMS = 20
+_INTRINSIC, _ROTATION, _TRANSLATION, _LENS = slice(0, 7), slice(7, 10), slice(10, 13), slice(15, 20)
+#: The parameters a still view depends on.
+STILL_PARAMETERS = np.r_[0:13, 15:20]
+#: Gauss-Newton stops when the step changes no unknown by more than this fraction of its standard deviation.
+SETTLED = 1e-4
+MAX_ITERATIONS = 20
+
+
+@dataclass(frozen=True, eq=False)
+class FloorSolution:
+    """The floor frame of the joint adjustment.
+
+    Attributes:
+        reference_from_world: X_ref = R X_world + T (mm): the world's axes and origin in the reference frame.
+        normal_std_deg: the standard deviation of the floor normal's direction, degrees (its RMS angle).
+        origin_std_mm: the standard deviation of the origin, mm (the RMS length of its error vector).
+        rms_px: RMS reprojection error of the floor views, px.
+        lays: (L, 3) x, y (mm) and psi (rad) of each lay (the first is the origin's).
+        models, poses: the cameras of the joint solution (the floor views moved them a little).
+    """
+
+    reference_from_world: Pose
+    normal_std_deg: float
+    origin_std_mm: float
+    rms_px: float
+    lays: FloatArray
+    models: tuple[CameraModel, ...]
+    poses: tuple[Pose, ...]
+
+
+def _camera(model: CameraModel, pose: Pose, delta: FloatArray) -> tuple[CameraModel, Pose]:
+    """A camera moved by a (20,) parameter step (the bundle adjustment's: rotation left-multiplied)."""
+    extra = model.lens_vector() + delta[_LENS] if model.is_pinhole else None
+    moved = model.with_intrinsic_vector(model.intrinsic_vector() + delta[_INTRINSIC], extra)
+    return moved, Pose(rotation_from_rotvec(delta[_ROTATION]) @ pose.rotation, pose.translation + delta[_TRANSLATION])
+
+
+def _lay_points(lays: FloatArray, positions: FloatArray) -> FloatArray:
+    """(L, K, 3) world points of the markers of lays (L, 3: x, y, psi) at ``positions`` (K,) along the wand."""
+    direction = np.stack([np.cos(lays[:, 2]), np.sin(lays[:, 2]), np.zeros(len(lays))], axis=1)
+    points = lays[:, None, :2] + positions[None, :, None] * direction[:, None, :2]
+    return np.concatenate([points, np.zeros((*points.shape[:2], 1))], axis=2)
+
+
+def _prior(covariance: FloatArray, free: NDArray[np.intp]) -> FloatArray:
+    """(r, n) the whitening matrix W of the calibration's prior: |W delta|^2 = delta^T Sigma^-1 delta."""
+    block = covariance[np.ix_(free, free)]
+    scale = np.sqrt(np.clip(np.diag(block), 1e-300, None))
+    values, vectors = np.linalg.eigh(block / np.outer(scale, scale))
+    kept = values > 1e-12 * values.max()
+    return (vectors[:, kept] / np.sqrt(values[kept])).T / scale[None, :]
+
+
+def adjust_floor(
+    models: tuple[CameraModel, ...],
+    poses: tuple[Pose, ...],
+    covariance: FloatArray,
+    sigma_px: float,
+    uv: FloatArray,
+    start: Pose,
+    *,
+    lay_of_frame: NDArray[np.intp] | None = None,
+    positions_mm: FloatArray | None = None,
+    lay_starts: FloatArray | None = None,
+    tool_mm: FloatArray | None = None,
+) -> FloorSolution:
+    """The floor frame and the cameras adjusted together (see the module docstring).
+
+    Args:
+        models, poses: the calibrated cameras (poses relative to the reference camera).
+        covariance: (C*20, C*20) the calibration's covariance of the camera parameters (rig order).
+        sigma_px: the calibration's pixel noise.
+        uv: (F, C, K, 2) the floor frames' views, NaN where not seen.
+        start: X_ref = R X_world + T to start from (the two-stage fit).
+        lay_of_frame: (F,) each frame's lay (0: the first, the origin's) for a wand laid on the floor.
+        positions_mm: (K,) the markers' positions along the lays' x in the world (the first lay's
+            origin at 0: A at 0, or minus half the wand's length for its centre).
+        lay_starts: (L, 3) x, y, psi of each lay to start from (the first is held at 0).
+        tool_mm: (K, 3) a floor tool's markers in the world frame, mm (instead of lays).
+
+    Raises:
+        DegenerateDataError: the floor's views do not determine the floor frame.
+    """
+    n_cameras = len(models)
+    if tool_mm is None:
+        assert lay_of_frame is not None and positions_mm is not None and lay_starts is not None
+        n_lays = len(lay_starts)
+    else:
+        n_lays = 0
+    std = np.sqrt(np.clip(np.diag(covariance), 0.0, None)).reshape(n_cameras, N_PARAMS)
+    free_mask = np.zeros((n_cameras, N_PARAMS), dtype=bool)
+    free_mask[:, STILL_PARAMETERS] = std[:, STILL_PARAMETERS] > 0
+    free = np.flatnonzero(free_mask.reshape(-1))
+    prior = _prior(covariance, free)
+    n_free = free.size
+    n_unknowns = n_free + 6 + 3 * max(n_lays - 1, 0)
+    seen = np.isfinite(uv).all(axis=-1)  # (F, C, K)
+    frame, camera, marker = np.nonzero(seen)
+    observed = uv[frame, camera, marker]
+
+    def unpack(x: FloatArray) -> tuple[list[tuple[CameraModel, Pose]], Pose, FloatArray]:
+        flat = np.zeros(n_cameras * N_PARAMS)
+        flat[free] = x[:n_free]
+        delta = flat.reshape(n_cameras, N_PARAMS)
+        cameras = [_camera(models[c], poses[c], delta[c]) for c in range(n_cameras)]
+        w = x[n_free : n_free + 6]
+        floor = Pose(rotation_from_rotvec(w[:3]) @ start.rotation, start.translation + w[3:])
+        lays = np.zeros((max(n_lays, 1), 3))
+        if n_lays:
+            lays = np.array(lay_starts, dtype=float)
+            lays[1:] += x[n_free + 6 :].reshape(-1, 3)
+        return cameras, floor, lays
+
+    rows_of = [np.flatnonzero(camera == c) for c in range(n_cameras)]
+    owner = free // N_PARAMS  # the camera of each free camera parameter
+
+    def reference_points(floor: Pose, lays: FloatArray) -> FloatArray:
+        """(M, 3) each observation's marker in the reference frame."""
+        if tool_mm is None:
+            assert positions_mm is not None and lay_of_frame is not None
+            return floor.apply(_lay_points(lays, positions_mm)[lay_of_frame[frame], marker])
+        return floor.apply(tool_mm[marker])
+
+    def residuals(x: FloatArray) -> FloatArray:
+        """Floor views over sigma (2M, camera by camera in observation order), then the prior."""
+        cameras, floor, lays = unpack(x)
+        reference = reference_points(floor, lays)
+        projected = np.empty_like(observed)
+        for c, rows in enumerate(rows_of):
+            if rows.size:
+                model, pose = cameras[c]
+                projected[rows] = project(model, pose.apply(reference[rows]))
+        return np.concatenate([((projected - observed) / sigma_px).reshape(-1), prior @ x[:n_free]])
+
+    steps = np.concatenate([std.reshape(-1)[free] * 1e-3, np.full(3, 1e-7), np.full(3, 1e-4),
+                            np.tile([1e-4, 1e-4, 1e-7], max(n_lays - 1, 0))])  # fmt: skip
+    x = np.zeros(n_unknowns)
+    information = np.eye(n_unknowns)
+    n_views = 2 * observed.shape[0]
+    for _ in range(MAX_ITERATIONS):
+        r = residuals(x)
+        if not np.all(np.isfinite(r)):
+            raise DegenerateDataError("the floor frames' views cannot be projected with the calibrated cameras")
+        jacobian = np.zeros((r.size, n_unknowns))
+        jacobian[n_views:, :n_free] = prior  # the prior is linear in the camera steps
+        _, floor, lays = unpack(x)
+        reference = reference_points(floor, lays)
+        base = r[:n_views].reshape(-1, 2)
+        for i in range(n_free):  # a camera parameter moves only that camera's views
+            rows = rows_of[owner[i]]
+            if not rows.size:
+                continue
+            moved = x.copy()
+            moved[i] += steps[i]
+            flat = np.zeros(n_cameras * N_PARAMS)
+            flat[free] = moved[:n_free]
+            c = int(owner[i])
+            model, pose = _camera(models[c], poses[c], flat.reshape(n_cameras, N_PARAMS)[c])
+            change = (project(model, pose.apply(reference[rows])) - observed[rows]) / sigma_px - base[rows]
+            column = np.zeros((observed.shape[0], 2))
+            column[rows] = change / steps[i]
+            jacobian[:n_views, i] = column.reshape(-1)
+        for i in range(n_free, n_unknowns):  # the floor and the lays move every view
+            moved = x.copy()
+            moved[i] += steps[i]
+            jacobian[:, i] = (residuals(moved) - r) / steps[i]
+        information = jacobian.T @ jacobian
+        try:
+            step = -np.linalg.solve(information, jacobian.T @ r)
+        except np.linalg.LinAlgError:
+            raise DegenerateDataError("the floor frames' views do not determine the floor") from None
+        x = x + step
+        scale = np.sqrt(np.clip(np.diag(np.linalg.pinv(information)), 1e-300, None))
+        if np.all(np.abs(step) < SETTLED * scale):
+            break
+    covariance_x = np.linalg.pinv(information)
+    cameras, floor, lays = unpack(x)
+    floor_views = residuals(x)[:n_views]
+    rotation_cov = covariance_x[n_free : n_free + 3, n_free : n_free + 3]
+    normal = floor.rotation[:, 2]
+    across = np.eye(3) - np.outer(normal, normal)  # a rotation about the normal leaves it
+    normal_var = float(np.trace(across @ rotation_cov @ across.T))
+    origin_var = float(np.trace(covariance_x[n_free + 3 : n_free + 6, n_free + 3 : n_free + 6]))
+    return FloorSolution(
+        floor,
+        float(np.degrees(np.sqrt(max(normal_var, 0.0)))),
+        float(np.sqrt(max(origin_var, 0.0))),
+        float(np.sqrt(np.mean(floor_views**2)) * sigma_px),
+        lays,
+        tuple(model for model, _ in cameras),
+        tuple(pose for _, pose in cameras),
+    )
