@@ -22,7 +22,7 @@ SEEDS = range(8)
 
 
 def test_on_the_16_camera_rig_two_lays_give_the_origin_within_5_mm_and_the_normal_within_0_1_deg() -> None:
-    # Measured: 2.87 mm and 0.052 deg in the reference frame, 0.46 mm and 0.046 deg as the rig measures
+    # Measured: 2.83 mm and 0.055 deg in the reference frame, 0.62 mm and 0.048 deg as the rig measures
     # (RMS over 8 seeds, 10,000 placements at 1 px, two lays of 15 still frames).
     errors = floor_errors("mocap16", tool=False, seeds=SEEDS)
     assert errors["origin"] < 5.0 and errors["normal"] < 0.1, errors
@@ -31,7 +31,8 @@ def test_on_the_16_camera_rig_two_lays_give_the_origin_within_5_mm_and_the_norma
 
 
 def test_on_the_16_camera_rig_an_l_frame_seen_in_any_order_puts_the_origin_within_2_mm_as_the_rig_measures() -> None:
-    # Its three markers span 500 x 300 mm: the normal is known less well than from two lays (0.10 deg std
+    # Measured: 2.72 mm and 0.101 deg in the reference frame, 0.41 mm and 0.107 deg as the rig measures. Its
+    # three markers span 500 x 300 mm: the normal is known less well than from two lays (0.10 deg std
     # against 0.06); the origin in the reference frame carries the calibration's error (2.4 mm std).
     errors = floor_errors("mocap16", tool=True, seeds=SEEDS)
     assert errors["measured origin"] < 2.0 and errors["origin"] < 5.0, errors

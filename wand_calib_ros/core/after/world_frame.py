@@ -6,6 +6,10 @@ the floor plane; its normal, turned towards the cameras, is z; the first placeme
 centre) is the origin; its A->C projected onto the floor is x. Poses in the result stay relative
 to the reference camera (X_cam = R X_ref + T); the world frame is one more transform:
 X_world = R_w X_ref + T_w.
+
+The plane fit (:func:`fit_floor`, or :func:`fit_tool` for a floor tool's markers) checks the floor frames
+and starts :func:`floor_of`, which adjusts the floor with the cameras
+(:mod:`~wand_calib_ros.core.after.floor_adjustment`).
 """
 
 from __future__ import annotations
