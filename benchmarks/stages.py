@@ -33,7 +33,7 @@ from typing import Any
 #: (module, function, stage): the functions timed, in the order a calibration reaches them.
 STAGES = (
     ("wand_calib_ros.commands.calibrate", "load_rig", "read cameras.yaml"),
-    ("wand_calib_ros.commands.calibrate", "read_observations", "read the CSV"),
+    ("wand_calib_ros.commands.calibrate", "read_rig_observations", "read the CSV"),
     ("wand_calib_ros.core.pipeline", "check_views", "plausibility of the views"),
     ("wand_calib_ros.core.pipeline", "timing_input", "timing input"),
     ("wand_calib_ros.core.pipeline", "build_vision_graph", "vision graph"),

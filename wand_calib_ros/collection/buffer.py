@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 from wand_calib_ros.collection.recovery import TornTail, backup_path, cut_torn_tail
 from wand_calib_ros.core.model.rig import RigSpec, WandObservations
 from wand_calib_ros.io.errors import FormatError
-from wand_calib_ros.io.observations_csv import header, observation_rows, read_observations
+from wand_calib_ros.io.observations_csv import header, observation_rows, read_rig_observations
 from wand_calib_ros.io.outputs import check_writable
 
 FloatArray = NDArray[np.float64]
@@ -90,9 +90,7 @@ class ObservationBuffer:
                 raise FormatError(buffer.path, f"cannot repair the buffer: {error.strerror}") from None
         if buffer.path.exists() and has_rows(buffer.path):
             try:
-                existing = read_observations(
-                    buffer.path, rig.camera_names, image_sizes=rig.image_sizes, labels=rig.wand.labels
-                )
+                existing = read_rig_observations(buffer.path, rig)
             except FormatError as error:
                 if buffer.repaired is not None:  # not a buffer a tear explains: put the file back as found
                     os.replace(buffer.repaired.original, buffer.path)

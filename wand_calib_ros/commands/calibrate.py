@@ -14,7 +14,7 @@ from wand_calib_ros.core.model.result import CalibrationResult, CameraCalibratio
 from wand_calib_ros.core.pipeline import CalibrationOptions, calibrate
 from wand_calib_ros.errors import WandCalibError
 from wand_calib_ros.io.errors import FormatError
-from wand_calib_ros.io.observations_csv import read_observations
+from wand_calib_ros.io.observations_csv import read_rig_observations
 from wand_calib_ros.io.outputs import check_writable
 from wand_calib_ros.io.result_yaml import (
     CameraGeometry,
@@ -160,9 +160,7 @@ def _timing_summary(result: CalibrationResult, camera: CameraCalibration) -> str
 def run(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     rig = load_rig(args.cameras)
-    observations = read_observations(
-        args.observations, rig.camera_names, image_sizes=rig.image_sizes, labels=rig.wand.labels
-    )
+    observations = read_rig_observations(args.observations, rig)
     log.info("read %d frames of %d cameras from %s", observations.uv.shape[0], len(rig.cameras), args.observations)
     if args.max_placements is not None and args.max_placements < 2:
         raise WandCalibError("--max-placements must be at least 2")

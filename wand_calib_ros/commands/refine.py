@@ -7,7 +7,7 @@ from pathlib import Path
 
 from wand_calib_ros.errors import WandCalibError
 from wand_calib_ros.io.errors import FormatError
-from wand_calib_ros.io.observations_csv import read_observations
+from wand_calib_ros.io.observations_csv import read_rig_observations
 from wand_calib_ros.io.outputs import check_writable
 from wand_calib_ros.io.result_yaml import (
     read_result,
@@ -40,9 +40,7 @@ def run(args: argparse.Namespace) -> int:
     missing = [n for n in rig.camera_names if n not in geometry]
     if missing:
         raise WandCalibError(f"{args.result}: no result for camera(s) {', '.join(missing)} of the rig")
-    observations = read_observations(
-        args.observations, rig.camera_names, image_sizes=rig.image_sizes, labels=rig.wand.labels
-    )
+    observations = read_rig_observations(args.observations, rig)
     names = rig.camera_names
     models = tuple(geometry[n].model for n in names)
     poses = tuple(geometry[n].pose for n in names)

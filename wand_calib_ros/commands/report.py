@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from wand_calib_ros.io.observations_csv import read_observations
+from wand_calib_ros.io.observations_csv import read_rig_observations
 from wand_calib_ros.io.rig_yaml import load_rig
 
 HELP = "write an HTML calibration report with figures"
@@ -23,9 +23,7 @@ def run(args: argparse.Namespace) -> int:
     from wand_calib_ros.report.html import write_report  # matplotlib only when a report is asked for
 
     rig = load_rig(args.cameras)
-    observations = read_observations(
-        args.observations, rig.camera_names, image_sizes=rig.image_sizes, labels=rig.wand.labels
-    )
+    observations = read_rig_observations(args.observations, rig)
     path = write_report(rig, observations, args.result, args.out)
     print(f"report: {path}")
     return 0

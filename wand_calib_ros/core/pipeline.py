@@ -276,8 +276,7 @@ def _require_whole_views(names: tuple[str, ...], complete: NDArray[np.bool_]) ->
 def _with_floor(rig: RigSpec, result: CalibrationResult, floor: WandObservations, origin: str) -> CalibrationResult:
     """The result with the world frame of the floor frames, its cameras adjusted with the floor."""
     names = rig.camera_names
-    if result.camera_covariance is None:  # a result assembled without its adjustment's covariance
-        raise CalibrationFailedError("the floor needs the calibration's covariance, which this result lacks")
+    assert result.camera_covariance is not None  # every calibration assembles its adjustment's covariance
     floor_fit = floor_of(
         tuple(result.camera(n).model for n in names),
         tuple(result.camera(n).pose for n in names),

@@ -23,7 +23,7 @@ from typing import TextIO
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.model.rig import ALL_POINT_LABELS, POINT_LABELS, WandObservations
+from wand_calib_ros.core.model.rig import ALL_POINT_LABELS, POINT_LABELS, RigSpec, WandObservations
 from wand_calib_ros.io.errors import FormatError
 
 COLUMNS = ("frame", "camera", "point", "u", "v")
@@ -37,6 +37,11 @@ STAMP = "stamp"
 IMAGE_MARGIN_PX = 10.0
 #: Stamps above this (seconds: year 5138) are surely in another unit (nanoseconds).
 MAX_STAMP_S = 1e11
+
+
+def read_rig_observations(path: str | Path, rig: RigSpec) -> WandObservations:
+    """:func:`read_observations` of a rig's cameras (in its order, image sizes checked) and wand labels."""
+    return read_observations(path, rig.camera_names, image_sizes=rig.image_sizes, labels=rig.wand.labels)
 
 
 def read_observations(

@@ -61,7 +61,7 @@ from wand_calib_ros.core.model.rig import WandObservations
 from wand_calib_ros.core.pipeline import CalibrationOptions
 from wand_calib_ros.errors import WandCalibError
 from wand_calib_ros.io.export import FORMATS
-from wand_calib_ros.io.observations_csv import read_observations
+from wand_calib_ros.io.observations_csv import read_rig_observations
 from wand_calib_ros.io.rig_yaml import load_camera_endpoints, load_rig
 from wand_calib_ros.io.session_csv import EVENTS_FILE, append_event
 from wand_calib_ros.nodes import messages
@@ -295,9 +295,7 @@ class CalibratorNode(Node):
 
     def _read_buffer(self, path: Path) -> WandObservations:
         """The collector's buffer file as the rig's observations (FormatError naming the file and row)."""
-        return read_observations(
-            path, self.rig.camera_names, image_sizes=self.rig.image_sizes, labels=self.rig.wand.labels
-        )
+        return read_rig_observations(path, self.rig)
 
     def _refine(self) -> tuple[bool, str]:
         if self.result is None:

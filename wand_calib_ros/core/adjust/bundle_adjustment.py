@@ -577,18 +577,24 @@ def _evaluate(
     return res, normal
 
 
+def moved_camera(model: CameraModel, pose: Pose, delta: FloatArray, *, lens: bool = True) -> tuple[CameraModel, Pose]:
+    """A camera moved by a (20,) step of its parameters (:data:`CAMERA_PARAM_NAMES`): intrinsics added, the
+    rotation vector left-multiplied, the translation added; the lens terms only with ``lens`` and a pinhole
+    model; timing is not the camera's (see :class:`BundleState`)."""
+    extra = model.lens_vector() + delta[LENS] if lens and model.is_pinhole else None
+    moved = model.with_intrinsic_vector(model.intrinsic_vector() + delta[:N_INTRINSIC], extra)
+    rotation = rotation_from_rotvec(delta[N_INTRINSIC : N_INTRINSIC + 3]) @ pose.rotation
+    return moved, Pose(rotation, pose.translation + delta[N_INTRINSIC + 3 : N_GEOMETRIC])
+
+
 def _apply_step(state: BundleState, delta_c: FloatArray, delta_p: FloatArray, carried: IntArray) -> BundleState:
     """The state moved by camera steps (C, 13 + len(carried)) and placement steps (P, 5)."""
     delta = np.zeros((len(state.models), N_CAMERA_PARAMS))
     delta[:, np.concatenate([np.arange(N_GEOMETRIC), carried])] = delta_c
     delta[~parameter_mask(state.models)] = 0.0  # what a camera's model does not have stays as it is
-    models, poses = [], []
     lens = bool(np.any(carried >= LENS.start))
-    for model, pose, d in zip(state.models, state.poses, delta, strict=True):
-        extra = model.lens_vector() + d[LENS] if lens and model.is_pinhole else None
-        models.append(model.with_intrinsic_vector(model.intrinsic_vector() + d[:N_INTRINSIC], extra))
-        rotation = rotation_from_rotvec(d[N_INTRINSIC : N_INTRINSIC + 3]) @ pose.rotation
-        poses.append(Pose(rotation, pose.translation + d[N_INTRINSIC + 3 : N_GEOMETRIC]))
+    moved = [moved_camera(m, p, d, lens=lens) for m, p, d in zip(state.models, state.poses, delta, strict=True)]
+    models, poses = [m for m, _ in moved], [p for _, p in moved]
     camera_timing = state.timing
     if np.any(carried < LENS.start):
         camera_timing = state.camera_timing + delta[:, TIMING]

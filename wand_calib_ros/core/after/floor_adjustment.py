@@ -28,19 +28,15 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from wand_calib_ros.core.adjust.bundle_adjustment import N_CAMERA_PARAMS, TIMING, moved_camera
 from wand_calib_ros.core.errors import DegenerateDataError
 from wand_calib_ros.core.model.camera_model import CameraModel, project
 from wand_calib_ros.core.model.geometry import Pose, rotation_from_rotvec
 
 FloatArray = NDArray[np.float64]
 
-#: Per camera parameter vector order of the calibration's covariance (CAMERA_PARAM_NAMES): k1..k5, u0, v0
-#: (0-6), the rotation vector (7-9), the translation (10-12), timing (13-14, no effect on a still wand),
-#: the pinhole models' t1, t2, d1..d3 (15-19).
-N_PARAMS = 20
-_INTRINSIC, _ROTATION, _TRANSLATION, _LENS = slice(0, 7), slice(7, 10), slice(10, 13), slice(15, 20)
-#: The parameters a still view depends on.
-STILL_PARAMETERS = np.r_[0:13, 15:20]
+#: The camera parameters a still view depends on: all but the timing ones (indices of CAMERA_PARAM_NAMES).
+STILL_PARAMETERS = np.setdiff1d(np.arange(N_CAMERA_PARAMS), np.arange(TIMING.start, TIMING.stop))
 #: Gauss-Newton stops when the step changes no unknown by more than this fraction of its standard deviation.
 SETTLED = 1e-4
 MAX_ITERATIONS = 20
@@ -66,13 +62,6 @@ class FloorSolution:
     lays: FloatArray
     models: tuple[CameraModel, ...]
     poses: tuple[Pose, ...]
-
-
-def _camera(model: CameraModel, pose: Pose, delta: FloatArray) -> tuple[CameraModel, Pose]:
-    """A camera moved by a (20,) parameter step (the bundle adjustment's: rotation left-multiplied)."""
-    extra = model.lens_vector() + delta[_LENS] if model.is_pinhole else None
-    moved = model.with_intrinsic_vector(model.intrinsic_vector() + delta[_INTRINSIC], extra)
-    return moved, Pose(rotation_from_rotvec(delta[_ROTATION]) @ pose.rotation, pose.translation + delta[_TRANSLATION])
 
 
 def _lay_points(lays: FloatArray, positions: FloatArray) -> FloatArray:
@@ -127,8 +116,8 @@ def adjust_floor(
         n_lays = len(lay_starts)
     else:
         n_lays = 0
-    std = np.sqrt(np.clip(np.diag(covariance), 0.0, None)).reshape(n_cameras, N_PARAMS)
-    free_mask = np.zeros((n_cameras, N_PARAMS), dtype=bool)
+    std = np.sqrt(np.clip(np.diag(covariance), 0.0, None)).reshape(n_cameras, N_CAMERA_PARAMS)
+    free_mask = np.zeros((n_cameras, N_CAMERA_PARAMS), dtype=bool)
     free_mask[:, STILL_PARAMETERS] = std[:, STILL_PARAMETERS] > 0
     free = np.flatnonzero(free_mask.reshape(-1))
     prior = _prior(covariance, free)
@@ -139,10 +128,10 @@ def adjust_floor(
     observed = uv[frame, camera, marker]
 
     def unpack(x: FloatArray) -> tuple[list[tuple[CameraModel, Pose]], Pose, FloatArray]:
-        flat = np.zeros(n_cameras * N_PARAMS)
+        flat = np.zeros(n_cameras * N_CAMERA_PARAMS)
         flat[free] = x[:n_free]
-        delta = flat.reshape(n_cameras, N_PARAMS)
-        cameras = [_camera(models[c], poses[c], delta[c]) for c in range(n_cameras)]
+        delta = flat.reshape(n_cameras, N_CAMERA_PARAMS)
+        cameras = [moved_camera(models[c], poses[c], delta[c]) for c in range(n_cameras)]
         w = x[n_free : n_free + 6]
         floor = Pose(rotation_from_rotvec(w[:3]) @ start.rotation, start.translation + w[3:])
         lays = np.zeros((max(n_lays, 1), 3))
@@ -152,7 +141,7 @@ def adjust_floor(
         return cameras, floor, lays
 
     rows_of = [np.flatnonzero(camera == c) for c in range(n_cameras)]
-    owner = free // N_PARAMS  # the camera of each free camera parameter
+    owner = free // N_CAMERA_PARAMS  # the camera of each free camera parameter
 
     def reference_points(floor: Pose, lays: FloatArray) -> FloatArray:
         """(M, 3) each observation's marker in the reference frame."""
@@ -192,10 +181,10 @@ def adjust_floor(
                 continue
             moved = x.copy()
             moved[i] += steps[i]
-            flat = np.zeros(n_cameras * N_PARAMS)
+            flat = np.zeros(n_cameras * N_CAMERA_PARAMS)
             flat[free] = moved[:n_free]
             c = int(owner[i])
-            model, pose = _camera(models[c], poses[c], flat.reshape(n_cameras, N_PARAMS)[c])
+            model, pose = moved_camera(models[c], poses[c], flat.reshape(n_cameras, N_CAMERA_PARAMS)[c])
             change = (project(model, pose.apply(reference[rows])) - observed[rows]) / sigma_px - base[rows]
             column = np.zeros((observed.shape[0], 2))
             column[rows] = change / steps[i]

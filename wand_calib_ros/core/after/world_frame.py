@@ -79,9 +79,7 @@ def fit_floor(points: FloatArray, camera_centres: FloatArray, *, origin: str = "
             f"the wand lay on the floor in one direction only (within {spread:.0f} deg): lay it in a second "
             f"direction, at least {MIN_DIRECTION_SPREAD_DEG:.0f} deg from the first, so the floor's tilt is known"
         )
-    # The first lay of the wand: every still placement of it (A within LAY_RADIUS_MM of the first
-    # one's, pointing the same way), averaged.
-    lay = (np.linalg.norm(usable[:, 0] - usable[0, 0], axis=1) < LAY_RADIUS_MM) & (directions @ directions[0] > 0.99)
+    lay = lays_of(usable) == 0  # the first lay of the wand: every still placement of it, averaged
     first = usable[lay].mean(axis=0)
     anchor = first[0] if origin == "A" else (first[0] + first[-1]) / 2.0  # A, or the midpoint of A and C
     anchor = anchor - ((anchor - centroid) @ normal) * normal  # onto the floor
