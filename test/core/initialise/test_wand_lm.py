@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from wand_calib_ros.core.initialise.wand_lm import _STEP3_INTRINSICS, _WandProblem, optimise_wand_lengths
-from wand_calib_ros.core.model.geometry import Pose, rotation_error_deg, translation_error
+from wand_calib_ros.core.model.geometry import Pose, rotation_error_deg
 from wand_calib_ros.sim.scenarios import paper_fisheye_scenario, simulate
 
 
@@ -32,13 +32,25 @@ def test_noise_free_data_converge_to_the_truth() -> None:
         for m, c in zip(models, scenario.cameras, strict=True)
     )
     fit = optimise_wand_lengths(models, pose, uv[:, 0], uv[:, 1], scenario.wand)
-    assert fit.rms_mm < 1e-6
-    truth = scenario.cameras[1].pose
-    assert rotation_error_deg(truth.rotation, fit.pose.rotation) < 1e-6
-    assert translation_error(truth.translation, fit.pose.translation) < 1e-8
-    for model, camera in zip(fit.models, scenario.cameras, strict=True):
-        assert abs(model.k[0] - camera.model.k[0]) < 1e-8
-        assert np.max(np.abs(model.principal_point - camera.model.principal_point)) < 1e-5
+    problem = _WandProblem(models, uv[:, 0], uv[:, 1], scenario.wand)
+
+    def vector(fitted, fitted_pose):  # type: ignore[no-untyped-def]
+        intrinsics = [m.intrinsic_vector()[_STEP3_INTRINSICS] for m in fitted]
+        return np.concatenate([*intrinsics, fitted_pose.rotvec, fitted_pose.translation])
+
+    truth = vector(tuple(c.model for c in scenario.cameras), scenario.cameras[1].pose)
+    found = vector(fit.models, fit.pose)
+    # Noise-free data: the solver stops where the cost reaches the rounding of the residuals' evaluation
+    # (the truth's own residuals, ~1e-12 mm, are that rounding). Rounding of that size moves the solution by
+    # the standard deviations it implies through the Jacobian (the problem's condition, ~1e8, makes the
+    # rotation's about 1e-6 deg); the solution must be within 5 of them of the truth, on any machine.
+    rounding = problem.residuals(truth)
+    sigma = max(float(np.sqrt(np.mean(rounding**2))), np.finfo(float).eps * scenario.wand.L)
+    jac = problem.jacobian(found)
+    std = sigma * np.sqrt(np.diag(np.linalg.inv(jac.T @ jac)))
+    assert fit.rms_mm < 100 * sigma  # the cost went down to the rounding floor
+    assert np.all(np.abs(found - truth) <= 5 * std + 1e-15 * np.abs(truth)), (found - truth) / std
+    assert rotation_error_deg(scenario.cameras[1].pose.rotation, fit.pose.rotation) < 1e-4  # and that is tiny
 
 
 def test_analytic_jacobian_matches_finite_differences() -> None:
