@@ -7,7 +7,8 @@ import pytest
 from rigs import true_views
 
 from wand_calib_ros.detection.blobs import Blobs
-from wand_calib_ros.detection.recording import detect_recording, track_labels
+from wand_calib_ros.detection.recording import detect_recording
+from wand_calib_ros.detection.tracking import track_labels
 from wand_calib_ros.detection.wand import WandDetection, WandOptions, identify_wand
 from wand_calib_ros.io.bags import ImageFrame
 from wand_calib_ros.sim.render import RenderOptions, render_recording
@@ -35,13 +36,38 @@ def test_no_wand_reasons() -> None:
     assert identify_wand(_blobs(two_wands)).reason == "competing_triples"
 
 
+def _moving(detection: WandDetection, step: int) -> WandDetection:
+    """The detection moved down by 4 px per step (a waved wand: every point moves)."""
+    assert detection.points is not None
+    moved = detection.points + np.array([0.0, 4.0 * step])
+    return WandDetection(moved, detection.quality, None, detection.ambiguous, detection.image_ratio)
+
+
+CLEAR = WandDetection(np.array([[0.0, 0], [20, 0], [30, 0]]), 1.0, None, False, 2.0)  # ratio 2: trusted
+AMBIGUOUS = WandDetection(np.array([[31.0, 0], [16, 0], [1, 0]]), 1.0, None, True, 1.0)
+
+
 def test_ambiguous_labels_are_settled_by_neighbouring_frames() -> None:
-    clear = WandDetection(np.array([[0.0, 0], [20, 0], [30, 0]]), 1.0, None, False, 2.0)  # ratio 2: trusted
-    ambiguous = WandDetection(np.array([[31.0, 0], [16, 0], [1, 0]]), 1.0, None, True, 1.0)
-    labelled = track_labels([(0, ambiguous), (33_000_000, clear), (66_000_000, ambiguous)])
-    assert np.allclose(labelled[0][0], [1, 0]) and np.allclose(labelled[2][0], [1, 0])
-    far = track_labels([(0, ambiguous), (10**9, clear)])
+    sequence = [(0, _moving(AMBIGUOUS, 0)), (33_000_000, _moving(CLEAR, 1)), (66_000_000, _moving(AMBIGUOUS, 2))]
+    labelled = track_labels(sequence)
+    assert labelled[0] is not None and labelled[2] is not None
+    assert np.allclose(labelled[0][0], [1, 0]) and np.allclose(labelled[2][0], [1, 8])
+    far = track_labels([(0, AMBIGUOUS), (10**9, CLEAR)])
     assert far[0] is None
+
+
+def test_a_track_that_never_moves_is_no_wand_and_one_that_stops_stays_the_wand() -> None:
+    from wand_calib_ros.detection.tracking import StreamLabeller
+
+    still = [(i * 33_000_000, CLEAR) for i in range(60)]  # lamps in a row, two seconds long
+    assert all(points is None for points in track_labels(still))
+    labeller = StreamLabeller(max_hold_ns=100_000_000)
+    out = [r for i in range(12) for r in labeller.push(i * 33_000_000, CLEAR)] + labeller.flush()
+    assert len(out) == 12 and all(r.points is None and r.reason == "still" for r in out)  # held, then given up
+    arrives = [(i * 33_000_000, _moving(CLEAR, i)) for i in range(5)]  # the wand laid on the floor ...
+    rests = [(int((5 + i) * 33_000_000), _moving(CLEAR, 4)) for i in range(60)]  # ... and left there 2 s
+    labelled = track_labels(arrives + rests)
+    assert all(points is not None for points in labelled)
 
 
 def test_rendered_recording_meets_the_detection_targets() -> None:
@@ -49,7 +75,7 @@ def test_rendered_recording_meets_the_detection_targets() -> None:
     rng = np.random.default_rng(3)
     recording = render_recording(scenario, 240, 30.0, RenderOptions(), rng)
     frames = [ImageFrame(camera, stamp, image, "mono8") for camera, stamp, image in recording.frames]
-    observations, stats, _ = detect_recording(frames, scenario.rig)
+    observations, stats, _, _ = detect_recording(frames, scenario.rig)
     drawn = recording.drawn
     assert np.array_equal(observations.frames, drawn.frames)  # one frame per instant, numbered alike
     visible = np.all(np.isfinite(drawn.uv), axis=(2, 3))
@@ -67,7 +93,7 @@ def test_spurious_reflections_rarely_produce_a_wrong_triple() -> None:
     rng = np.random.default_rng(4)
     recording = render_recording(scenario, 200, 30.0, RenderOptions(reflection_rate=1.0), rng)
     frames = [ImageFrame(camera, stamp, image, "mono8") for camera, stamp, image in recording.frames]
-    observations, stats, _ = detect_recording(frames, scenario.rig)
+    observations, stats, _, _ = detect_recording(frames, scenario.rig)
     written = observations.complete
     errors = np.linalg.norm(observations.uv - true_views(recording.drawn, observations), axis=-1).max(axis=-1)
     wrong = (errors > 3) & written
@@ -88,7 +114,7 @@ def test_unusable_images_are_counted_by_reason_not_raised() -> None:
         ImageFrame("cam0", t + 3 * 10**8, np.zeros((480, 640, 3), np.uint8), "yuv422"),  # unknown encoding
         ImageFrame("cam1", t, rng.integers(0, 255, (480, 640), dtype=np.uint8), "mono8"),  # all noise
     ]
-    observations, stats, _ = detect_recording(frames, scenario.rig)
+    observations, stats, _, _ = detect_recording(frames, scenario.rig)
     assert stats["cam0"].rejected["wrong_size"] == 1
     assert stats["cam0"].rejected["bad_image"] == 1
     assert stats["cam0"].rejected["no_blobs"] == 2
@@ -106,7 +132,7 @@ def test_other_cameras_settle_ambiguous_views_of_independent_placements() -> Non
     rng = np.random.default_rng(8)
     recording = render_recording(scenario, 200, 30.0, RenderOptions(), rng, independent=True)
     frames = [ImageFrame(camera, stamp, image, "mono8") for camera, stamp, image in recording.frames]
-    observations, _, ambiguous = detect_recording(frames, scenario.rig)
+    observations, _, ambiguous, _ = detect_recording(frames, scenario.rig)
     assert ambiguous  # no continuity between independent placements
     result = calibrate(scenario.rig, observations)
     settled_obs, settled = label_across_cameras(observations, ambiguous, result, scenario.wand)
@@ -117,20 +143,18 @@ def test_other_cameras_settle_ambiguous_views_of_independent_placements() -> Non
 
 
 def test_stream_labeller_holds_back_then_follows_a_live_stream() -> None:
-    from wand_calib_ros.detection.recording import StreamLabeller
+    from wand_calib_ros.detection.tracking import Released, StreamLabeller
 
-    clear = WandDetection(np.array([[0.0, 0], [20, 0], [30, 0]]), 1.0, None, False, 2.0)
-    ambiguous = WandDetection(np.array([[31.0, 0], [16, 0], [1, 0]]), 1.0, None, True, 1.0)
     labeller = StreamLabeller(max_hold_ns=100_000_000)
-    assert labeller.push(0, ambiguous) == []  # held: nothing decides it yet
-    assert labeller.push(33_000_000, clear) == []
-    released = labeller.push(100_000_000, ambiguous)  # the hold ends: the track is decided
-    assert [stamp for stamp, _ in released] == [0, 33_000_000, 100_000_000]
-    assert all(np.allclose(points[0], [0, 0], atol=1.5) for _, points in released)
-    follow = labeller.push(133_000_000, clear)  # a decided track releases at once
-    assert len(follow) == 1 and np.allclose(follow[0][1][0], [0, 0])
-    assert labeller.push(10**9, ambiguous) == []  # a new track after the gap
-    assert labeller.flush() == [(10**9, None)]
+    assert labeller.push(0, _moving(AMBIGUOUS, 0)) == []  # held: nothing decides it yet
+    assert labeller.push(33_000_000, _moving(CLEAR, 1)) == []
+    released = labeller.push(100_000_000, _moving(AMBIGUOUS, 2))  # the hold ends: the track is decided
+    assert [r.stamp_ns for r in released] == [0, 33_000_000, 100_000_000]
+    assert all(r.points is not None and np.allclose(r.points[0], [0, 4 * i], atol=1.5) for i, r in enumerate(released))
+    follow = labeller.push(133_000_000, _moving(CLEAR, 3))  # a decided track releases at once
+    assert len(follow) == 1 and follow[0].points is not None and np.allclose(follow[0].points[0], [0, 12])
+    assert labeller.push(10**9, AMBIGUOUS) == []  # a new track after the gap
+    assert labeller.flush() == [Released(10**9, None, "ambiguous", 1)]  # a second track: one view tells nothing
 
 
 def test_a_misleading_stretch_of_image_ratios_is_outvoted_by_its_track() -> None:
@@ -138,11 +162,11 @@ def test_a_misleading_stretch_of_image_ratios_is_outvoted_by_its_track() -> None
     truth = np.array([[0.0, 0], [20, 0], [30, 0]])
     sequence = []
     for i, ratio in enumerate([2.0, 1.8, 1.6, 1.3, 0.8, 0.65, 0.65, 0.8, 1.3, 1.8, 2.0]):
-        points = truth + np.array([i * 0.5, 0])
+        points = truth + np.array([i * 0.5, 4.0 * i])
         own = points if ratio >= 1 else points[::-1].copy()  # the detector orders by the image ratio
         sequence.append((i * 33_000_000, WandDetection(own, 1.0, None, False, max(ratio, 1 / ratio))))
     labelled = track_labels(sequence)
-    assert all(np.allclose(points, truth + np.array([i * 0.5, 0])) for i, points in enumerate(labelled))
+    assert all(np.allclose(points, truth + np.array([i * 0.5, 4.0 * i])) for i, points in enumerate(labelled))
 
 
 def test_a_camera_repeating_a_stamp_is_labelled_without_error() -> None:

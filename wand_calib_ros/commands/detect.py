@@ -9,13 +9,8 @@ import time
 from pathlib import Path
 
 import cv2
-import numpy as np
-from numpy.typing import NDArray
 
-from wand_calib_ros.core.model.rig import RigSpec, WandObservations
-from wand_calib_ros.core.pipeline import calibrate
 from wand_calib_ros.detection.blobs import Blobs
-from wand_calib_ros.detection.recording import CameraStats
 from wand_calib_ros.detection.wand import WandDetection
 from wand_calib_ros.errors import WandCalibError
 from wand_calib_ros.io.bags import ImageFrame
@@ -64,6 +59,7 @@ def _image_topics(pattern: str, names: tuple[str, ...]) -> dict[str, str]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from wand_calib_ros.detection.consistency import settle_labels
     from wand_calib_ros.detection.recording import detect_recording
     from wand_calib_ros.io.bags import count_images, read_image_frames
 
@@ -94,11 +90,11 @@ def run(args: argparse.Namespace) -> int:
             picture = draw_overlay(frame.image, frame.encoding, blobs, detection, reason)
             cv2.imwrite(str(args.debug_dir / f"{frame.camera}_{frame.stamp_ns}.png"), picture)
 
-    observations, stats, ambiguous = detect_recording(
+    detections = detect_recording(
         read_image_frames(args.bag, topics), rig, tolerance_ns=int(args.sync_tolerance_ms * 1e6), inspect=inspect
     )
-    if ambiguous and len(rig.cameras) >= 2:
-        observations = _settle_across_cameras(rig, observations, ambiguous, stats)
+    observations, _ = settle_labels(rig, detections)
+    stats = detections.stats
     args.output.parent.mkdir(parents=True, exist_ok=True)
     write_observations(observations, args.output)
     print(f"detected the wand in {args.bag} -> {args.output} ({time.perf_counter() - started:.1f} s)")
@@ -106,25 +102,3 @@ def run(args: argparse.Namespace) -> int:
         reasons = ", ".join(f"{reason} {n}" for reason, n in sorted(counts.rejected.items())) or "none"
         print(f"  {name}: {counts.images} images, {counts.detected} with the wand; rejected: {reasons}")
     return 0
-
-
-def _settle_across_cameras(
-    rig: RigSpec,
-    observations: WandObservations,
-    ambiguous: list[tuple[int, str, NDArray[np.float64], float]],
-    stats: dict[str, CameraStats],
-) -> WandObservations:
-    """Label views that neither their image nor time settled, with a calibration of the settled ones."""
-    from wand_calib_ros.detection.consistency import label_across_cameras
-
-    try:
-        result = calibrate(rig, observations)
-    except WandCalibError as error:
-        log.info("no calibration to settle %d ambiguous views across cameras: %s", len(ambiguous), error)
-        return observations
-    observations, settled = label_across_cameras(observations, ambiguous, result, rig.wand)
-    for camera in settled:
-        stats[camera].rejected["ambiguous"] -= 1
-        stats[camera].detected += 1
-    log.info("%d of %d ambiguous views settled by the other cameras", len(settled), len(ambiguous))
-    return observations

@@ -1,23 +1,27 @@
-"""Bright-blob extraction: LED spots with sub-pixel, background-subtracted centres.
+"""Bright blobs: the spots that stand out of their local background, with sub-pixel centres.
 
-The threshold is relative to the frame: the background level and its noise
-come from the median and the median absolute deviation of the image, and a
-pixel belongs to a blob when it stands clearly above both the noise and a
-fraction of the brightest pixel. Connected components are measured in a small
-window around each: the centre is the intensity-weighted mean of the
-background-subtracted pixels (exact for symmetric spots), the size gates
-reject single hot pixels and large reflections.
+A pixel belongs to a blob when it is above its region's threshold
+(:mod:`wand_calib_ros.detection.background`: the local background plus a few times its
+noise), and is not masked (a lamp the camera learned, or a mask the user gave). Connected
+pixels are one blob; size gates reject single hot pixels and large bright areas. Each blob
+is measured in a window around it (:mod:`wand_calib_ros.detection.centres`): its centre, its
+peak above its own background, the length of its motion streak, and whether it touches the
+image border or the mask (then it may be cut and its centre is not trusted). A small blob
+that touches a much larger one is a fringe of it (JPEG ringing, demosaicing, a flare) and is
+dropped.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from wand_calib_ros.detection.background import Background, BackgroundOptions, estimate_background
+from wand_calib_ros.detection.centres import spot_centre
 from wand_calib_ros.detection.errors import ImageError
 
 FloatArray = NDArray[np.float64]
@@ -36,11 +40,13 @@ ENCODINGS = (
     "bayer_grbg8",
 )
 
+#: OpenCV's conversions by the sensor's pattern (its older names, e.g. BayerRG, call the same patterns by
+#: other letters: BayerRGGB2GRAY is BayerBG2GRAY).
 _BAYER = {
-    "bayer_rggb8": cv2.COLOR_BayerRG2GRAY,
-    "bayer_bggr8": cv2.COLOR_BayerBG2GRAY,
-    "bayer_gbrg8": cv2.COLOR_BayerGB2GRAY,
-    "bayer_grbg8": cv2.COLOR_BayerGR2GRAY,
+    "bayer_rggb8": cv2.COLOR_BayerRGGB2GRAY,
+    "bayer_bggr8": cv2.COLOR_BayerBGGR2GRAY,
+    "bayer_gbrg8": cv2.COLOR_BayerGBRG2GRAY,
+    "bayer_grbg8": cv2.COLOR_BayerGRBG2GRAY,
 }
 
 
@@ -49,17 +55,15 @@ class BlobOptions:
     """Blob extraction settings.
 
     Attributes:
-        noise_sigmas: a blob pixel stands this many background noise sigmas above the background.
-        peak_fraction: ... and above this fraction of the frame's brightest pixel (above background).
-        min_area: smallest component (px) that counts as an LED.
-        max_area: largest component (px); larger ones are reflections or lamps.
-        window: half size (px) of the window around a component used for its centre.
+        background: how far above its local background a pixel must be.
+        min_area: smallest blob (px) that counts as an LED.
+        max_area: largest blob (px); larger ones are windows or reflections.
+        window: margin (px) around a blob's pixels in which it is measured.
     """
 
-    noise_sigmas: float = 8.0
-    peak_fraction: float = 0.25
+    background: BackgroundOptions = field(default_factory=BackgroundOptions)
     min_area: int = 2
-    max_area: int = 400
+    max_area: int = 2000
     window: int = 3
 
 
@@ -70,10 +74,14 @@ class Blobs:
     Attributes:
         centres: (N, 2) sub-pixel centres, OpenCV pixel convention.
         areas: (N,) pixels above the threshold.
-        peaks: (N,) brightest value above background.
+        peaks: (N,) brightest value above the blob's own background.
         saturated: (N,) True where a pixel reached the image's maximum value.
         at_border: (N,) True where the blob touches the image border (cut: its centre is pulled
             inwards); None: none does.
+        masked: (N,) True where the blob touches masked pixels (it may be cut); None: none does.
+        lengths: (N,) length of the blob's motion streak, px; None: not measured.
+        backgrounds: (N,) the background under the blob, grey levels; None: not measured.
+        contrast: (N,) how far above that background the image's threshold is there; None: not measured.
     """
 
     centres: FloatArray
@@ -81,10 +89,55 @@ class Blobs:
     peaks: FloatArray
     saturated: NDArray[np.bool_]
     at_border: NDArray[np.bool_] | None = None
+    masked: NDArray[np.bool_] | None = None
+    lengths: FloatArray | None = None
+    backgrounds: FloatArray | None = None
+    contrast: FloatArray | None = None
 
     def cut(self, index: list[int]) -> bool:
-        """Whether any of the blobs ``index`` touches the image border."""
-        return self.at_border is not None and bool(self.at_border[index].any())
+        """Whether any of the blobs ``index`` touches the image border or the mask."""
+        border = self.at_border is not None and bool(self.at_border[index].any())
+        return border or (self.masked is not None and bool(self.masked[index].any()))
+
+    def subset(self, keep: NDArray[np.bool_]) -> Blobs:
+        """The blobs where ``keep``."""
+
+        def pick(values: NDArray[Any] | None) -> NDArray[Any] | None:
+            return None if values is None else values[keep]
+
+        return Blobs(
+            self.centres[keep],
+            self.areas[keep],
+            self.peaks[keep],
+            self.saturated[keep],
+            pick(self.at_border),
+            pick(self.masked),
+            pick(self.lengths),
+            pick(self.backgrounds),
+            pick(self.contrast),
+        )
+
+
+#: A blob of at most this fraction of the area of a blob it touches is a fringe of that blob.
+FRINGE_AREA = 0.1
+#: Blobs touch when they are closer than their radii (from their areas) plus this, px.
+TOUCH_PX = 2.0
+
+
+def touching(centres: FloatArray, areas: NDArray[np.int64]) -> NDArray[np.bool_]:
+    """(N, N) which blobs touch or overlap: closer than their radii (from their areas) plus TOUCH_PX (the diagonal
+    True)."""
+    gaps = np.linalg.norm(centres[:, None] - centres[None], axis=-1)
+    radii = np.sqrt(areas / np.pi)
+    return np.asarray(gaps < radii[:, None] + radii[None, :] + TOUCH_PX)
+
+
+def fringes(centres: FloatArray, areas: NDArray[np.int64]) -> NDArray[np.bool_]:
+    """(N,) blobs that are fringes of a larger blob they touch (FRINGE_AREA)."""
+    return np.asarray((touching(centres, areas) & (areas[:, None] <= FRINGE_AREA * areas[None, :])).any(axis=1))
+
+
+NO_BLOBS = Blobs(np.zeros((0, 2)), np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros(0, dtype=bool))
 
 
 def to_gray(image: NDArray[Any], encoding: str) -> NDArray[Any]:
@@ -114,60 +167,86 @@ def to_gray(image: NDArray[Any], encoding: str) -> NDArray[Any]:
     return array if array.dtype in (np.uint8, np.uint16) else array.astype(np.float32)
 
 
-def find_blobs(gray: NDArray[Any], options: BlobOptions = BlobOptions(), *, saturation: float = 255.0) -> Blobs:
+def saturation_of(gray: NDArray[Any]) -> float:
+    """The largest value an image of this dtype holds (what a saturated pixel reads)."""
+    return float(np.iinfo(gray.dtype).max) if gray.dtype.kind == "u" else 255.0
+
+
+def find_blobs(
+    gray: NDArray[Any],
+    options: BlobOptions = BlobOptions(),
+    *,
+    saturation: float | None = None,
+    mask: NDArray[np.uint8] | None = None,
+    background: Background | None = None,
+) -> Blobs:
     """Bright blobs of a grey image (see the module docstring).
 
     Args:
-        gray: (H, W) single-channel image (any numeric dtype).
+        gray: (H, W) uint8 or uint16 image.
         options: thresholds and gates.
-        saturation: the image's maximum value (255 for 8 bit, 65535 for 16 bit).
+        saturation: the value of a saturated pixel (default: the dtype's maximum; 65535 for a 12-bit camera's
+            mono16 scaled to 16 bits).
+        mask: (H, W) uint8, non-zero where pixels are ignored (lamps, windows), or None.
+        background: the image's background (:func:`~wand_calib_ros.detection.background.estimate_background`;
+            a recent image's will do: it changes slowly), or None: estimated here.
     """
+    if gray.dtype not in (np.uint8, np.uint16):
+        gray = np.clip(np.round(gray), 0, 65535).astype(np.uint16)
     height, width = gray.shape
-    # Background and noise from a sparse sample of pixels (fast and robust: LEDs cover few pixels).
-    sample = gray[:: max(1, height // 32), :: max(1, width // 32)].astype(np.float64)
-    background = float(np.median(sample))
-    noise = max(1.4826 * float(np.median(np.abs(sample - background))), 0.5)
-    peak = float(cv2.minMaxLoc(gray)[1] if gray.dtype == np.uint8 else gray.max()) - background
-    empty = Blobs(np.zeros((0, 2)), np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros(0, dtype=bool))
-    if peak <= options.noise_sigmas * noise:
-        return empty
-    threshold = background + max(options.noise_sigmas * noise, options.peak_fraction * peak)
-    if gray.dtype == np.uint8:  # OpenCV's threshold is several times faster than numpy on 8 bit
-        mask = cv2.threshold(gray, float(np.floor(threshold)), 1, cv2.THRESH_BINARY)[1]
-    else:
-        mask = (gray > threshold).astype(np.uint8)
+    full = saturation_of(gray) if saturation is None else saturation
+    if background is None or background.threshold.shape != gray.shape or background.threshold.dtype != gray.dtype:
+        background = estimate_background(gray, options.background)
+    above = cv2.compare(gray, background.threshold, cv2.CMP_GT)
+    if mask is not None:
+        above = cv2.subtract(above, mask)
     # External contours of a sparse mask are much cheaper than labelling the whole image.
-    contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
-    centres, areas, peaks, saturated, at_border = [], [], [], [], []
+    contours, _ = cv2.findContours(above, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+    rows: list[tuple[float, ...]] = []
     w = options.window
     for contour in contours:
         x, y, bw, bh = cv2.boundingRect(contour)
-        area = int(mask[y : y + bh, x : x + bw].sum())
+        if bw * bh < options.min_area:
+            continue
+        area = cv2.countNonZero(above[y : y + bh, x : x + bw])
         if not (options.min_area <= area <= options.max_area):
             continue
         x0, y0 = max(x - w, 0), max(y - w, 0)
         x1, y1 = min(x + bw + w, width), min(y + bh + w, height)
         window = gray[y0:y1, x0:x1].astype(np.float64)
-        weights = np.clip(window - (background + 0.5 * options.noise_sigmas * noise), 0.0, None)
-        total = float(weights.sum())
-        if total <= 0:
+        centre_tile = background.at(np.array([[x + bw / 2.0, y + bh / 2.0]]))
+        threshold = float(background.threshold[min(y + bh // 2, height - 1), min(x + bw // 2, width - 1)])
+        contrast = max(threshold - float(centre_tile[0][0]), 1.0)
+        spot = spot_centre(window, 0.5 * contrast)
+        if spot is None:
             continue
-        centres.append(
-            [
-                float(weights.sum(axis=0) @ np.arange(x0, x1)) / total,
-                float(weights.sum(axis=1) @ np.arange(y0, y1)) / total,
-            ]
+        touches = mask is not None and bool(mask[max(y - 1, 0) : y + bh + 1, max(x - 1, 0) : x + bw + 1].any())
+        rows.append(
+            (
+                x0 + spot.u,
+                y0 + spot.v,
+                area,
+                spot.peak,
+                float(window.max() >= full),
+                float(x == 0 or y == 0 or x + bw == width or y + bh == height),
+                float(touches),
+                spot.length_px,
+                spot.background,
+                contrast,
+            )
         )
-        areas.append(area)
-        peaks.append(float(window.max()) - background)
-        saturated.append(bool(window.max() >= saturation))
-        at_border.append(x == 0 or y == 0 or x + bw == width or y + bh == height)
-    if not centres:
-        return empty
+    if not rows:
+        return NO_BLOBS
+    table = np.array(rows, dtype=np.float64)
+    table = table[~fringes(table[:, :2], table[:, 2].astype(np.int64))]
     return Blobs(
-        np.array(centres, dtype=np.float64),
-        np.array(areas, dtype=np.int64),
-        np.array(peaks, dtype=np.float64),
-        np.array(saturated, dtype=bool),
-        np.array(at_border, dtype=bool),
+        table[:, :2].copy(),
+        table[:, 2].astype(np.int64),
+        table[:, 3].copy(),
+        table[:, 4] > 0,
+        table[:, 5] > 0,
+        table[:, 6] > 0,
+        table[:, 7].copy(),
+        table[:, 8].copy(),
+        table[:, 9].copy(),
     )

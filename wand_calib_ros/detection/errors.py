@@ -15,3 +15,7 @@ class ImageError(DetectionError):
 
 class UnsupportedWandError(DetectionError):
     """A wand the LED detector cannot find (it finds the paper's three collinear LEDs)."""
+
+
+class MaskError(DetectionError):
+    """A mask that cannot be used (not an image, not the camera's size)."""

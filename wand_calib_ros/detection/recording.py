@@ -1,11 +1,20 @@
-"""From a stream of camera images to wand observations: detect, track labels, group by time.
+"""From a stream of camera images to wand observations: the detector's pipeline, per camera.
 
-Each camera's images go through a :class:`CameraStream` (blobs, wand, labels).
-An ambiguous A/C labelling is settled by continuity with a neighbouring
-detection in time (before or after it), otherwise the view is rejected as
-"ambiguous" rather than risk swapped labels. For recordings, images of
-different cameras are grouped into frames by nearest stamps, with the same
-synchroniser the live collector uses.
+Each camera's images go through a :class:`CameraStream`:
+
+1. the grey image (:func:`~wand_calib_ros.detection.blobs.to_gray`);
+2. its local background and noise (:mod:`~wand_calib_ros.detection.background`, refreshed every
+   BACKGROUND_REFRESH images: a room's background changes slowly);
+3. the blobs that stand out of it, outside the camera's mask (the user's and the learned lights',
+   :mod:`~wand_calib_ros.detection.masks`), with their centres (:mod:`~wand_calib_ros.detection.centres`);
+4. the wand among the blobs that may be part of it (not still lights), preferring the triple that
+   continues the camera's track (:mod:`~wand_calib_ros.detection.wand`);
+5. the track: views confirmed once it moved, labels decided by its votes
+   (:mod:`~wand_calib_ros.detection.tracking`); the static lights learned from what is left.
+
+An ambiguous A/C labelling is settled by the track, otherwise the view is rejected as
+"ambiguous" rather than risk swapped labels. For recordings, images of different cameras are
+grouped into frames by nearest stamps, with the same synchroniser the live collector uses.
 """
 
 from __future__ import annotations
@@ -23,20 +32,18 @@ from wand_calib_ros.core.initialise.intrinsics_init import nominal_bearings
 from wand_calib_ros.core.model.bearings import BearingTable
 from wand_calib_ros.core.model.camera_model import CameraModel
 from wand_calib_ros.core.model.rig import CameraSpec, RigSpec, WandObservations
+from wand_calib_ros.detection.background import Background, estimate_background
 from wand_calib_ros.detection.blobs import BlobOptions, Blobs, find_blobs, to_gray
 from wand_calib_ros.detection.errors import ImageError
-from wand_calib_ros.detection.wand import (
-    WandDetection,
-    WandOptions,
-    identify_wand,
-    resolve_with_previous,
-)
+from wand_calib_ros.detection.masks import Mask, StaticSources
+from wand_calib_ros.detection.tracking import Released, StreamLabeller
+from wand_calib_ros.detection.wand import WandDetection, WandOptions, identify_wand
 from wand_calib_ros.io.bags import ImageFrame
 
-#: Detections further apart in time than this do not belong to one continuity track.
-TRACK_GAP_NS = 200_000_000
-#: A track's labels are decided once its votes (log image ratios) add up to log(ANCHOR_RATIO).
-ANCHOR_RATIO = 1.5
+#: A camera's background is estimated again every this many images.
+BACKGROUND_REFRESH = 8
+#: The value a saturated pixel of each encoding reads (a 12-bit camera's mono16 is scaled to 16 bits).
+SATURATION = {"mono16": 65520.0}
 
 
 class Detections(NamedTuple):
@@ -48,11 +55,13 @@ class Detections(NamedTuple):
         ambiguous: (frame id, camera, (3, 2) points in either order, stamp in s) of views whose
             A/C labels neither the image nor time settled; other cameras can (see
             :func:`wand_calib_ros.detection.consistency.label_across_cameras`).
+        tracks: (F, C) the camera's track of each view (-1: no view): views of one track were labelled together.
     """
 
     observations: WandObservations
     stats: dict[str, CameraStats]
     ambiguous: list[tuple[int, str, NDArray[np.float64], float]]
+    tracks: NDArray[np.int64]
 
 
 @dataclass
@@ -70,11 +79,12 @@ def detect_image(
     blob_options: BlobOptions,
     wand_options: WandOptions,
     model: CameraModel | BearingTable | None,
+    mask: Mask | None = None,
 ) -> tuple[Blobs, WandDetection]:
-    """Blobs and wand of one decoded image (ImageError for unusable images)."""
+    """Blobs and wand of one decoded image on its own, with no track or learned lights (ImageError for
+    unusable images)."""
     gray = to_gray(image, encoding)
-    saturation = 65535.0 if encoding == "mono16" else 255.0
-    blobs = find_blobs(gray, blob_options, saturation=saturation)
+    blobs = find_blobs(gray, blob_options, saturation=SATURATION.get(encoding, 255.0), mask=mask)
     return blobs, identify_wand(blobs, wand_options, model)
 
 
@@ -86,18 +96,20 @@ class Labelled(NamedTuple):
         points: (3, 2) pixels of A, B, C, or None (no wand, or A and C could not be told apart).
         unsettled: (3, 2) the wand's ends and middle in either order when only the A/C labels were
             missing (other cameras may settle them), else None.
+        track: the camera's track the view belongs to (-1: none): its views' labels stand or fall together.
     """
 
     stamp_ns: int
     points: NDArray[np.float64] | None
     unsettled: NDArray[np.float64] | None = None
+    track: int = -1
 
 
 class CameraStream:
-    """One camera's images in, labelled wand points out: detection, then a :class:`StreamLabeller`.
+    """One camera's images in, labelled wand points out (see the module docstring).
 
     Feed images in time order with :meth:`push` (or :meth:`detect` and :meth:`label` to see each
-    image's blobs); results come out in time order, ambiguous ones up to ``max_hold_ns`` late.
+    image's blobs); results come out in time order, held ones up to ``max_hold_ns`` late.
     ``stats`` counts images, labelled wands and rejections by reason.
     """
 
@@ -108,26 +120,68 @@ class CameraStream:
         blob_options: BlobOptions = BlobOptions(),
         *,
         max_hold_ns: int | None = 1_000_000_000,
+        mask: Mask | None = None,
     ) -> None:
         self.spec = spec
         self.wand_options = wand_options
         self.blob_options = blob_options
         self.model = nominal_bearings(spec)
         self.labeller = StreamLabeller(max_hold_ns)
+        self.sources = StaticSources(spec.image_size)
+        self.given_mask = mask
         self.stats = CameraStats()
+        self._background: Background | None = None
+        self._since_background = 0
+        self._mask: Mask | None = mask
         self._pending: deque[WandDetection] = deque()  # pushed, not yet released (release keeps the order)
 
-    def detect(self, image: NDArray[Any], encoding: str) -> tuple[Blobs | None, WandDetection | None, str | None]:
-        """Blobs, wand and rejection reason (None when the wand was found) of one image."""
+    @property
+    def mask(self) -> Mask | None:
+        """What the detector ignores: the user's mask and the learned lights'."""
+        return self._mask
+
+    def detect(
+        self, image: NDArray[Any], encoding: str, stamp_ns: int
+    ) -> tuple[Blobs | None, WandDetection | None, str | None]:
+        """Blobs, wand and rejection reason (None when the wand was found) of one image at ``stamp_ns``."""
         self.stats.images += 1
         height, width = image.shape[:2]
         if (width, height) != self.spec.image_size:
             return None, None, "wrong_size"
         try:
-            blobs, detection = detect_image(image, encoding, self.blob_options, self.wand_options, self.model)
+            gray = to_gray(image, encoding)
         except ImageError:
             return None, None, "bad_image"
+        background = self._background_of(gray)
+        blobs = find_blobs(
+            gray, self.blob_options, saturation=SATURATION.get(encoding, 255.0), mask=self._mask, background=background
+        )
+        prediction = self.labeller.predict(stamp_ns)
+        claimed = np.zeros(blobs.centres.shape[0], dtype=bool)
+        if prediction is not None and prediction.moved and blobs.centres.size:
+            gaps = np.linalg.norm(blobs.centres[:, None] - prediction.points[None], axis=-1).min(axis=1)
+            claimed = gaps <= prediction.gate_px
+        usable = ~self.sources.still(blobs)  # (the wand's own blobs are never learned: it cannot be still)
+        near = None if prediction is None else (prediction.points, prediction.gate_px)
+        detection = identify_wand(blobs, self.wand_options, self.model, usable=usable, near=near)
+        if detection.points is not None and prediction is not None and prediction.moved and blobs.centres.size:
+            gaps = np.linalg.norm(blobs.centres[:, None] - detection.points[None], axis=-1).min(axis=1)
+            claimed |= gaps < 1e-6
+        standing_out = self.sources.centres_standing_out(gray, background.threshold)
+        if self.sources.observe(stamp_ns, blobs, claimed, standing_out):  # the mask changed
+            learned, given = self.sources.mask, self.given_mask
+            self._mask = learned if given is None else np.maximum(given, learned).astype(np.uint8)
         return blobs, detection, detection.reason if detection.points is None else None
+
+    def _background_of(self, gray: NDArray[Any]) -> Background:
+        """The background, estimated again every BACKGROUND_REFRESH images (or when the image changed kind)."""
+        current = self._background
+        stale = self._since_background >= BACKGROUND_REFRESH
+        if current is None or stale or current.threshold.shape != gray.shape or current.threshold.dtype != gray.dtype:
+            self._background, self._since_background = estimate_background(gray, self.blob_options.background), 0
+        self._since_background += 1
+        assert self._background is not None
+        return self._background
 
     def label(self, stamp_ns: int, detection: WandDetection | None, reason: str | None) -> list[Labelled]:
         """Hand one image's detection to the labeller; returns the outcomes it releases."""
@@ -142,23 +196,26 @@ class CameraStream:
 
     def push(self, stamp_ns: int, image: NDArray[Any], encoding: str) -> list[Labelled]:
         """:meth:`detect` then :meth:`label`."""
-        _, detection, reason = self.detect(image, encoding)
+        _, detection, reason = self.detect(image, encoding, stamp_ns)
         return self.label(stamp_ns, detection, reason)
 
     def flush(self) -> list[Labelled]:
         """Release what the labeller holds back (unsettled)."""
         return self._released(self.labeller.flush())
 
-    def _released(self, results: list[tuple[int, NDArray[np.float64] | None]]) -> list[Labelled]:
+    def _released(self, results: list[Released]) -> list[Labelled]:
         out = []
-        for stamp, points in results:
+        for stamp, points, reason, track in results:
             detection = self._pending.popleft()
-            if points is None:
-                self.stats.rejected["ambiguous"] += 1
-                out.append(Labelled(stamp, None, detection.points))
-            else:
+            if points is not None:
                 self.stats.detected += 1
-                out.append(Labelled(stamp, points))
+                out.append(Labelled(stamp, points, None, track))
+            elif reason == "ambiguous":
+                self.stats.rejected["ambiguous"] += 1
+                out.append(Labelled(stamp, None, detection.points, track))
+            else:
+                self.stats.rejected[reason or "no_wand"] += 1
+                out.append(Labelled(stamp, None))
         return out
 
 
@@ -189,7 +246,7 @@ def detect_recording(
     outcomes: list[tuple[str, Labelled]] = []
     for frame in sorted(frames, key=lambda f: f.stamp_ns):
         stream = streams[frame.camera]
-        blobs, detection, reason = stream.detect(frame.image, frame.encoding)
+        blobs, detection, reason = stream.detect(frame.image, frame.encoding, frame.stamp_ns)
         if inspect is not None:
             inspect(frame, blobs, detection, reason)
         outcomes += [(frame.camera, out) for out in stream.label(frame.stamp_ns, detection, reason)]
@@ -206,82 +263,10 @@ def detect_recording(
         for camera, out in outcomes
         if out.unsettled is not None and (index[camera], out.stamp_ns) in frame_of
     ]
+    tracks = np.full((len(grouped), len(rig.camera_names)), -1, dtype=np.int64)
+    for camera, out in outcomes:
+        row = frame_of.get((index[camera], out.stamp_ns))
+        if out.points is not None and row is not None:
+            tracks[row, index[camera]] = out.track
     stats = {name: stream.stats for name, stream in streams.items()}
-    return Detections(observations, stats, ambiguous)
-
-
-class StreamLabeller:
-    """Labels one camera's wand detections as they come: continuity tracks, then a vote per track.
-
-    Consecutive detections at most TRACK_GAP_NS apart whose ends continuity pairs up clearly
-    (:func:`resolve_with_previous`) form a track; within a track the A/C labels can only all be
-    right or all be swapped. Each detection votes for its own order with log(|AB|/|BC|) in the
-    image (near 0 for ambiguous images), and the track takes the order the votes favour once
-    they sum to at least log(ANCHOR_RATIO) either way. One image's ratio alone can mislead:
-    when the wand points towards the camera, perspective shrinks the far segment until the
-    image ratio favours the wrong order for a stretch of frames; the rest of the track outvotes
-    that stretch.
-
-    Live, a track's detections are held until ``max_hold_ns`` after its first one (or until the
-    track ends), then decided and released; later ones of a decided track are released at once.
-    Held detections the vote cannot decide come out unsettled (None). Results come out in time
-    order. With ``max_hold_ns=None`` every track is decided on all its detections (recordings).
-    """
-
-    def __init__(self, max_hold_ns: int | None = 1_000_000_000) -> None:
-        self.max_hold_ns = max_hold_ns
-        self._held: list[tuple[int, NDArray[np.float64], float]] = []  # stamp, points in track order, vote
-        self._last: tuple[int, NDArray[np.float64]] | None = None  # newest stamp and points in track order
-        self._vote = 0.0
-        self._forward: bool | None = None  # None: undecided; True: the track order is A, B, C
-
-    def push(self, stamp_ns: int, detection: WandDetection) -> list[tuple[int, NDArray[np.float64] | None]]:
-        """Add a detection (in time order); returns the (stamp, A B C or None) results it releases."""
-        assert detection.points is not None
-        released: list[tuple[int, NDArray[np.float64] | None]] = []
-        linked = None
-        if self._last is not None and stamp_ns - self._last[0] <= TRACK_GAP_NS:
-            linked = resolve_with_previous(detection, self._last[1])
-        chosen = detection.points if linked is None or linked.ambiguous else linked.points
-        if linked is None or linked.ambiguous:
-            released += self.flush()
-        assert chosen is not None
-        points: NDArray[np.float64] = chosen
-        same = bool(np.array_equal(points, detection.points))
-        vote = float(np.clip(np.log(max(detection.image_ratio, 1e-6)), -1.0, 1.0)) * (1.0 if same else -1.0)
-        self._vote += vote
-        self._last = (stamp_ns, points)
-        if self._forward is not None:
-            released.append((stamp_ns, points if self._forward else points[::-1].copy()))
-            return released
-        self._held.append((stamp_ns, points, vote))
-        if self.max_hold_ns is not None and stamp_ns - self._held[0][0] >= self.max_hold_ns:
-            released += self._decide()
-        return released
-
-    def flush(self) -> list[tuple[int, NDArray[np.float64] | None]]:
-        """End the current track: decide and release what it holds (end of a recording, /calibrate)."""
-        released = self._decide()
-        self._held, self._last, self._vote, self._forward = [], None, 0.0, None
-        return released
-
-    def _decide(self) -> list[tuple[int, NDArray[np.float64] | None]]:
-        released: list[tuple[int, NDArray[np.float64] | None]]
-        if abs(self._vote) >= np.log(ANCHOR_RATIO):
-            self._forward = self._vote > 0
-            forward = self._forward
-            released = [(stamp, points if forward else points[::-1].copy()) for stamp, points, _ in self._held]
-        else:  # too little evidence so far: release unsettled, keep voting on what follows
-            released = [(stamp, None) for stamp, _, _ in self._held]
-        self._held = []
-        return released
-
-
-def track_labels(sequence: list[tuple[int, WandDetection]]) -> list[NDArray[np.float64] | None]:
-    """A, B, C of each detection of one camera of a recording (None where the vote cannot decide).
-
-    A :class:`StreamLabeller` that holds each track until it ends.
-    """
-    labeller = StreamLabeller(max_hold_ns=None)
-    released = [labels for stamp, detection in sequence for _, labels in labeller.push(stamp, detection)]
-    return released + [labels for _, labels in labeller.flush()]
+    return Detections(observations, stats, ambiguous, tracks[observations.frames])

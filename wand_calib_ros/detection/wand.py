@@ -7,7 +7,12 @@ within the tolerance is accepted) and by how far its image ratio |AB|/|BC| is
 from the wand's; perspective changes that ratio, so it only breaks ties. The
 end farther from B is A. When the image ratio is close to 1 (the wand points
 steeply towards the camera) the labels are ambiguous: the detection says so
-and a tracker or another camera has to decide (:func:`resolve_with_previous`).
+and a tracker or another camera has to decide (:mod:`wand_calib_ros.detection.tracking`).
+
+With a track's prediction (where the wand was heading in this camera), the triples near it
+are preferred: a lamp that lines up with two LEDs, or another wand-like triple elsewhere,
+does not compete with the one that continues the track. Blobs that may not be part of a
+wand (still lights, learned or not yet) are left out by the caller (``usable``).
 """
 
 from __future__ import annotations
@@ -21,13 +26,20 @@ from numpy.typing import NDArray
 from wand_calib_ros.core.model.bearings import BearingTable
 from wand_calib_ros.core.model.camera_model import CameraModel, unproject
 from wand_calib_ros.core.model.rig import RigSpec, WandSpec
-from wand_calib_ros.detection.blobs import Blobs
+from wand_calib_ros.detection.blobs import Blobs, touching
 from wand_calib_ros.detection.errors import UnsupportedWandError
 
 FloatArray = NDArray[np.float64]
 
 #: Reasons a frame gives no wand (counted per camera by ``wand-calib detect``).
 REASONS = ("no_blobs", "too_few_blobs", "not_collinear", "competing_triples", "at_border")
+
+
+def distance_to(points: FloatArray, prediction: FloatArray) -> float:
+    """The largest distance (px) of a view's points from a prediction's, in the nearer of the two orders."""
+    straight = float(np.max(np.linalg.norm(points - prediction, axis=1)))
+    swapped = float(np.max(np.linalg.norm(points[::-1] - prediction, axis=1)))
+    return min(straight, swapped)
 
 
 @dataclass(frozen=True)
@@ -149,7 +161,12 @@ def _score(
 
 
 def identify_wand(
-    blobs: Blobs, options: WandOptions = WandOptions(), model: CameraModel | BearingTable | None = None
+    blobs: Blobs,
+    options: WandOptions = WandOptions(),
+    model: CameraModel | BearingTable | None = None,
+    *,
+    usable: NDArray[np.bool_] | None = None,
+    near: tuple[FloatArray, float] | None = None,
 ) -> WandDetection:
     """The most wand-like collinear triple among the blobs (see the module docstring), else a floor
     tool's view when ``options.tool_markers`` says the rig has one and the image holds that many blobs.
@@ -159,8 +176,13 @@ def identify_wand(
         options: tolerances.
         model: the camera's (nominal or calibrated) model, or its BearingTable: collinearity is
             then tested on the unit sphere, which keeps fisheye images of the wand straight.
+        usable: (N,) the blobs that may be part of the wand (None: all).
+        near: (points (3, 2), gate px) a track's prediction: a triple within the gate of it wins over
+            the others; two within it make the image ambiguous.
     """
-    found = _find_wand(blobs, options, model)
+    if usable is not None and not usable.all():
+        blobs = blobs.subset(usable)
+    found = _find_wand(blobs, options, model, near)
     n = blobs.centres.shape[0]
     if found.points is not None or not options.tool_markers or n != options.tool_markers:
         return found
@@ -171,7 +193,12 @@ def identify_wand(
     return WandDetection(points, 1.0, None, tool=True)
 
 
-def _find_wand(blobs: Blobs, options: WandOptions, model: CameraModel | BearingTable | None) -> WandDetection:
+def _find_wand(
+    blobs: Blobs,
+    options: WandOptions,
+    model: CameraModel | BearingTable | None,
+    near: tuple[FloatArray, float] | None = None,
+) -> WandDetection:
     """The most wand-like collinear triple among the blobs (see the module docstring)."""
     n = blobs.centres.shape[0]
     if n == 0:
@@ -189,13 +216,19 @@ def _find_wand(blobs: Blobs, options: WandOptions, model: CameraModel | BearingT
         bearings = model(blobs.centres)
     else:
         bearings = unproject(model, blobs.centres)
+    merged = touching(blobs.centres, blobs.areas)  # two halves of one spot, or two spots merged: never two LEDs
     for triple in itertools.combinations(range(n), 3):
         index = list(triple)
+        if merged[np.ix_(index, index)][np.triu_indices(3, 1)].any():
+            continue
         outcome = _score(blobs.centres[index], options, None if bearings is None else bearings[index])
         if outcome is not None:
             scored.append((*outcome, index))
     if not scored:
         return WandDetection(None, 0.0, "not_collinear")
+    if near is not None:  # the triples that continue the track, if any, compete only among themselves
+        continuing = [s for s in scored if distance_to(s[1], near[0]) <= near[1]]
+        scored = continuing or scored
     scored.sort(key=lambda s: float(s[0]))
     best = scored[0]
     if len(scored) > 1 and scored[1][0] < options.competing_margin * best[0] + 0.05:
@@ -299,24 +332,3 @@ def _marker_pattern(blobs: Blobs, options: WandOptions, bearings: FloatArray | N
     if blobs.cut(list(index)):
         return WandDetection(None, 0.0, "at_border")
     return WandDetection(points, float(1.0 / (1.0 + error)), None)
-
-
-#: Continuity settles a labelling only when one order is this much closer to the previous frame than the other.
-CONTINUITY_MARGIN = 0.5
-
-
-def resolve_with_previous(detection: WandDetection, previous: FloatArray | None) -> WandDetection:
-    """Label a detection by continuity with a neighbouring frame's A, B, C.
-
-    The order (A, B, C) or (C, B, A) nearer to the neighbour's points wins when it
-    is clearly nearer (CONTINUITY_MARGIN); otherwise (the wand turned through the
-    line of sight between the frames) the detection stays ambiguous.
-    """
-    if detection.points is None or previous is None:
-        return detection
-    straight = np.linalg.norm(detection.points - previous, axis=1).sum()
-    swapped = np.linalg.norm(detection.points[::-1] - previous, axis=1).sum()
-    if min(straight, swapped) > CONTINUITY_MARGIN * max(straight, swapped):
-        return WandDetection(detection.points, detection.quality, None, True, detection.image_ratio)
-    points = detection.points if straight <= swapped else detection.points[::-1].copy()
-    return WandDetection(points, detection.quality, None, False, detection.image_ratio)

@@ -223,7 +223,9 @@ class CollectorNode(Node):
     def _on_image(self, camera: str, message: Image) -> None:
         stream = self.streams[camera]
         try:
-            _, detection, reason = stream.detect(image_array(message), message.encoding)
+            _, detection, reason = stream.detect(
+                image_array(message), message.encoding, messages.stamp_ns(message.header)
+            )
         except ValueError:
             detection, reason = None, "bad_image"
         with self.lock:

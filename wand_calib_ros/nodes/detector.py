@@ -73,7 +73,9 @@ class DetectorNode(Node):
     def _on_image(self, message: Image) -> None:
         self.frame_id = message.header.frame_id or self.frame_id
         try:
-            _, detection, reason = self.stream.detect(image_array(message), message.encoding)
+            _, detection, reason = self.stream.detect(
+                image_array(message), message.encoding, messages.stamp_ns(message.header)
+            )
         except ValueError:
             detection, reason = None, "bad_image"
         self._publish(self.stream.label(messages.stamp_ns(message.header), detection, reason))

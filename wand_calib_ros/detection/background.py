@@ -1,0 +1,139 @@
+"""The local background of an image and its noise: where a pixel stands out.
+
+A room's images are not a dark field with spots: a wall lit unevenly, a window, the halo of
+a lamp. A threshold that follows the brightest pixel (a lamp sets it) loses LEDs that are
+10-20 grey levels above a dark wall. Here each region's threshold is its own background
+plus a few times its own noise:
+
+- the background is measured on every STEP-th pixel of every STEP-th row, as the median of
+  SPOT_SAMPLES x SPOT_SAMPLES samples (spots narrower than about half that, LEDs and lamps, do
+  not raise it; a window does), then widened to the largest of its neighbours so that the
+  soft edge of a bright area stays below its own threshold;
+- the noise grows with the signal (shot noise): its variance is fitted as a + b x level to
+  tiles of the samples (the lower half of their squared differences of neighbouring samples,
+  so that edges crossing a tile do not count), so a bright window's noise does not make
+  blobs while a dark wall's threshold stays low;
+- the threshold image is the background plus max(noise_sigmas x noise, min_contrast),
+  bilinear between the samples.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+
+#: Samples are every STEP-th pixel of every STEP-th row.
+STEP = 4
+#: The background is the median of this many samples square (the largest median filter OpenCV has for 16 bits).
+SPOT_SAMPLES = 5
+#: Tiles of this many samples square estimate the noise.
+TILE_SAMPLES = 8
+#: The mean of the lower half of TILE_SAMPLES^2 draws of a chi-square with one degree of freedom (measured over
+#: 2e7 tiles): a tile's differences of neighbouring samples, squared, average this times their variance over
+#: their lower half, whatever edges (a window's frame, a bar) cross the other half.
+LOWER_HALF_MEAN = 0.1509
+
+
+@dataclass(frozen=True)
+class BackgroundOptions:
+    """Where a pixel stands out.
+
+    Attributes:
+        noise_sigmas: a blob pixel stands this many noise standard deviations above its background ...
+        min_contrast: ... and at least this many grey levels (of an 8-bit image; scaled for 16-bit images).
+    """
+
+    noise_sigmas: float = 4.0
+    min_contrast: float = 5.0
+
+
+@dataclass(frozen=True, eq=False)
+class Background:
+    """An image's local background and noise.
+
+    Attributes:
+        level: (H / step, W / step) the background at every step-th pixel, grey levels.
+        noise: (H / step, W / step) the noise standard deviation there, grey levels.
+        threshold: (H, W) the full image's threshold (the image's dtype): a pixel above it stands out.
+        step: the samples' spacing, px (STEP; 1 for an image too small to sample).
+    """
+
+    level: FloatArray
+    noise: FloatArray
+    threshold: NDArray[Any]
+    step: int = STEP
+
+    def at(self, uv: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """(N,) background level and noise at (N, 2) pixels (their nearest samples')."""
+        rows = np.clip(np.round(uv[:, 1] / self.step).astype(int), 0, self.level.shape[0] - 1)
+        cols = np.clip(np.round(uv[:, 0] / self.step).astype(int), 0, self.level.shape[1] - 1)
+        return self.level[rows, cols], self.noise[rows, cols]
+
+
+def _noise_model(level: FloatArray, variance: FloatArray) -> tuple[float, float]:
+    """(a, b) of variance = a + b x level fitted to tiles (a, b >= 0), by least squares that drop, three times
+    over, the tiles more than three times above the fit (a lamp or an LED in the tile, a textured window)."""
+    x, y = level.ravel().astype(np.float64), variance.ravel().astype(np.float64)
+    keep = np.ones(x.size, dtype=bool)
+    a, b = float(np.mean(y)), 0.0
+    for _ in range(3):
+        n = float(keep.sum())
+        if n < 2:
+            break
+        sx, sy = float(x[keep].sum()), float(y[keep].sum())
+        sxx, sxy = float(x[keep] @ x[keep]), float(x[keep] @ y[keep])
+        spread = n * sxx - sx * sx
+        b = max((n * sxy - sx * sy) / spread, 0.0) if spread > 1e-9 * max(n * sxx, 1.0) else 0.0
+        a = max((sy - b * sx) / n, 0.0)
+        keep = y <= 3.0 * (a + b * x) + 1e-6
+    return a, b
+
+
+def _tile_noise(samples: NDArray[np.float32], median: NDArray[np.float32]) -> tuple[FloatArray, FloatArray]:
+    """(level, noise variance) of tiles of TILE_SAMPLES x TILE_SAMPLES samples, every other row (enough, and half
+    the cost); one tile of all the samples when there are fewer than two tiles' worth."""
+    rows, cols = samples.shape[0] // (2 * TILE_SAMPLES), (samples.shape[1] - 1) // TILE_SAMPLES
+    if rows < 1 or cols < 1:
+        squared = np.square(samples[:, 1:] - samples[:, :-1]).reshape(1, -1)
+        levels = np.array([[float(np.median(median))]])
+    else:
+        height, width = 2 * rows * TILE_SAMPLES, cols * TILE_SAMPLES
+        squared = np.square(samples[:height:2, 1 : width + 1] - samples[:height:2, :width])
+        squared = squared.reshape(rows, TILE_SAMPLES, cols, TILE_SAMPLES).transpose(0, 2, 1, 3).reshape(rows * cols, -1)
+        levels = cv2.resize(median[:height:2, :width], (cols, rows), interpolation=cv2.INTER_AREA)
+    if squared.shape[1] < 2:
+        return np.zeros((1, 1)), np.zeros((1, 1))
+    half = squared.shape[1] // 2
+    lower = np.partition(squared, half - 1, axis=1)[:, :half].mean(axis=1)
+    # Differences of neighbouring samples (STEP px apart: independent noise) have twice the noise's variance.
+    variance = lower / (2.0 * LOWER_HALF_MEAN)
+    return levels.astype(np.float64).reshape(-1), variance.astype(np.float64)
+
+
+def estimate_background(gray: NDArray[Any], options: BackgroundOptions = BackgroundOptions()) -> Background:
+    """The local background, noise and threshold image of a grey image (see the module docstring).
+
+    Args:
+        gray: (H, W) uint8 or uint16 image.
+        options: how far above its background a pixel must be.
+    """
+    height, width = gray.shape
+    full = float(np.iinfo(gray.dtype).max)
+    scale = full / 255.0
+    step = STEP if min(height, width) >= 2 * STEP * TILE_SAMPLES else 1  # (a small image: every pixel)
+    sampled = cv2.resize(gray, (width // step, height // step), interpolation=cv2.INTER_NEAREST)
+    samples = sampled.astype(np.float32)
+    median = cv2.medianBlur(sampled, SPOT_SAMPLES).astype(np.float32)
+    level = cv2.dilate(median, np.ones((5, 5), np.uint8), borderType=cv2.BORDER_REPLICATE)
+    a, b = _noise_model(*_tile_noise(samples, median))
+    noise = np.sqrt(a + b * level)
+    contrast = np.maximum(options.noise_sigmas * noise, options.min_contrast * scale)
+    small = np.minimum(np.ceil(level + contrast), full).astype(gray.dtype)
+    threshold = cv2.resize(small, (width, height), interpolation=cv2.INTER_LINEAR)
+    return Background(level.astype(np.float64), noise.astype(np.float64), threshold, step)

@@ -1,0 +1,97 @@
+"""The centre of one LED spot: what a calibration can trust to a tenth of a pixel.
+
+A spot is measured in a window around it. Its background is a plane through the medians of
+the window's four sides (a lamp's halo or the wall's gradient under the spot, not only its
+level), and the centre is the mean of the pixels weighted by how far they stand above the
+plane beyond a floor (half the contrast that found the spot, so the noise of the window's
+dark pixels adds nothing). The weighting is symmetric, so it is exact for any symmetric
+spot: a Gaussian, a saturated flat top with its halo, or a motion streak, whose centre is
+where the LED was at mid-exposure when it moved evenly. The same moments give the streak's
+length: a uniform streak of length L has variance L^2 / 12 along it beyond the spot's own.
+An LED whose brightness changes as it moves (nearer, turning towards the camera) makes a
+streak brighter at one end, whose weighted mean lies g L / 12 towards that end for a
+brightness I0 (1 + g s / L) along it; g is measured from the weight of the streak's two
+halves and the centre moved back to the streak's middle.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+
+#: Streaks at least this long (px) have their centre corrected for a brightness that changes along them.
+MIN_STREAK_PX = 8.0
+
+
+@dataclass(frozen=True)
+class SpotCentre:
+    """One spot's measurement.
+
+    Attributes:
+        u, v: the centre in the window's pixels (column, row; OpenCV convention: a pixel's centre is integral).
+        peak: the brightest pixel above the background plane there, grey levels.
+        background: the background plane at the centre, grey levels.
+        length_px: the motion streak's length (0 for a still spot).
+    """
+
+    u: float
+    v: float
+    peak: float
+    background: float
+    length_px: float
+
+
+def side_plane(window: FloatArray) -> tuple[float, float, float]:
+    """(level at the window's centre, slope along u, slope along v) of a plane through the medians of the
+    window's four sides (grey levels, per px)."""
+    height, width = window.shape
+    left, right = np.sort(window[:, [0, -1]], axis=0)[height // 2]  # (a middle value for an even count)
+    top, bottom = np.sort(window[[0, -1]], axis=1)[:, width // 2]
+    slope_u = float(right - left) / max(width - 1, 1)
+    slope_v = float(bottom - top) / max(height - 1, 1)
+    return 0.25 * float(left + right + top + bottom), slope_u, slope_v
+
+
+def spot_centre(window: FloatArray, floor: float) -> SpotCentre | None:
+    """The centre of the spot in a window (see the module docstring), or None when nothing stands above the floor.
+
+    Args:
+        window: (h, w) pixels around the spot, at least 3x3, the spot inside and the window's sides on background.
+        floor: how far above the background plane a pixel must be to count, grey levels.
+    """
+    height, width = window.shape
+    level, slope_u, slope_v = side_plane(window)
+    cols = np.arange(width) - (width - 1) / 2.0
+    rows = np.arange(height) - (height - 1) / 2.0
+    plane = level + slope_u * cols[None, :] + slope_v * rows[:, None]
+    above = window - plane
+    weights = np.maximum(above - floor, 0.0)
+    total = float(weights.sum())
+    if total <= 0.0:
+        return None
+    along_u, along_v = weights.sum(axis=0), weights.sum(axis=1)
+    du, dv = float(along_u @ cols) / total, float(along_v @ rows) / total
+    cu, cv = cols - du, rows - dv
+    suu = float(along_u @ cu**2) / total
+    svv = float(along_v @ cv**2) / total
+    suv = float(cu @ weights.T @ cv) / total
+    spread = np.sqrt(max((suu - svv) ** 2 + 4.0 * suv**2, 0.0))  # major minus minor variance
+    length = float(np.sqrt(12.0 * spread))
+    if length >= MIN_STREAK_PX:  # the mid-exposure point of a streak whose brightness changes along it
+        angle = 0.5 * np.arctan2(2.0 * suv, suu - svv)
+        axis = np.array([np.cos(angle), np.sin(angle)])
+        along = cu[None, :] * axis[0] + cv[:, None] * axis[1]
+        ahead, behind = float(weights[along > 0].sum()), float(weights[along < 0].sum())
+        gradient = 4.0 * (ahead - behind) / max(ahead + behind, 1e-12)  # g of I0 (1 + g s / L) over the streak
+        du, dv = du - gradient * length / 12.0 * axis[0], dv - gradient * length / 12.0 * axis[1]
+    return SpotCentre(
+        du + (width - 1) / 2.0,
+        dv + (height - 1) / 2.0,
+        float(above.max()),
+        level + slope_u * du + slope_v * dv,
+        length,
+    )

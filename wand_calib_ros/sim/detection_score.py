@@ -1,0 +1,153 @@
+"""How well a detector did on rendered images: views found, false views, centres and labels against the truth."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wand_calib_ros.core.model.rig import RigSpec, WandObservations
+from wand_calib_ros.detection.consistency import settle_labels
+from wand_calib_ros.detection.recording import Detections, detect_recording
+from wand_calib_ros.io.bags import ImageFrame
+from wand_calib_ros.io.images import decode_compressed
+from wand_calib_ros.sim.room import CameraTruth, RoomRecording, clearly_visible
+
+FloatArray = NDArray[np.float64]
+
+#: A returned view is right when each of its points is within this distance of its LED's truth (px).
+RIGHT_PX = 3.0
+#: A returned view belongs to the image whose stamp is within this of its own (s).
+STAMP_MATCH_S = 1e-4
+
+
+@dataclass(frozen=True)
+class DetectionScore:
+    """Counts over the images of one or more cameras.
+
+    Attributes:
+        clearly_visible: images whose wand a detector must find (:func:`wand_calib_ros.sim.room.clearly_visible`).
+        found: of those, the ones with a right view returned (labels aside).
+        returned: views returned.
+        false: returned views with a point more than RIGHT_PX from every LED's truth in either order.
+        swapped: right views whose A and C are exchanged.
+        centre_sq_px: sum of the squared 2D errors of the right views' points, px^2.
+        centres: points in ``centre_sq_px``.
+    """
+
+    clearly_visible: int
+    found: int
+    returned: int
+    false: int
+    swapped: int
+    centre_sq_px: float
+    centres: int
+
+    @property
+    def recall(self) -> float:
+        return self.found / max(self.clearly_visible, 1)
+
+    @property
+    def false_rate(self) -> float:
+        return self.false / max(self.returned, 1)
+
+    @property
+    def labels_right(self) -> float:
+        right = self.returned - self.false
+        return (right - self.swapped) / max(right, 1)
+
+    @property
+    def centre_rms_px(self) -> float:
+        """RMS of the 2D centre error of the right views' points, px."""
+        return float(np.sqrt(self.centre_sq_px / max(self.centres, 1)))
+
+    def __add__(self, other: DetectionScore) -> DetectionScore:
+        return DetectionScore(
+            *(a + b for a, b in zip(self.counts(), other.counts(), strict=True))  # type: ignore[arg-type]
+        )
+
+    def counts(self) -> tuple[float, ...]:
+        return (
+            self.clearly_visible,
+            self.found,
+            self.returned,
+            self.false,
+            self.swapped,
+            self.centre_sq_px,
+            self.centres,
+        )
+
+
+def right_views(observations: WandObservations, truth: tuple[CameraTruth, ...]) -> NDArray[np.bool_]:
+    """(F, C) the returned views that are right (every point within RIGHT_PX of its LED in either order)."""
+    return _compare(observations, truth)[0]
+
+
+def _compare(
+    observations: WandObservations, truth: tuple[CameraTruth, ...]
+) -> tuple[NDArray[np.bool_], NDArray[np.bool_], FloatArray, list[NDArray[np.int64]]]:
+    """Per returned view: right, swapped, the 2D errors of its points in the better order, and per camera
+    the image index of each frame (-1: none)."""
+    if observations.stamps is None:
+        raise ValueError("scoring needs the views' stamps")
+    shape = observations.uv.shape[:2]
+    right = np.zeros(shape, dtype=bool)
+    swapped = np.zeros(shape, dtype=bool)
+    errors = np.full((*shape, observations.uv.shape[2]), np.nan)
+    images = []
+    for camera in truth:
+        column = observations.camera_names.index(camera.name)
+        stamps = camera.stamps_ns / 1e9
+        wanted = observations.stamps[:, column]
+        index = np.searchsorted(stamps, wanted)
+        index = np.clip(index, 1, len(stamps) - 1)
+        nearer = np.where(np.abs(stamps[index - 1] - wanted) <= np.abs(stamps[index] - wanted), index - 1, index)
+        matched = np.isfinite(wanted) & (np.abs(stamps[nearer] - np.nan_to_num(wanted)) <= STAMP_MATCH_S)
+        image = np.where(matched, nearer, -1)
+        images.append(image)
+        returned = observations.complete[:, column] & matched
+        seen = observations.uv[:, column]
+        true = camera.uv[np.maximum(image, 0)]
+        straight = np.linalg.norm(seen - true, axis=-1)
+        reverse = np.linalg.norm(seen - true[:, ::-1], axis=-1)
+        with np.errstate(invalid="ignore"):
+            straight_ok = np.all(straight <= RIGHT_PX, axis=1)
+            reverse_ok = np.all(reverse <= RIGHT_PX, axis=1)
+        right[:, column] = returned & (straight_ok | reverse_ok)
+        swapped[:, column] = returned & ~straight_ok & reverse_ok
+        errors[:, column] = np.where(swapped[:, column, None], reverse, straight)
+    return right, swapped, errors, images
+
+
+def score(observations: WandObservations, truth: tuple[CameraTruth, ...]) -> DetectionScore:
+    """The detector's views against the truth of the images they came from (matched by camera and stamp)."""
+    right, swapped, errors, images = _compare(observations, truth)
+    visible = 0
+    found = 0
+    for c, camera in enumerate(truth):
+        column = observations.camera_names.index(camera.name)
+        clear = clearly_visible(camera)
+        visible += int(clear.sum())
+        hit = images[c][right[:, column]]
+        found += int(clear[hit].sum())
+    returned = int(observations.complete.sum())
+    good = errors[right]
+    return DetectionScore(
+        visible, found, returned, returned - int(right.sum()), int(swapped.sum()), float(np.sum(good**2)), good.size
+    )
+
+
+def detect_room_recording(recording: RoomRecording, rig: RigSpec) -> tuple[WandObservations, Detections]:
+    """What ``wand-calib detect`` makes of a rendered take: its images decoded as the command decodes a bag's
+    (compressed ones included), the detector's pipeline, then the labels checked across cameras."""
+    frames = []
+    for camera, stamp, payload, encoding in recording.frames:
+        if isinstance(payload, bytes):
+            image, decoded = decode_compressed(payload, encoding)
+            frames.append(ImageFrame(camera, stamp, image, decoded))
+        else:
+            frames.append(ImageFrame(camera, stamp, payload, encoding))
+    detections = detect_recording(frames, rig)
+    observations, _ = settle_labels(rig, detections)
+    return observations, detections
