@@ -118,18 +118,22 @@ class Blobs:
         )
 
 
+#: A region's core is where it stands above its background by this fraction of its peak ...
+CORE_FRACTION = 0.25
+#: ... and a region whose peak is this many times the threshold's contrast is split where it has two cores.
+CORE_SPLIT = 4.0
 #: A blob of at most this fraction of the area of a blob it touches is a fringe of that blob.
 FRINGE_AREA = 0.1
 #: Blobs touch when they are closer than their radii (from their areas) plus this, px.
 TOUCH_PX = 2.0
 
 
-def touching(centres: FloatArray, areas: NDArray[np.int64]) -> NDArray[np.bool_]:
-    """(N, N) which blobs touch or overlap: closer than their radii (from their areas) plus TOUCH_PX (the diagonal
-    True)."""
+def touching(centres: FloatArray, areas: NDArray[np.int64], margin_px: float = TOUCH_PX) -> NDArray[np.bool_]:
+    """(N, N) which blobs touch or overlap: closer than their radii (from their areas) plus ``margin_px`` (the
+    diagonal True)."""
     gaps = np.linalg.norm(centres[:, None] - centres[None], axis=-1)
     radii = np.sqrt(areas / np.pi)
-    return np.asarray(gaps < radii[:, None] + radii[None, :] + TOUCH_PX)
+    return np.asarray(gaps < radii[:, None] + radii[None, :] + margin_px)
 
 
 def fringes(centres: FloatArray, areas: NDArray[np.int64]) -> NDArray[np.bool_]:
@@ -172,6 +176,61 @@ def saturation_of(gray: NDArray[Any]) -> float:
     return float(np.iinfo(gray.dtype).max) if gray.dtype.kind == "u" else 255.0
 
 
+def _measure(
+    gray: NDArray[Any],
+    box: tuple[int, int, int, int],
+    area: int,
+    background: Background,
+    options: BlobOptions,
+    full: float,
+    mask: NDArray[np.uint8] | None,
+) -> list[tuple[float, ...]]:
+    """The blob (or blobs) of one connected region above the threshold: (u, v, area, peak, saturated, at border,
+    masked, streak length, background, contrast) each.
+
+    A bright region is looked at again at CORE_FRACTION of its own peak: two cores there are two spots that touch
+    at the low threshold (two LEDs close together), each measured on its own core; the core, not the faint
+    halo, tells whether the spot is cut by the image border."""
+    height, width = gray.shape
+    x, y, bw, bh = box
+    w = options.window
+    x0, y0 = max(x - w, 0), max(y - w, 0)
+    x1, y1 = min(x + bw + w, width), min(y + bh + w, height)
+    window = gray[y0:y1, x0:x1].astype(np.float64)
+    level = float(background.at(np.array([[x + bw / 2.0, y + bh / 2.0]]))[0][0])
+    threshold = float(background.threshold[min(y + bh // 2, height - 1), min(x + bw // 2, width - 1)])
+    contrast = max(threshold - level, 1.0)
+    peak = float(window.max()) - level
+    core = (window > level + CORE_FRACTION * peak).astype(np.uint8)
+    cores, _ = cv2.findContours(core, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+    whole: tuple[int, int, int, int] = tuple(cv2.boundingRect(core))  # type: ignore[assignment]
+    parts: list[tuple[NDArray[np.bool_] | None, tuple[int, int, int, int]]] = [(None, whole)]
+    if peak >= CORE_SPLIT * contrast and len(cores) >= 2:
+        parts = []
+        for outline in cores:
+            if cv2.contourArea(outline) < options.min_area:
+                continue
+            drawn = np.zeros_like(core)
+            cv2.drawContours(drawn, [outline], -1, 1, -1)
+            region = np.asarray(cv2.dilate(drawn, np.ones((3, 3), np.uint8)) > 0)
+            parts.append((region, tuple(cv2.boundingRect(outline))))  # type: ignore[arg-type]
+    touches = mask is not None and bool(mask[max(y - 1, 0) : y + bh + 1, max(x - 1, 0) : x + bw + 1].any())
+    measured: list[tuple[float, ...]] = []
+    for part, (cx, cy, cw, ch) in parts:
+        floor = 0.5 * contrast if part is None else CORE_FRACTION * peak
+        spot = spot_centre(window, floor, part)
+        if spot is None:
+            continue
+        cut = x0 + cx == 0 or y0 + cy == 0 or x0 + cx + cw == width or y0 + cy + ch == height
+        size = area if part is None else int(part.sum())
+        saturated = float((window if part is None else window[part]).max() >= full)
+        measured.append(
+            (x0 + spot.u, y0 + spot.v, size, spot.peak, saturated, float(cut), float(touches), spot.length_px,
+             spot.background, contrast)
+        )  # fmt: skip
+    return measured
+
+
 def find_blobs(
     gray: NDArray[Any],
     options: BlobOptions = BlobOptions(),
@@ -193,7 +252,6 @@ def find_blobs(
     """
     if gray.dtype not in (np.uint8, np.uint16):
         gray = np.clip(np.round(gray), 0, 65535).astype(np.uint16)
-    height, width = gray.shape
     full = saturation_of(gray) if saturation is None else saturation
     if background is None or background.threshold.shape != gray.shape or background.threshold.dtype != gray.dtype:
         background = estimate_background(gray, options.background)
@@ -203,38 +261,13 @@ def find_blobs(
     # External contours of a sparse mask are much cheaper than labelling the whole image.
     contours, _ = cv2.findContours(above, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
     rows: list[tuple[float, ...]] = []
-    w = options.window
     for contour in contours:
         x, y, bw, bh = cv2.boundingRect(contour)
         if bw * bh < options.min_area:
             continue
         area = cv2.countNonZero(above[y : y + bh, x : x + bw])
-        if not (options.min_area <= area <= options.max_area):
-            continue
-        x0, y0 = max(x - w, 0), max(y - w, 0)
-        x1, y1 = min(x + bw + w, width), min(y + bh + w, height)
-        window = gray[y0:y1, x0:x1].astype(np.float64)
-        centre_tile = background.at(np.array([[x + bw / 2.0, y + bh / 2.0]]))
-        threshold = float(background.threshold[min(y + bh // 2, height - 1), min(x + bw // 2, width - 1)])
-        contrast = max(threshold - float(centre_tile[0][0]), 1.0)
-        spot = spot_centre(window, 0.5 * contrast)
-        if spot is None:
-            continue
-        touches = mask is not None and bool(mask[max(y - 1, 0) : y + bh + 1, max(x - 1, 0) : x + bw + 1].any())
-        rows.append(
-            (
-                x0 + spot.u,
-                y0 + spot.v,
-                area,
-                spot.peak,
-                float(window.max() >= full),
-                float(x == 0 or y == 0 or x + bw == width or y + bh == height),
-                float(touches),
-                spot.length_px,
-                spot.background,
-                contrast,
-            )
-        )
+        if options.min_area <= area <= options.max_area:
+            rows += _measure(gray, (x, y, bw, bh), area, background, options, full, mask)
     if not rows:
         return NO_BLOBS
     table = np.array(rows, dtype=np.float64)

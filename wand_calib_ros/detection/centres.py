@@ -56,12 +56,13 @@ def side_plane(window: FloatArray) -> tuple[float, float, float]:
     return 0.25 * float(left + right + top + bottom), slope_u, slope_v
 
 
-def spot_centre(window: FloatArray, floor: float) -> SpotCentre | None:
+def spot_centre(window: FloatArray, floor: float, region: NDArray[np.bool_] | None = None) -> SpotCentre | None:
     """The centre of the spot in a window (see the module docstring), or None when nothing stands above the floor.
 
     Args:
         window: (h, w) pixels around the spot, at least 3x3, the spot inside and the window's sides on background.
         floor: how far above the background plane a pixel must be to count, grey levels.
+        region: (h, w) the pixels that may count (one of two spots that touch), or None: all.
     """
     height, width = window.shape
     level, slope_u, slope_v = side_plane(window)
@@ -70,6 +71,8 @@ def spot_centre(window: FloatArray, floor: float) -> SpotCentre | None:
     plane = level + slope_u * cols[None, :] + slope_v * rows[:, None]
     above = window - plane
     weights = np.maximum(above - floor, 0.0)
+    if region is not None:
+        weights = weights * region
     total = float(weights.sum())
     if total <= 0.0:
         return None

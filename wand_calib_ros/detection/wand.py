@@ -216,7 +216,7 @@ def _find_wand(
         bearings = model(blobs.centres)
     else:
         bearings = unproject(model, blobs.centres)
-    merged = touching(blobs.centres, blobs.areas)  # two halves of one spot, or two spots merged: never two LEDs
+    merged = touching(blobs.centres, blobs.areas, 0.0)  # overlapping blobs: parts of one spot, never two LEDs
     for triple in itertools.combinations(range(n), 3):
         index = list(triple)
         if merged[np.ix_(index, index)][np.triu_indices(3, 1)].any():
