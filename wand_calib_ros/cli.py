@@ -12,7 +12,18 @@ import sys
 from collections.abc import Sequence
 from types import ModuleType
 
-from wand_calib_ros.commands import calibrate, detect, export, imports, refine, render, report, simulate, sweep
+from wand_calib_ros.commands import (
+    calibrate,
+    detect,
+    export,
+    imports,
+    mask,
+    refine,
+    render,
+    report,
+    simulate,
+    sweep,
+)
 from wand_calib_ros.errors import WandCalibError
 
 #: The subcommands in the order ``--help`` lists them.
@@ -20,6 +31,7 @@ COMMANDS: dict[str, ModuleType] = {
     "calibrate": calibrate,
     "render": render,
     "detect": detect,
+    "mask": mask,
     "report": report,
     "export": export,
     "refine": refine,

@@ -17,7 +17,7 @@ def test_calibration_from_rendered_images_is_as_good_as_its_noise_allows() -> No
     rng = np.random.default_rng(6)
     recording = render_recording(scenario, 300, 30.0, RenderOptions(), rng)
     frames = [ImageFrame(camera, stamp, image, "mono8") for camera, stamp, image in recording.frames]
-    observations, _, _, _ = detect_recording(frames, scenario.rig)
+    observations = detect_recording(frames, scenario.rig).observations
     result = calibrate(scenario.rig, observations)
     # Errors against the truth, in units of the calibration's own standard deviations: a biased
     # detector (or labels swapped) would show up as many-sigma errors.

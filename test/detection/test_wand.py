@@ -75,7 +75,8 @@ def test_rendered_recording_meets_the_detection_targets() -> None:
     rng = np.random.default_rng(3)
     recording = render_recording(scenario, 240, 30.0, RenderOptions(), rng)
     frames = [ImageFrame(camera, stamp, image, "mono8") for camera, stamp, image in recording.frames]
-    observations, stats, _, _ = detect_recording(frames, scenario.rig)
+    detected = detect_recording(frames, scenario.rig)
+    observations, stats = detected.observations, detected.stats
     drawn = recording.drawn
     assert np.array_equal(observations.frames, drawn.frames)  # one frame per instant, numbered alike
     visible = np.all(np.isfinite(drawn.uv), axis=(2, 3))
@@ -93,7 +94,8 @@ def test_spurious_reflections_rarely_produce_a_wrong_triple() -> None:
     rng = np.random.default_rng(4)
     recording = render_recording(scenario, 200, 30.0, RenderOptions(reflection_rate=1.0), rng)
     frames = [ImageFrame(camera, stamp, image, "mono8") for camera, stamp, image in recording.frames]
-    observations, stats, _, _ = detect_recording(frames, scenario.rig)
+    detected = detect_recording(frames, scenario.rig)
+    observations, stats = detected.observations, detected.stats
     written = observations.complete
     errors = np.linalg.norm(observations.uv - true_views(recording.drawn, observations), axis=-1).max(axis=-1)
     wrong = (errors > 3) & written
@@ -114,7 +116,8 @@ def test_unusable_images_are_counted_by_reason_not_raised() -> None:
         ImageFrame("cam0", t + 3 * 10**8, np.zeros((480, 640, 3), np.uint8), "yuv422"),  # unknown encoding
         ImageFrame("cam1", t, rng.integers(0, 255, (480, 640), dtype=np.uint8), "mono8"),  # all noise
     ]
-    observations, stats, _, _ = detect_recording(frames, scenario.rig)
+    detected = detect_recording(frames, scenario.rig)
+    observations, stats = detected.observations, detected.stats
     assert stats["cam0"].rejected["wrong_size"] == 1
     assert stats["cam0"].rejected["bad_image"] == 1
     assert stats["cam0"].rejected["no_blobs"] == 2
@@ -132,7 +135,8 @@ def test_other_cameras_settle_ambiguous_views_of_independent_placements() -> Non
     rng = np.random.default_rng(8)
     recording = render_recording(scenario, 200, 30.0, RenderOptions(), rng, independent=True)
     frames = [ImageFrame(camera, stamp, image, "mono8") for camera, stamp, image in recording.frames]
-    observations, _, ambiguous, _ = detect_recording(frames, scenario.rig)
+    detected = detect_recording(frames, scenario.rig)
+    observations, ambiguous = detected.observations, detected.ambiguous
     assert ambiguous  # no continuity between independent placements
     result = calibrate(scenario.rig, observations)
     settled_obs, settled = label_across_cameras(observations, ambiguous, result, scenario.wand)

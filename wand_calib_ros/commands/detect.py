@@ -10,6 +10,7 @@ from pathlib import Path
 
 import cv2
 
+from wand_calib_ros.core.model.rig import RigSpec
 from wand_calib_ros.detection.blobs import Blobs
 from wand_calib_ros.detection.wand import WandDetection
 from wand_calib_ros.errors import WandCalibError
@@ -28,7 +29,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("bag", type=Path, help="rosbag2 directory (mcap or sqlite3)")
     parser.add_argument("--cameras", required=True, type=Path, help="rig description (cameras.yaml)")
     parser.add_argument("--output", required=True, type=Path, help="observations CSV to write")
-    parser.add_argument("--topic", default="/{camera}/image_raw", help="topic pattern (default /{camera}/image_raw)")
+    topic_arguments(parser)
     parser.add_argument(
         "--sync-tolerance-ms",
         type=float,
@@ -37,6 +38,34 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--debug-dir", type=Path, help="write overlay images (blobs, chosen A/B/C) here")
     parser.add_argument("--debug-every", type=int, default=30, help="overlay every N-th image per camera (default 30)")
+
+
+def topic_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--topic`` and ``--transport``: where a bag holds each camera's images (``detect``, ``mask``)."""
+    parser.add_argument(
+        "--topic",
+        help="topic pattern, e.g. /{camera}/image_raw (default: each camera's image_topic in the rig file, "
+        "else /<camera>/image_raw)",
+    )
+    parser.add_argument(
+        "--transport",
+        choices=("auto", "raw", "compressed"),
+        default="auto",
+        help="raw images, image_transport's <topic>/compressed, or auto (default): raw where the bag has it",
+    )
+
+
+def camera_topics(args: argparse.Namespace, rig: RigSpec) -> dict[str, str]:
+    """Per camera the bag's topic to read: ``--topic`` or the rig file's ``image_topic``, raw or compressed
+    (``--transport``)."""
+    from wand_calib_ros.io.bags import bag_topics, choose_topics
+    from wand_calib_ros.io.rig_yaml import load_camera_endpoints
+
+    if args.topic is None:
+        raw = {name: endpoint.image_topic for name, endpoint in load_camera_endpoints(args.cameras).items()}
+    else:
+        raw = _image_topics(args.topic, rig.camera_names)
+    return choose_topics(bag_topics(args.bag), raw, args.transport)
 
 
 def _image_topics(pattern: str, names: tuple[str, ...]) -> dict[str, str]:
@@ -60,13 +89,20 @@ def _image_topics(pattern: str, names: tuple[str, ...]) -> dict[str, str]:
 
 def run(args: argparse.Namespace) -> int:
     from wand_calib_ros.detection.consistency import settle_labels
+    from wand_calib_ros.detection.health import save_what_cameras_saw
+    from wand_calib_ros.detection.masks import mask_of
     from wand_calib_ros.detection.recording import detect_recording
     from wand_calib_ros.io.bags import count_images, read_image_frames
+    from wand_calib_ros.io.rig_yaml import load_camera_masks
 
     cv2.setNumThreads(1)  # per-image work is small: OpenCV's thread pool only adds overhead here
     rig = load_rig(args.cameras)
-    topics = _image_topics(args.topic, rig.camera_names)
+    masks = {
+        name: mask_of(spec, rig.cameras[rig.camera_names.index(name)].image_size)
+        for name, spec in load_camera_masks(args.cameras).items()
+    }
     check_writable([args.output])  # before reading the bag
+    topics = camera_topics(args, rig)
     started = time.perf_counter()
     seen: dict[str, int] = {}
     if args.debug_dir is not None:
@@ -91,14 +127,20 @@ def run(args: argparse.Namespace) -> int:
             cv2.imwrite(str(args.debug_dir / f"{frame.camera}_{frame.stamp_ns}.png"), picture)
 
     detections = detect_recording(
-        read_image_frames(args.bag, topics), rig, tolerance_ns=int(args.sync_tolerance_ms * 1e6), inspect=inspect
+        read_image_frames(args.bag, topics),
+        rig,
+        tolerance_ns=int(args.sync_tolerance_ms * 1e6),
+        inspect=inspect,
+        masks=masks,
     )
     observations, _ = settle_labels(rig, detections)
-    stats = detections.stats
     args.output.parent.mkdir(parents=True, exist_ok=True)
     write_observations(observations, args.output)
-    print(f"detected the wand in {args.bag} -> {args.output} ({time.perf_counter() - started:.1f} s)")
-    for name, counts in stats.items():
-        reasons = ", ".join(f"{reason} {n}" for reason, n in sorted(counts.rejected.items())) or "none"
-        print(f"  {name}: {counts.images} images, {counts.detected} with the wand; rejected: {reasons}")
+    summary = save_what_cameras_saw(args.output, detections.reports, detections.masks)
+    print(f"detected the wand in {args.bag} -> {args.output} ({time.perf_counter() - started:.1f} s); {summary}")
+    for name in rig.camera_names:
+        report = detections.reports[name]
+        print(f"  {name}: {report.images} images ({topics[name]}), {report.views} views of the wand")
+        for message in report.messages():
+            print(f"    {message}")
     return 0

@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 
 from wand_calib_ros.detection.blobs import Blobs
 from wand_calib_ros.detection.errors import MaskError
+from wand_calib_ros.io.rig_yaml import MaskSpec
 
 FloatArray = NDArray[np.float64]
 Mask = NDArray[np.uint8]
@@ -81,6 +82,18 @@ def write_mask(path: Path, mask: Mask) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     if not cv2.imwrite(str(path), mask):
         raise MaskError(f"{path}: the mask could not be written")
+
+
+def mask_of(spec: MaskSpec, size: tuple[int, int]) -> Mask:
+    """A camera's mask from the rig file's ``mask`` (its shapes and its PNG together).
+
+    Raises:
+        MaskError: its PNG is not an image of the camera's size.
+    """
+    mask = mask_from_shapes(size, list(spec.circles), list(spec.rectangles))
+    if spec.file is not None:
+        mask = np.maximum(mask, read_mask(spec.file, size))
+    return mask
 
 
 def mask_fraction(mask: Mask) -> float:

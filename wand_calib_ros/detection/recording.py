@@ -20,7 +20,7 @@ grouped into frames by nearest stamps, with the same synchroniser the live colle
 from __future__ import annotations
 
 from collections import Counter, deque
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
@@ -35,7 +35,8 @@ from wand_calib_ros.core.model.rig import CameraSpec, RigSpec, WandObservations
 from wand_calib_ros.detection.background import Background, estimate_background
 from wand_calib_ros.detection.blobs import BlobOptions, Blobs, find_blobs, to_gray
 from wand_calib_ros.detection.errors import ImageError
-from wand_calib_ros.detection.masks import Mask, StaticSources
+from wand_calib_ros.detection.health import CameraHealth, HealthReport, ViewLight, health_report, view_light
+from wand_calib_ros.detection.masks import Mask, MaskTaker, StaticSources, mask_fraction
 from wand_calib_ros.detection.tracking import Released, StreamLabeller
 from wand_calib_ros.detection.wand import WandDetection, WandOptions, identify_wand
 from wand_calib_ros.io.bags import ImageFrame
@@ -46,7 +47,8 @@ BACKGROUND_REFRESH = 8
 SATURATION = {"mono16": 65520.0}
 
 
-class Detections(NamedTuple):
+@dataclass(frozen=True, eq=False)
+class Detections:
     """What a recording gave.
 
     Attributes:
@@ -56,12 +58,16 @@ class Detections(NamedTuple):
             A/C labels neither the image nor time settled; other cameras can (see
             :func:`wand_calib_ros.detection.consistency.label_across_cameras`).
         tracks: (F, C) the camera's track of each view (-1: no view): views of one track were labelled together.
+        reports: per camera what it saw (:mod:`~wand_calib_ros.detection.health`).
+        masks: per camera the pixels its detector ignored at the end (given and learned), or None: none.
     """
 
     observations: WandObservations
     stats: dict[str, CameraStats]
     ambiguous: list[tuple[int, str, NDArray[np.float64], float]]
     tracks: NDArray[np.int64]
+    reports: dict[str, HealthReport]
+    masks: dict[str, Mask | None]
 
 
 @dataclass
@@ -130,21 +136,40 @@ class CameraStream:
         self.sources = StaticSources(spec.image_size)
         self.given_mask = mask
         self.stats = CameraStats()
+        self.health = CameraHealth()
+        self._lights: dict[int, ViewLight] = {}  # the light of a detected view, until labelled
         self._background: Background | None = None
         self._since_background = 0
         self._mask: Mask | None = mask
-        self._pending: deque[WandDetection] = deque()  # pushed, not yet released (release keeps the order)
+        self._pending: deque[tuple[WandDetection, ViewLight | None]] = deque()  # pushed, not yet released
+        self._taker: MaskTaker | None = None  # a mask being taken (take_mask)
+        self._taking_ns = 0
+        self._taking_from: int | None = None
+        self.taken: Mask | None = None  #: the masks taken so far (take_mask), together
 
     @property
     def mask(self) -> Mask | None:
         """What the detector ignores: the user's mask and the learned lights'."""
         return self._mask
 
+    def take_mask(self, duration_ns: int) -> None:
+        """Take a mask from the next ``duration_ns`` of images (the wand out of sight): every blob in them is
+        ignored from then on. Meanwhile the images give no view ("taking_mask")."""
+        self._taker, self._taking_ns, self._taking_from = MaskTaker(self.spec.image_size), duration_ns, None
+
+    @property
+    def taking_mask(self) -> bool:
+        """Whether a mask is being taken."""
+        return self._taker is not None
+
     def detect(
-        self, image: NDArray[Any], encoding: str, stamp_ns: int
+        self, image: NDArray[Any] | None, encoding: str, stamp_ns: int
     ) -> tuple[Blobs | None, WandDetection | None, str | None]:
-        """Blobs, wand and rejection reason (None when the wand was found) of one image at ``stamp_ns``."""
+        """Blobs, wand and rejection reason (None when the wand was found) of one image at ``stamp_ns`` (None:
+        its pixels could not be read)."""
         self.stats.images += 1
+        if image is None:
+            return None, None, "bad_image"
         height, width = image.shape[:2]
         if (width, height) != self.spec.image_size:
             return None, None, "wrong_size"
@@ -156,6 +181,8 @@ class CameraStream:
         blobs = find_blobs(
             gray, self.blob_options, saturation=SATURATION.get(encoding, 255.0), mask=self._mask, background=background
         )
+        if self._taker is not None:
+            return blobs, None, self._take(stamp_ns, blobs)
         prediction = self.labeller.predict(stamp_ns)
         claimed = np.zeros(blobs.centres.shape[0], dtype=bool)
         if prediction is not None and prediction.moved and blobs.centres.size:
@@ -171,7 +198,33 @@ class CameraStream:
         if self.sources.observe(stamp_ns, blobs, claimed, standing_out):  # the mask changed
             learned, given = self.sources.mask, self.given_mask
             self._mask = learned if given is None else np.maximum(given, learned).astype(np.uint8)
+        if detection.points is not None:
+            light = view_light(blobs, detection.points)
+            if light is not None:
+                self._lights[stamp_ns] = light
         return blobs, detection, detection.reason if detection.points is None else None
+
+    def _take(self, stamp_ns: int, blobs: Blobs) -> str:
+        """One image of a mask being taken; the mask joins the given one once its time is up."""
+        assert self._taker is not None
+        start = self._taking_from = stamp_ns if self._taking_from is None else self._taking_from
+        if stamp_ns - start <= self._taking_ns:
+            self._taker.add(blobs)
+            return "taking_mask"
+        taken = self._taker.mask
+        self.taken = taken if self.taken is None else np.maximum(self.taken, taken).astype(np.uint8)
+        self.given_mask = taken if self.given_mask is None else np.maximum(self.given_mask, taken).astype(np.uint8)
+        learned = self.sources.mask
+        self._mask = np.maximum(self.given_mask, learned).astype(np.uint8)
+        self._taker = None
+        return "taking_mask"
+
+    def report(self) -> HealthReport:
+        """What this camera saw so far (:mod:`~wand_calib_ros.detection.health`)."""
+        sources = tuple((s.centre[0], s.centre[1], s.radius_px) for s in self.sources.sources)
+        masked = 0.0 if self._mask is None else mask_fraction(self._mask)
+        stats = self.stats
+        return health_report(self.spec.name, stats.images, stats.detected, stats.rejected, self.health, sources, masked)
 
     def _background_of(self, gray: NDArray[Any]) -> Background:
         """The background, estimated again every BACKGROUND_REFRESH images (or when the image changed kind)."""
@@ -185,13 +238,15 @@ class CameraStream:
 
     def label(self, stamp_ns: int, detection: WandDetection | None, reason: str | None) -> list[Labelled]:
         """Hand one image's detection to the labeller; returns the outcomes it releases."""
+        light = self._lights.pop(stamp_ns, None)
         if reason is not None or detection is None:
             self.stats.rejected[reason or "no_wand"] += 1
             return [Labelled(stamp_ns, None)]
         if self.wand_options.n_points != 3 or detection.tool:  # two or a tool: the calibration labels them
             self.stats.detected += 1
+            self.health.add(light)
             return [*self.flush(), Labelled(stamp_ns, detection.points)]
-        self._pending.append(detection)
+        self._pending.append((detection, light))
         return self._released(self.labeller.push(stamp_ns, detection))
 
     def push(self, stamp_ns: int, image: NDArray[Any], encoding: str) -> list[Labelled]:
@@ -206,9 +261,10 @@ class CameraStream:
     def _released(self, results: list[Released]) -> list[Labelled]:
         out = []
         for stamp, points, reason, track in results:
-            detection = self._pending.popleft()
+            detection, light = self._pending.popleft()
             if points is not None:
                 self.stats.detected += 1
+                self.health.add(light)
                 out.append(Labelled(stamp, points, None, track))
             elif reason == "ambiguous":
                 self.stats.rejected["ambiguous"] += 1
@@ -226,6 +282,7 @@ def detect_recording(
     tolerance_ns: int = 0,
     blob_options: BlobOptions = BlobOptions(),
     inspect: Callable[[ImageFrame, Blobs | None, WandDetection | None, str | None], None] | None = None,
+    masks: Mapping[str, Mask] | None = None,
 ) -> Detections:
     """Wand observations of a recording, with per-camera counts (detected, rejected by reason).
 
@@ -240,9 +297,14 @@ def detect_recording(
         blob_options: blob extraction settings.
         inspect: called for every image with its blobs, detection and rejection reason
             (progress reports, debug overlays).
+        masks: per camera the pixels to ignore (the rig file's ``mask``), if any.
     """
     wand_options = WandOptions.for_rig(rig)
-    streams = {c.name: CameraStream(c, wand_options, blob_options, max_hold_ns=None) for c in rig.cameras}
+    given = masks or {}
+    streams = {
+        c.name: CameraStream(c, wand_options, blob_options, max_hold_ns=None, mask=given.get(c.name))
+        for c in rig.cameras
+    }
     outcomes: list[tuple[str, Labelled]] = []
     for frame in sorted(frames, key=lambda f: f.stamp_ns):
         stream = streams[frame.camera]
@@ -269,4 +331,6 @@ def detect_recording(
         if out.points is not None and row is not None:
             tracks[row, index[camera]] = out.track
     stats = {name: stream.stats for name, stream in streams.items()}
-    return Detections(observations, stats, ambiguous, tracks[observations.frames])
+    reports = {name: stream.report() for name, stream in streams.items()}
+    ignored: dict[str, Mask | None] = {name: stream.mask for name, stream in streams.items()}
+    return Detections(observations, stats, ambiguous, tracks[observations.frames], reports, ignored)

@@ -13,6 +13,9 @@ cameras:
 The ROS nodes read three optional keys per camera with :func:`load_camera_endpoints`:
 ``image_topic`` (default ``/<name>/image_raw``), ``points_topic`` (default ``wand_points`` next to
 the image topic) and ``set_camera_info`` (the driver's service, default next to the image topic).
+The detector reads an optional ``mask`` per camera with :func:`load_camera_masks`: the pixels it
+ignores, a PNG (named relative to the rig file, white where ignored) or
+``{circles: [[u, v, r], ...], rectangles: [[u0, v0, u1, v1], ...], file: mask.png}``.
 The core never sees them.
 """
 
@@ -362,3 +365,63 @@ def load_camera_endpoints(path: str | Path) -> dict[str, CameraEndpoints]:
             _frame_id(path, name, item.get("frame_id", name)),
         )
     return endpoints
+
+
+@dataclass(frozen=True)
+class MaskSpec:
+    """A camera's ``mask`` in the rig file: the pixels its detector ignores (lamps, a window).
+
+    Attributes:
+        circles: (u, v, radius) in px.
+        rectangles: (u0, v0, u1, v1) in px, inclusive corners.
+        file: a PNG, white where ignored (the camera's image size), or None.
+    """
+
+    circles: tuple[tuple[float, float, float], ...] = ()
+    rectangles: tuple[tuple[float, float, float, float], ...] = ()
+    file: Path | None = None
+
+
+def _shapes(path: Path, where: str, value: Any, size: int) -> list[tuple[float, ...]]:
+    if not isinstance(value, list):
+        raise FormatError(path, f"{where} must be a list of [{', '.join(['n'] * size)}] lists, got {value!r}")
+    shapes = []
+    for item in value:
+        if not isinstance(item, list) or len(item) != size:
+            raise FormatError(path, f"{where}: each entry has {size} numbers, got {item!r}")
+        shapes.append(tuple(_number(path, where, v, positive=False) for v in item))
+    return shapes
+
+
+def _mask(path: Path, name: str, value: Any) -> MaskSpec:
+    where = f"camera '{name}' mask"
+    if isinstance(value, str):
+        value = {"file": value}
+    if not isinstance(value, dict) or not value or not set(value) <= {"circles", "rectangles", "file"}:
+        raise FormatError(
+            path, f"{where} must be a PNG file name or a mapping of circles: [[u, v, r], ...], "
+            f"rectangles: [[u0, v0, u1, v1], ...] and file: mask.png; got {value!r}"
+        )  # fmt: skip
+    circles = _shapes(path, f"{where} circles", value.get("circles", []), 3)
+    if any(r <= 0 for _, _, r in circles):
+        raise FormatError(path, f"{where} circles: a radius must be positive, got {value['circles']!r}")
+    rectangles = _shapes(path, f"{where} rectangles", value.get("rectangles", []), 4)
+    if any(u1 < u0 or v1 < v0 for u0, v0, u1, v1 in rectangles):
+        raise FormatError(path, f"{where} rectangles are [u0, v0, u1, v1] with u0 <= u1 and v0 <= v1")
+    file = value.get("file")
+    if file is not None:
+        if not isinstance(file, str) or not file:
+            raise FormatError(path, f"{where} file must be a PNG file name, got {file!r}")
+        file = Path(file).expanduser()
+        file = file if file.is_absolute() else path.parent / file
+        if not file.is_file():
+            raise FormatError(path, f"{where}: no such file {file}")
+    return MaskSpec(tuple(circles), tuple(rectangles), file)  # type: ignore[arg-type]
+
+
+def load_camera_masks(path: str | Path) -> dict[str, MaskSpec]:
+    """Per camera the ``mask`` of ``cameras.yaml`` (cameras without one are left out)."""
+    path = Path(path)
+    rig = load_rig(path)
+    items = {str(item["name"]): item for item in read_yaml(path)["cameras"]}
+    return {name: _mask(path, name, items[name]["mask"]) for name in rig.camera_names if "mask" in items[name]}

@@ -1,8 +1,13 @@
 """The collector node: images (or detector points) in, a coverage-checked persisted buffer out.
 
-Per camera it subscribes either to the image topic (sensor-data QoS by default)
-and runs the LED detector itself, or to a detector node's wand points
-(``input: points``). Results are time-synchronised into frames, offered to the
+Per camera it subscribes either to the image topic (sensor-data QoS by default; raw, or
+image_transport's ``<topic>/compressed``: ``image_transport``) and runs the LED detector itself, or
+to a detector node's wand points (``input: points``). What each camera sees (static lights masked,
+LEDs saturating, too dim or streaking, images without a view and why) is in /diagnostics, said
+once per cause as a warning, and kept beside the buffer (``observations.detection.yaml``, the
+masks in ``observations.masks/``); ``wand_calib/<cam>/detections`` shows an image with the
+detections drawn (2 Hz, while subscribed). ``/take_mask`` takes each camera's mask from the next
+``mask_take_s`` of images, the wand out of sight. Results are time-synchronised into frames, offered to the
 persisted :class:`ObservationBuffer` and counted by the :class:`CoverageTracker`;
 ``/diagnostics`` (1 Hz), a coverage heat map per camera
 (``wand_calib/<cam>/coverage``) and log lines on every change of what is
@@ -34,8 +39,10 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PolygonStamped, TransformStamped
+from numpy.typing import NDArray
 from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
 from rclpy.context import Context
@@ -55,12 +62,18 @@ from wand_calib_ros.collection.watch import BumpWatch
 from wand_calib_ros.core.model.result import CalibrationResult
 from wand_calib_ros.core.model.rig import WandObservations
 from wand_calib_ros.core.pipeline import CalibrationOptions
+from wand_calib_ros.detection.blobs import Blobs
+from wand_calib_ros.detection.health import save_what_cameras_saw
+from wand_calib_ros.detection.masks import Mask, mask_of, read_mask, write_mask
+from wand_calib_ros.detection.overlay import draw_overlay
 from wand_calib_ros.detection.recording import CameraStream, Labelled
-from wand_calib_ros.detection.wand import WandOptions
-from wand_calib_ros.io.images import image_array
-from wand_calib_ros.io.rig_yaml import load_camera_endpoints, load_rig
+from wand_calib_ros.detection.wand import WandDetection, WandOptions
+from wand_calib_ros.errors import WandCalibError
+from wand_calib_ros.io.detection_summary import masks_folder
+from wand_calib_ros.io.rig_yaml import load_camera_endpoints, load_camera_masks, load_rig
 from wand_calib_ros.io.session_csv import ESTIMATES_FILE, EVENTS_FILE, append_estimate, append_event
 from wand_calib_ros.nodes import messages
+from wand_calib_ros.nodes.images import IMAGE_TRANSPORT, CameraImages
 from wand_calib_ros.nodes.markers import markers_message
 from wand_calib_ros.nodes.params import (
     COVERAGE,
@@ -87,6 +100,8 @@ PARAMS = (
         choices=("images", "points"),
     ),
     IMAGE_QOS,
+    IMAGE_TRANSPORT,
+    Param("mask_take_s", 1.0, "/take_mask: seconds of images whose lights become each camera's mask", 0.1, 60.0),
     Param(
         "sync_tolerance_ms",
         0.0,
@@ -126,6 +141,11 @@ PARAMS = (
         10000.0,
     ),
 )
+
+#: The detections image of a camera is published at most once per this many seconds.
+DEBUG_PERIOD_S = 0.5
+#: observations.detection.yaml is written again at most once per this many seconds.
+SUMMARY_PERIOD_S = 10.0
 
 #: Points from detector nodes are few and small: deliver every one.
 POINTS_QOS = QoSProfile(depth=200, reliability=ReliabilityPolicy.RELIABLE)
@@ -180,22 +200,36 @@ class CollectorNode(Node):
         self._auto_round: Estimate | None = None  # the round that started it
         self._moved_logged: dict[str, str] = {}
         wand = WandOptions.for_rig(self.rig)
-        self.streams = {c.name: CameraStream(c, wand, max_hold_ns=hold_ns) for c in self.rig.cameras}
+        masks = self._given_masks(cameras_file)
+        self.streams = {
+            c.name: CameraStream(c, wand, max_hold_ns=hold_ns, mask=masks.get(c.name)) for c in self.rig.cameras
+        }
+        self.mask_take_s = float(values["mask_take_s"])
+        self._said: dict[str, set[str]] = {name: set() for name in self.rig.camera_names}  # warnings given
+        self._summary_saved = 0.0  # when observations.detection.yaml was last written (monotonic)
         self.received = dict.fromkeys(self.rig.camera_names, 0)
         self.malformed = dict.fromkeys(self.rig.camera_names, 0)
         self.lock = threading.Lock()
         self._logged: tuple[bool, float] | None = None  # (ready, when) of the last coverage log line
         # A single-threaded executor runs these callbacks (see nodes.runner): each camera's
         # messages in order, as the A/C labeller needs; /calibrate runs in the calibrator's executor.
+        self.images: dict[str, CameraImages] = {}
+        self.debug_images = {
+            name: self.create_publisher(Image, f"wand_calib/{name}/detections", 1) for name in self.rig.camera_names
+        }
+        self._debug_shown = dict.fromkeys(self.rig.camera_names, 0.0)
         for name, endpoint in self.endpoints.items():
             if values["input"] == "images":
                 qos = image_qos(values["image_qos"])
-                self.create_subscription(Image, endpoint.image_topic, functools.partial(self._on_image, name), qos)
+                self.images[name] = CameraImages(
+                    self, name, endpoint.image_topic, qos, values["image_transport"], self._on_image
+                )
             else:
                 self.create_subscription(
                     PolygonStamped, endpoint.points_topic, functools.partial(self._on_points, name), POINTS_QOS
                 )
         self.create_service(Trigger, "reset", self._on_reset)
+        self.create_service(Trigger, "take_mask", self._on_take_mask)
         self.floor = FloorWindow(float(values["floor_hold_s"]))
         self.create_service(Trigger, "set_floor", self._on_set_floor)
         self.diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
@@ -220,17 +254,53 @@ class CollectorNode(Node):
             f"({len(self.buffer.frames)} frames resumed)"
         )
 
-    def _on_image(self, camera: str, message: Image) -> None:
+    def _given_masks(self, cameras_file: Path) -> dict[str, Mask]:
+        """Per camera the rig file's mask and the ones /take_mask took for this collection (kept beside it)."""
+        masks = {
+            name: mask_of(spec, self.rig.cameras[self.rig.camera_names.index(name)].image_size)
+            for name, spec in load_camera_masks(cameras_file).items()
+        }
+        for spec in self.rig.cameras:
+            taken = self._taken_path(spec.name)
+            if taken.is_file():
+                mask = read_mask(taken, spec.image_size)
+                masks[spec.name] = np.maximum(masks[spec.name], mask) if spec.name in masks else mask
+        return masks
+
+    def _taken_path(self, camera: str) -> Path:
+        return masks_folder(self.buffer.path) / f"{camera}.taken.png"
+
+    def _on_image(self, camera: str, stamp_ns: int, pixels: NDArray[Any] | None, encoding: str) -> None:
         stream = self.streams[camera]
-        try:
-            _, detection, reason = stream.detect(
-                image_array(message), message.encoding, messages.stamp_ns(message.header)
-            )
-        except ValueError:
-            detection, reason = None, "bad_image"
         with self.lock:
+            taking = stream.taking_mask
+            blobs, detection, reason = stream.detect(pixels, encoding, stamp_ns)
             self.received[camera] += 1
-            self._offer(camera, stream.label(messages.stamp_ns(message.header), detection, reason))
+            self._offer(camera, stream.label(stamp_ns, detection, reason))
+            taken = stream.taken if taking and not stream.taking_mask else None
+        if taken is not None:
+            write_mask(self._taken_path(camera), taken)
+            self.get_logger().info(f"{camera}: mask taken ({100 * float((taken > 0).mean()):.2f} % of the image)")
+        self._show(camera, stamp_ns, pixels, encoding, blobs, detection, reason)
+
+    def _show(
+        self,
+        camera: str,
+        stamp_ns: int,
+        pixels: NDArray[Any] | None,
+        encoding: str,
+        blobs: Blobs | None,
+        detection: WandDetection | None,
+        reason: str | None,
+    ) -> None:
+        """The image with its detections drawn on ``wand_calib/<cam>/detections``: 2 Hz at most, while subscribed."""
+        publisher = self.debug_images[camera]
+        now = time.monotonic()
+        if pixels is None or now - self._debug_shown[camera] < DEBUG_PERIOD_S or not publisher.get_subscription_count():
+            return
+        self._debug_shown[camera] = now
+        picture = draw_overlay(pixels, encoding, blobs, detection, reason)
+        publisher.publish(messages.array_to_image(picture, stamp_ns, self.frame_ids[camera], "bgr8"))
 
     def _on_points(self, camera: str, message: PolygonStamped) -> None:
         try:
@@ -272,8 +342,9 @@ class CollectorNode(Node):
             self._store(self.sync.flush_all())
 
     def close(self) -> None:
-        """At exit: store what is held and write the buffer through to the disk."""
+        """At exit: store what is held and write the buffer and what the cameras saw through to the disk."""
         self.flush()
+        self._save_what_cameras_saw()
         with self.lock:
             self.buffer.sync()
             if self.watch is not None:
@@ -357,6 +428,45 @@ class CollectorNode(Node):
             f"principal point within +-{self.auto[1]:g} px: calibrating"
         )
 
+    def _save_what_cameras_saw(self) -> None:
+        """Each camera's detection report and mask beside the buffer (observations.detection.yaml, .masks/)."""
+        with self.lock:
+            reports = {name: stream.report() for name, stream in self.streams.items()}
+            masks = {name: stream.mask for name, stream in self.streams.items()}
+        try:
+            save_what_cameras_saw(self.buffer.path, reports, masks)
+        except WandCalibError as error:
+            self.get_logger().warning(f"cannot keep what the cameras saw: {error}", throttle_duration_sec=60.0)
+        self._summary_saved = time.monotonic()
+
+    def _detection_feedback(self, counts: dict[str, dict[str, int | str]]) -> dict[str, list[str]]:
+        """Each camera's detection figures into its diagnostics values, its warnings (said once per cause), the
+        transports checked and the summary written now and then; returns the warnings per camera."""
+        for images in self.images.values():
+            switched = images.check()
+            if switched is not None:
+                self.get_logger().info(switched)
+        notes: dict[str, list[str]] = {}
+        with self.lock:
+            reports = {name: stream.report() for name, stream in self.streams.items()}
+        for name, report in reports.items():
+            values = report.as_dict()
+            shown: dict[str, int | str] = {
+                "static_lights": len(report.sources),
+                "masked_percent": f"{100 * report.masked_fraction:.2f}",
+            }
+            shown |= {key: f"{values[key]:g}" for key in ("saturated", "dim", "streak_median_px") if key in values}
+            counts.setdefault(name, {}).update(shown)
+            warnings = report.warnings()
+            notes[name] = list(warnings.values())
+            for cause, line in warnings.items():
+                if cause not in self._said[name]:
+                    self._said[name].add(cause)
+                    self.get_logger().warning(line)
+        if time.monotonic() - self._summary_saved >= SUMMARY_PERIOD_S:
+            self._save_what_cameras_saw()
+        return notes
+
     def _counts(self) -> dict[str, dict[str, int | str]]:
         counts: dict[str, dict[str, int | str]] = {}
         for name, stream in self.streams.items():
@@ -387,6 +497,7 @@ class CollectorNode(Node):
             cells = {name: self.coverage.cells[c].copy() for c, name in enumerate(self.rig.camera_names)}
             watch = self.watch
         now = time.monotonic()
+        notes = self._detection_feedback(counts)
         self._estimate_feedback(now, status.ready, counts, rig_values)
         moved = {}
         if watch is not None:
@@ -400,7 +511,7 @@ class CollectorNode(Node):
             self._moved_logged = moved
         stamp = self.get_clock().now().to_msg()
         source = self.get_fully_qualified_name().lstrip("/")  # e.g. rig1/wand_calib_collector
-        self.diagnostics.publish(messages.diagnostics_message(status, counts, rig_values, stamp, source, moved))
+        self.diagnostics.publish(messages.diagnostics_message(status, counts, rig_values, stamp, source, moved, notes))
         for spec in self.rig.cameras:
             self.heat_maps[spec.name].publish(
                 messages.heat_map_message(cells[spec.name], spec.image_size, stamp, spec.name)
@@ -420,6 +531,18 @@ class CollectorNode(Node):
         response.message = (
             f"floor lay {lay}: hold the wand still on the floor for {self.floor.hold_s:g} s; {after} "
             "(the world frame: z up, the origin at the first lay's A, x along its A->C)"
+        )
+        self.get_logger().info(response.message)
+        return response
+
+    def _on_take_mask(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        with self.lock:
+            for stream in self.streams.values():
+                stream.take_mask(int(self.mask_take_s * 1e9))
+        response.success = True
+        response.message = (
+            f"taking each camera's mask from its next {self.mask_take_s:g} s of images: keep the wand out of sight; "
+            f"the lights in them are ignored from then on (kept in {masks_folder(self.buffer.path)})"
         )
         self.get_logger().info(response.message)
         return response

@@ -210,6 +210,7 @@ def diagnostics_message(
     stamp: Time,
     source: str = "wand_calib_collector",
     moved: Mapping[str, str] | None = None,
+    notes: Mapping[str, list[str]] | None = None,
 ) -> DiagnosticArray:
     """/diagnostics: one OK/WARN entry per camera (what is missing) and one for the rig, named
     ``<source>: <camera>`` and ``<source>: rig`` (``source`` the collector's namespaced name, so an
@@ -221,6 +222,8 @@ def diagnostics_message(
         rig_values: rig-wide counters (frames stored, late or out-of-order messages, ...).
         stamp: the array's stamp.
         moved: cameras judged to have moved since the calibration, with their message (ERROR entries).
+        notes: per camera warnings of what its detector sees (LEDs saturating, too dim): added to its message
+            (WARN).
     """
     array = DiagnosticArray()
     array.header.stamp = stamp
@@ -228,6 +231,10 @@ def diagnostics_message(
         entry = DiagnosticStatus(name=f"{source}: {camera.name}", hardware_id=camera.name)
         entry.level = DiagnosticStatus.OK if camera.ok else DiagnosticStatus.WARN
         entry.message = "ready" if camera.ok else "; ".join(camera.missing)
+        said = (notes or {}).get(camera.name, [])
+        if said:
+            entry.level = DiagnosticStatus.WARN
+            entry.message = "; ".join([*([] if camera.ok else camera.missing), *said])
         if moved and camera.name in moved:
             entry.level, entry.message = DiagnosticStatus.ERROR, moved[camera.name]
         values = {

@@ -1,7 +1,9 @@
 """Play a bag's camera images on the rig's image topics (``ros2 bag play`` for images, without ROS installed).
 
-Publishes sensor_msgs/Image (compressed images decoded) at the recorded pace
-(or ``rate`` times it) and exits when the bag ends.
+Publishes sensor_msgs/Image on each camera's image topic, or, where the bag holds only a camera's
+compressed images (image_transport's ``<topic>/compressed``), sensor_msgs/CompressedImage on
+``<image topic>/compressed`` as recorded, at the recorded pace (or ``rate`` times it), and exits when
+the bag ends.
 """
 
 from __future__ import annotations
@@ -14,10 +16,12 @@ from pathlib import Path
 from typing import Any
 
 from rclpy.node import Node
-from sensor_msgs.msg import Image
+from sensor_msgs.msg import CompressedImage, Image
 
 from wand_calib_ros.errors import WandCalibError
-from wand_calib_ros.io.bags import read_image_frames
+from wand_calib_ros.io.bags import COMPRESSED, COMPRESSED_SUFFIX, bag_topics, choose_topics, read_image_messages
+from wand_calib_ros.io.errors import FormatError
+from wand_calib_ros.io.images import image_array
 from wand_calib_ros.io.rig_yaml import load_camera_endpoints
 from wand_calib_ros.nodes import messages
 from wand_calib_ros.nodes.params import Param, declare, existing_file, image_qos, usage
@@ -43,9 +47,13 @@ class ReplayNode(Node):
         if not self.bag.exists():
             raise WandCalibError(f"parameter bag: no such bag {self.bag}")
         endpoints = load_camera_endpoints(existing_file(values, "cameras_file"))
-        self.topics = {name: endpoint.image_topic for name, endpoint in endpoints.items()}
+        raw = {name: endpoint.image_topic for name, endpoint in endpoints.items()}
+        self.topics = choose_topics(bag_topics(self.bag), raw, "auto")  # where the bag holds each camera's images
         qos = image_qos(values["qos"])
-        self.publishers_ = {name: self.create_publisher(Image, topic, qos) for name, topic in self.topics.items()}
+        self.publishers_ = {
+            name: self.create_publisher(CompressedImage if topic.endswith(COMPRESSED_SUFFIX) else Image, topic, qos)
+            for name, topic in self.topics.items()
+        }
         self.rate = float(values["rate"])
         self.wait_s = float(values["wait_for_subscribers_s"])
         self.published = 0
@@ -59,17 +67,15 @@ class ReplayNode(Node):
             time.sleep(0.05)
         started, first = time.monotonic(), None
         try:
-            for frame in read_image_frames(self.bag, self.topics):
+            for camera, stamp_ns, msgtype, stored in read_image_messages(self.bag, self.topics):
                 if not self.context.ok():
                     return
-                first = frame.stamp_ns if first is None else first
+                first = stamp_ns if first is None else first
                 if self.rate > 0:
-                    delay = (frame.stamp_ns - first) / 1e9 / self.rate - (time.monotonic() - started)
+                    delay = (stamp_ns - first) / 1e9 / self.rate - (time.monotonic() - started)
                     if delay > 0:
                         time.sleep(delay)
-                self.publishers_[frame.camera].publish(
-                    messages.array_to_image(frame.image, frame.stamp_ns, frame.camera, frame.encoding)
-                )
+                self.publishers_[camera].publish(self._message(camera, stamp_ns, msgtype, stored))
                 self.published += 1
             self.get_logger().info(f"played {self.published} images from {self.bag}")
         except WandCalibError as error:
@@ -78,6 +84,21 @@ class ReplayNode(Node):
         if self.on_done is not None:
             time.sleep(0.5)  # let reliable subscribers take the last messages
             self.on_done()
+
+    def _message(self, camera: str, stamp_ns: int, msgtype: str, stored: Any) -> Image | CompressedImage:
+        """The rclpy message of a stored one (a raw image re-encoded from its pixels, a compressed one as is)."""
+        if msgtype == COMPRESSED:
+            message = CompressedImage()
+            message.header.stamp = messages.time_message(stamp_ns)
+            message.header.frame_id = camera
+            message.format = str(stored.format)
+            message.data = bytes(stored.data)
+            return message
+        try:
+            pixels = image_array(stored)
+        except ValueError as error:
+            raise FormatError(self.bag, f"{camera}: {error}") from None
+        return messages.array_to_image(pixels, stamp_ns, camera, str(stored.encoding))
 
     def close(self) -> None:
         self._thread.join(timeout=2.0)
