@@ -18,6 +18,7 @@ import numpy as np
 import numpy.ma
 import numpy.random
 
+from wand_calib_ros.collection.buffer import BUFFER_FILE
 from wand_calib_ros.collection.coverage import CoverageStatus, CoverageThresholds, CoverageTracker
 from wand_calib_ros.collection.errors import CoverageError
 from wand_calib_ros.core.after.repair import judge_moved, repair_moved, repaired_result
@@ -60,7 +61,7 @@ def _write_report(rig: RigSpec, observations: WandObservations, result_path: Pat
     from wand_calib_ros.report.html import write_report  # matplotlib only when a report is asked for
 
     try:
-        return write_report(rig, observations, result_path, output_dir / "report")
+        return write_report(rig, observations, result_path, output_dir / "report", output_dir / BUFFER_FILE)
     except (OSError, ValueError, np.linalg.LinAlgError, WandCalibError) as error:
         log.warning("the calibration is written, but its report failed: %s", error)
         return None

@@ -24,6 +24,6 @@ def run(args: argparse.Namespace) -> int:
 
     rig = load_rig(args.cameras)
     observations = read_rig_observations(args.observations, rig)
-    path = write_report(rig, observations, args.result, args.out)
+    path = write_report(rig, observations, args.result, args.out, args.observations)
     print(f"report: {path}")
     return 0

@@ -120,7 +120,8 @@ class Blobs:
 
 #: A region's core is where it stands above its background by this fraction of its peak ...
 CORE_FRACTION = 0.25
-#: ... and a region whose peak is this many times the threshold's contrast is split where it has two cores.
+#: ... and a region whose peak is this many times the threshold's contrast is split where it has two cores each
+#: as bright as 0.3 of its peak.
 CORE_SPLIT = 4.0
 #: A blob of at most this fraction of the area of a blob it touches is a fringe of that blob.
 FRINGE_AREA = 0.1
@@ -206,14 +207,16 @@ def _measure(
     whole: tuple[int, int, int, int] = tuple(cv2.boundingRect(core))  # type: ignore[assignment]
     parts: list[tuple[NDArray[np.bool_] | None, tuple[int, int, int, int]]] = [(None, whole)]
     if peak >= CORE_SPLIT * contrast and len(cores) >= 2:
-        parts = []
+        split: list[tuple[NDArray[np.bool_] | None, tuple[int, int, int, int]]] = []
         for outline in cores:
-            if cv2.contourArea(outline) < options.min_area:
-                continue
             drawn = np.zeros_like(core)
             cv2.drawContours(drawn, [outline], -1, 1, -1)
+            # a spot of its own: as bright as half the region's peak, and more than a fleck (noise on a streak)
+            if drawn.sum() < options.min_area or float(window[drawn > 0].max()) - level < 0.3 * peak:
+                continue
             region = np.asarray(cv2.dilate(drawn, np.ones((3, 3), np.uint8)) > 0)
-            parts.append((region, tuple(cv2.boundingRect(outline))))  # type: ignore[arg-type]
+            split.append((region, tuple(cv2.boundingRect(outline))))  # type: ignore[arg-type]
+        parts = split if len(split) >= 2 else parts
     touches = mask is not None and bool(mask[max(y - 1, 0) : y + bh + 1, max(x - 1, 0) : x + bw + 1].any())
     measured: list[tuple[float, ...]] = []
     for part, (cx, cy, cw, ch) in parts:

@@ -7,8 +7,9 @@ views: the order whose reconstructed |AB| and |BC| match L1 and L2 clearly bette
 - An ambiguous view (neither its image nor its track settled A and C) takes the order
   that wins (:func:`label_across_cameras`).
 - A track (a camera's views labelled together, :mod:`~wand_calib_ros.detection.tracking`)
-  whose views the other cameras find exchanged, in most of the frames that decide, is
-  exchanged as a whole (:func:`flip_contradicted_tracks`): a vote of image ratios misleads
+  is right or exchanged stretch by stretch, between the places where continuity paired its
+  ends wrongly (the wand spun about its middle): the stretches the other cameras find
+  exchanged are exchanged (:func:`flip_contradicted_tracks`); a vote of image ratios misleads
   a whole track when the wand points at the camera throughout it.
 """
 
@@ -34,10 +35,9 @@ FloatArray = NDArray[np.float64]
 CONSISTENCY_MARGIN = 0.25
 #: ... and reconstruct the wand within this fraction of its length.
 CONSISTENCY_TOLERANCE = 0.03
-#: A track is exchanged when at least this many of its views ...
-FLIP_MIN_VIEWS = 3
-#: ... and this fraction of those the other cameras decide are found exchanged.
-FLIP_FRACTION = 0.75
+#: A track's labels change between as labelled and exchanged at this cost (in views the other cameras
+#: contradict): a stretch in the middle of a track is exchanged when more than twice this many of its views say so.
+SWITCH_COST = 1.5
 
 
 def wand_length_errors(result: CalibrationResult, uv: FloatArray, wand: WandSpec) -> FloatArray:
@@ -60,10 +60,72 @@ def wand_length_errors(result: CalibrationResult, uv: FloatArray, wand: WandSpec
     return np.where(complete.sum(axis=1) >= 2, np.abs(ab - wand.L1) + np.abs(bc - wand.L2), np.nan)
 
 
+#: Up to this many cameras, every combination of orders of a frame's views is tried (else one view at a time).
+JOINT_CAMERAS = 5
+
+
+def _order_evidence(result: CalibrationResult, uv: FloatArray, wand: WandSpec) -> NDArray[np.int64]:
+    """(F, C) what the frame says of each complete view's order: +1 as labelled, -1 exchanged, 0 it does not tell.
+
+    The frame's views are tried in every combination of orders (one view at a time for a rig of more than
+    JOINT_CAMERAS cameras): the combination that makes the wand of the right lengths (|AB| = L1, |BC| = L2) wins,
+    and a view's order is told when the best combination with that view the other way round is CONSISTENCY_MARGIN
+    times worse. (Exchanging every view makes a consistent wand of the wrong lengths: L1 and L2 differ.)
+    """
+    n_frames, n_cameras = uv.shape[:2]
+    complete = np.all(np.isfinite(uv), axis=(2, 3))
+    if n_cameras <= JOINT_CAMERAS:
+        patterns = np.array([[(m >> c) & 1 for c in range(n_cameras)] for m in range(2**n_cameras)], dtype=bool)
+    else:
+        patterns = np.vstack([np.zeros((1, n_cameras), dtype=bool), np.eye(n_cameras, dtype=bool)])
+    errors = np.full((patterns.shape[0], n_frames), np.inf)
+    for k, pattern in enumerate(patterns):
+        trial = np.where(pattern[None, :, None, None], uv[:, :, ::-1], uv)
+        with np.errstate(invalid="ignore"):
+            errors[k] = np.nan_to_num(wand_length_errors(result, trial, wand), nan=np.inf)
+    # a pattern that exchanges a camera without a view repeats another pattern: leave it out
+    valid = ~np.any(patterns[:, None, :] & ~complete[None], axis=2)  # (K, F)
+    errors = np.where(valid, errors, np.inf)
+    evidence = np.zeros((n_frames, n_cameras), dtype=np.int64)
+    for c in range(n_cameras):
+        straight = errors[~patterns[:, c]].min(axis=0)
+        swapped = errors[patterns[:, c]].min(axis=0)
+        with np.errstate(invalid="ignore"):
+            evidence[:, c] = (straight <= CONSISTENCY_MARGIN * swapped).astype(np.int64)
+            evidence[:, c] -= swapped <= CONSISTENCY_MARGIN * straight
+        evidence[~complete[:, c] | (complete.sum(axis=1) < 2), c] = 0
+    return evidence
+
+
+def exchanged_stretches(evidence: NDArray[np.int64], switch_cost: float = SWITCH_COST) -> NDArray[np.bool_]:
+    """(N,) which of a track's views (in time order) are exchanged: the labelling, as labelled or exchanged
+    view by view, that disagrees least with the evidence (+1: the other cameras find the view right, -1:
+    exchanged, 0: they do not tell) at SWITCH_COST per change between the two along the track (Viterbi).
+
+    A track's labels can only go wrong where continuity paired its ends wrongly: from there on, they are
+    exchanged until the next such place. A stretch is exchanged when enough of its views say so to pay for
+    its two ends.
+    """
+    n = evidence.size
+    cost = np.zeros(2)  # best cost so far ending labelled as is (0) or exchanged (1)
+    came = np.zeros((n, 2), dtype=np.int64)
+    for i, e in enumerate(evidence):
+        stay, switch = cost, cost[::-1] + switch_cost
+        came[i] = np.where(stay <= switch, [0, 1], [1, 0])
+        cost = np.minimum(stay, switch) + np.array([float(e < 0), float(e > 0)])
+    state = int(np.argmin(cost))
+    exchanged = np.zeros(n, dtype=bool)
+    for i in range(n - 1, -1, -1):
+        exchanged[i] = state == 1
+        state = int(came[i, state])
+    return exchanged
+
+
 def flip_contradicted_tracks(
     observations: WandObservations, tracks: NDArray[np.int64], result: CalibrationResult, wand: WandSpec
 ) -> tuple[WandObservations, list[tuple[str, int, int]]]:
-    """Exchange A and C in the tracks the other cameras contradict (see the module docstring).
+    """Exchange A and C in the stretches of tracks the other cameras contradict (see the module docstring and
+    :func:`exchanged_stretches`).
 
     Args:
         observations: labelled views of a three-marker wand.
@@ -72,7 +134,7 @@ def flip_contradicted_tracks(
         wand: the wand's lengths.
 
     Returns:
-        The observations with those tracks exchanged, and (camera, track, views) of each one exchanged.
+        The observations with those stretches exchanged, and (camera, track, views exchanged) of each track.
     """
     names = observations.camera_names
     order = [names.index(c.name) for c in result.cameras]
@@ -80,23 +142,16 @@ def flip_contradicted_tracks(
     own = tracks[:, order]
     flipped: list[tuple[str, int, int]] = []
     for _ in range(2):  # a second round sees the first's corrections
-        base = wand_length_errors(result, uv, wand)
-        complete = np.all(np.isfinite(uv), axis=(2, 3))
+        evidence = _order_evidence(result, uv, wand)
         for c in range(uv.shape[1]):
-            trial = uv.copy()
-            trial[:, c] = uv[:, c, ::-1]
-            other = wand_length_errors(result, trial, wand)
-            with np.errstate(invalid="ignore"):
-                keep = complete[:, c] & (base <= CONSISTENCY_MARGIN * other)
-                swap = complete[:, c] & (other <= CONSISTENCY_MARGIN * base)
-            for track in np.unique(own[swap, c]):
-                rows = own[:, c] == track
-                n_swap, n_keep = int(swap[rows].sum()), int(keep[rows].sum())
-                if track < 0 or n_swap < FLIP_MIN_VIEWS or n_swap < FLIP_FRACTION * (n_swap + n_keep):
+            for track in np.unique(own[evidence[:, c] < 0, c]):
+                rows = np.flatnonzero(own[:, c] == track)
+                exchanged = rows[exchanged_stretches(evidence[rows, c])]
+                if track < 0 or exchanged.size == 0:
                     continue
-                uv[rows, c] = uv[rows, c, ::-1]
-                base = wand_length_errors(result, uv, wand)
-                flipped.append((result.cameras[c].name, int(track), int(rows.sum())))
+                uv[exchanged, c] = uv[exchanged, c, ::-1]
+                evidence[exchanged, c] *= -1
+                flipped.append((result.cameras[c].name, int(track), int(exchanged.size)))
     back = np.empty_like(uv)
     back[:, order] = uv
     return observations.with_uv(back), flipped

@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from wand_calib_ros.detection.blobs import Blobs
 from wand_calib_ros.detection.masks import Mask, write_mask
-from wand_calib_ros.io.detection_summary import masks_folder, write_summary
+from wand_calib_ros.io.detection_summary import REASON_TEXT, masks_folder, write_summary
 
 FloatArray = NDArray[np.float64]
 
@@ -36,21 +36,6 @@ DIM_WARN = 0.2
 STREAK_WARN_PX = 6.0
 #: Fewest views before the exposure is judged.
 MIN_VIEWS_JUDGED = 20
-
-#: Why an image gave no view, in plain words (the detector's reasons).
-REASON_TEXT = {
-    "no_blobs": "nothing bright",
-    "too_few_blobs": "fewer spots than the wand has LEDs",
-    "not_collinear": "no spots in a line like the wand's",
-    "competing_triples": "two wand-like lines (ambiguous)",
-    "at_border": "an LED cut by the image border or a mask",
-    "ambiguous": "A and C could not be told apart",
-    "still": "still lights, not a moving wand",
-    "wrong_size": "an image of another size than the rig file's",
-    "bad_image": "an image that could not be read",
-    "taking_mask": "taking the mask",
-    "no_wand": "no wand",
-}
 
 
 @dataclass(frozen=True)

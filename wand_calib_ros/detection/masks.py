@@ -26,9 +26,9 @@ from wand_calib_ros.io.rig_yaml import MaskSpec
 FloatArray = NDArray[np.float64]
 Mask = NDArray[np.uint8]
 
-#: A blob that has stayed put this long (s) is still: it cannot be the wand's ...
+#: A blob that has stayed put this long (s) is still: it cannot be the wand's (nor can one that has been there
+#: since the stream's first image, in STILL_IMAGES images).
 STILL_S = 0.5
-#: ... as is one that has been there since the first image, in this many images.
 STILL_IMAGES = 3
 #: ... and this long a static source: it is masked.
 STATIC_LEARN_S = 2.0
@@ -151,8 +151,8 @@ class StaticSources:
         return self._mask
 
     def still(self, blobs: Blobs) -> NDArray[np.bool_]:
-        """(N,) blobs at a place where a blob has been, in most images, for STILL_S or more, or since the first
-        image (for STILL_IMAGES images or more: what was there from the start and has not moved is no wand)."""
+        """(N,) blobs at a place where a blob has been, in most images, for STILL_S or more, or since the stream's
+        first image in STILL_IMAGES images (what was there from the start and has not moved is no wand)."""
         if not self._centres.size or not blobs.centres.size or not self._images:
             return np.zeros(blobs.centres.shape[0], dtype=bool)
         nearest, index = self._nearest(blobs)
@@ -162,16 +162,23 @@ class StaticSources:
         return nearest & ((age >= STILL_S) | from_start) & (presence >= STATIC_PRESENCE)
 
     def observe(
-        self, stamp_ns: int, blobs: Blobs, claimed: NDArray[np.bool_], standing_out: NDArray[np.bool_] | None = None
+        self,
+        stamp_ns: int,
+        blobs: Blobs,
+        claimed: NDArray[np.bool_],
+        standing_out: NDArray[np.bool_] | None = None,
+        track_since_ns: int | None = None,
     ) -> bool:
         """Learn from one image.
 
         Args:
             stamp_ns: its stamp (time order).
             blobs: its blobs (the learned mask already applied).
-            claimed: (N,) blobs of the wand's track: never learned.
+            claimed: (N,) blobs of the wand's track: never new candidates (a wand at rest is not learned), but
+                counted on a candidate older than the track (a lamp the track took for an LED is still a lamp).
             standing_out: (S,) whether each current source's centre still stands out in this image (None:
                 not checked; every source stays).
+            track_since_ns: when the wand's track began (None: no track).
 
         Returns:
             Whether the mask changed.
@@ -182,9 +189,8 @@ class StaticSources:
         if self._images[0] < horizon:
             self._images = [s for s in self._images if s >= horizon]
         changed = self._forget(stamp_ns, standing_out)
-        free = ~claimed
-        if free.any():
-            self._match(stamp_ns, blobs.subset(free))
+        if blobs.centres.size:
+            self._match(stamp_ns, blobs, claimed, track_since_ns)
         keep = (stamp_ns - self._last) <= CANDIDATE_GAP_S * 1e9
         age = (stamp_ns - self._first) / 1e9
         presence = self._count / np.maximum(self._observed_since(self._first), 1)
@@ -209,13 +215,17 @@ class StaticSources:
         reach = MATCH_PX + 0.25 * np.maximum(_radii(blobs), self._radii[index])
         return distance[np.arange(index.size), index] <= reach, index
 
-    def _match(self, stamp_ns: int, blobs: Blobs) -> None:
+    def _match(self, stamp_ns: int, blobs: Blobs, claimed: NDArray[np.bool_], since_ns: int | None) -> None:
+        """Count the blobs on the candidates they match (a claimed blob only on a candidate older than the track);
+        the unclaimed others are new candidates."""
         radii = _radii(blobs)
-        new = np.ones(blobs.centres.shape[0], dtype=bool)
+        new = ~claimed
         if self._centres.size:
             matched, index = self._nearest(blobs)
             for b in np.flatnonzero(matched):
                 i = index[b]
+                if claimed[b] and (since_ns is None or self._first[i] > since_ns):
+                    continue
                 if self._last[i] == stamp_ns:  # a second blob on one candidate: counted once
                     new[b] = False
                     continue

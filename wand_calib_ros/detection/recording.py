@@ -195,7 +195,8 @@ class CameraStream:
             gaps = np.linalg.norm(blobs.centres[:, None] - detection.points[None], axis=-1).min(axis=1)
             claimed |= gaps < 1e-6
         standing_out = self.sources.centres_standing_out(gray, background.threshold)
-        if self.sources.observe(stamp_ns, blobs, claimed, standing_out):  # the mask changed
+        since = self.labeller.since_ns if prediction is not None else None
+        if self.sources.observe(stamp_ns, blobs, claimed, standing_out, since):  # the mask changed
             learned, given = self.sources.mask, self.given_mask
             self._mask = learned if given is None else np.maximum(given, learned).astype(np.uint8)
         if detection.points is not None:

@@ -11,8 +11,9 @@ of their points jumped) form a track. A track
   first saw it: lamps in a row never move, nor does a lamp lined up with two LEDs as a
   whole, while a wand laid on the floor keeps the track it arrived with. Views of a track
   that has not moved are held, and given up as "still" when it has STILL_VIEWS views or
-  lasted STILL_TRACK_S without moving (one or two images that continuity cannot link to
-  others tell nothing either way: their views are kept);
+  lasted STILL_TRACK_S without moving, or began in the stream's first STILL_START_S (what was
+  there from the start and has not moved is no wand, whatever lamps it took in; later, one or
+  two images that continuity cannot link to others tell nothing either way: their views are kept);
 - decides its labels: within a track the A/C labels can only all be right or all be
   swapped. Each view votes for its own order with log(|AB|/|BC|) in the image (near 0 for
   ambiguous images), and the track takes the order the votes favour once they sum to at
@@ -47,8 +48,9 @@ CONTINUITY_MARGIN = 0.5
 MIN_TRACK_MOTION_PX = 3.0
 #: ... and still lights when it has this many views ...
 STILL_VIEWS = 5
-#: ... or lasted this long (s) without.
+#: ... or lasted this long (s) without, or began this soon (s) after the stream's first view.
 STILL_TRACK_S = 0.3
+STILL_START_S = 0.5
 #: The wand is looked for within this distance (px) of the track's prediction ...
 GATE_PX = 6.0
 #: ... plus this fraction of the distance it is predicted to move ...
@@ -118,10 +120,16 @@ class StreamLabeller:
         self._first: FloatArray | None = None  # the track's first points
         self._since = 0  # and their stamp
         self._views = 0  # views in the track
+        self._start: int | None = None  # the stream's first view
         self._track = -1  # its number
         self._moved = False
         self._vote = 0.0
         self._forward: bool | None = None  # None: undecided; True: the track order is A, B, C
+
+    @property
+    def since_ns(self) -> int:
+        """When the current track began."""
+        return self._since
 
     @property
     def moved(self) -> bool:
@@ -141,6 +149,7 @@ class StreamLabeller:
     def push(self, stamp_ns: int, detection: WandDetection) -> list[Released]:
         """Add a detection (in time order); returns the views it releases."""
         assert detection.points is not None
+        self._start = stamp_ns if self._start is None else self._start
         released: list[Released] = []
         linked = None
         expected = self.predict(stamp_ns)
@@ -189,7 +198,9 @@ class StreamLabeller:
         """Whether the current track is still lights: it has not moved in STILL_VIEWS views or STILL_TRACK_S."""
         if self._moved or self._last is None:
             return False
-        return self._views >= STILL_VIEWS or self._last[0] - self._since >= STILL_TRACK_S * 1e9
+        assert self._start is not None
+        early = self._since - self._start < STILL_START_S * 1e9
+        return early or self._views >= STILL_VIEWS or self._last[0] - self._since >= STILL_TRACK_S * 1e9
 
     def _decide(self) -> list[Released]:
         released: list[Released]

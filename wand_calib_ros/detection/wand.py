@@ -181,8 +181,11 @@ def identify_wand(
             the others; two within it make the image ambiguous.
     """
     if usable is not None and not usable.all():
-        blobs = blobs.subset(usable)
-    found = _find_wand(blobs, options, model, near)
+        found = _find_wand(blobs.subset(usable), options, model, near)
+        if found.points is None and found.reason in ("no_blobs", "too_few_blobs"):  # the lights there were still
+            return WandDetection(None, 0.0, "still")
+    else:
+        found = _find_wand(blobs, options, model, near)
     n = blobs.centres.shape[0]
     if found.points is not None or not options.tool_markers or n != options.tool_markers:
         return found

@@ -33,6 +33,21 @@ from wand_calib_ros.io.outputs import write_together
 from wand_calib_ros.io.result_yaml import yaml_text
 from wand_calib_ros.io.text import read_yaml
 
+#: Why an image gave no view, in plain words (the detector's reasons).
+REASON_TEXT = {
+    "no_blobs": "nothing bright",
+    "too_few_blobs": "fewer spots than the wand has LEDs",
+    "not_collinear": "no spots in a line like the wand's",
+    "competing_triples": "two wand-like lines (ambiguous)",
+    "at_border": "an LED cut by the image border or a mask",
+    "ambiguous": "A and C could not be told apart",
+    "still": "still lights, not a moving wand",
+    "wrong_size": "an image of another size than the rig file's",
+    "bad_image": "an image that could not be read",
+    "taking_mask": "taking the mask",
+    "no_wand": "no wand",
+}
+
 
 def summary_path(observations: Path) -> Path:
     """``<stem>.detection.yaml`` beside an observations CSV."""

@@ -8,10 +8,12 @@ import io
 import logging
 from pathlib import Path
 
+import cv2
 import matplotlib.pyplot as plt
 import numpy as np
 
 from wand_calib_ros.core.model.rig import RigSpec, WandObservations
+from wand_calib_ros.io.detection_summary import REASON_TEXT, read_summary, summary_path
 from wand_calib_ros.io.errors import OutputError
 from wand_calib_ros.report.analysis import ReportData, prepare
 from wand_calib_ros.report.figures import FIGURES
@@ -121,8 +123,74 @@ def _events(data: ReportData) -> str:
     )
 
 
-def write_report(rig: RigSpec, observations: WandObservations, result_path: Path, out: Path) -> Path:
+def _what_cameras_saw(observations_path: Path | None) -> str:
+    """The detector's report per camera (``<stem>.detection.yaml`` beside the observations, if the detector
+    wrote one) with the masks it ended with."""
+    summary = read_summary(observations_path) if observations_path is not None else None
+    if not summary or observations_path is None:
+        return ""
+    keys = (
+        ("images", "images"),
+        ("views", "views"),
+        ("static lights", "static_lights"),
+        ("masked %", "masked_fraction"),
+        ("LEDs saturated %", "saturated"),
+        ("dim views %", "dim"),
+        ("streak median (px)", "streak_median_px"),
+    )
+    head = "".join(f"<th>{html.escape(label)}</th>" for label, _ in keys)
+    rows, notes, masks = [], [], []
+    for name, entry in summary.items():
+        cells = []
+        for _, key in keys:
+            value = entry.get(key, "")
+            if key == "static_lights":
+                value = len(value) if isinstance(value, list) else value
+            elif key in ("masked_fraction", "saturated", "dim") and isinstance(value, int | float):
+                value = f"{100 * value:.1f}"
+            elif isinstance(value, float):
+                value = f"{value:.3g}"
+            cells.append(f"<td>{html.escape(str(value))}</td>")
+        no_view = entry.get("no_view", {})
+        reasons = (
+            ", ".join(f"{REASON_TEXT.get(k, k)} {v}" for k, v in no_view.items()) if isinstance(no_view, dict) else ""
+        )
+        rows.append(f"<tr><th>{html.escape(name)}</th>{''.join(cells)}<td style=\"text-align:left\">"
+                    f"{html.escape(reasons)}</td></tr>")  # fmt: skip
+        notes += [f'<li class="warn">{html.escape(str(m))}</li>' for m in entry.get("messages", [])]
+        mask_file = entry.get("mask")
+        picture = cv2.imread(str(observations_path.parent / mask_file), cv2.IMREAD_GRAYSCALE) if mask_file else None
+        if picture is not None:
+            scale = 240.0 / max(picture.shape[1], 1)
+            small = cv2.resize(picture, (240, max(round(picture.shape[0] * scale), 1)), interpolation=cv2.INTER_AREA)
+            ok, png = cv2.imencode(".png", cv2.bitwise_not(small))
+            if ok:
+                encoded = base64.b64encode(png.tobytes()).decode("ascii")
+                masks.append(
+                    f'<figure style="display:inline-block"><img alt="{html.escape(name)} mask" '
+                    f'src="data:image/png;base64,{encoded}"><figcaption>{html.escape(name)}</figcaption></figure>'
+                )
+    return (
+        "<h2>What each camera saw</h2><p>The LED detector's account of each camera's images (beside the "
+        f"observations: {html.escape(summary_path(observations_path).name)}).</p>"
+        f"<table><tr><th>camera</th>{head}<th>images without a view</th></tr>{''.join(rows)}</table>"
+        + (f"<ul>{''.join(notes)}</ul>" if notes else "")
+        + (f"<p>Masks (dark: pixels the detector ignored):</p>{''.join(masks)}" if masks else "")
+    )
+
+
+def write_report(
+    rig: RigSpec,
+    observations: WandObservations,
+    result_path: Path,
+    out: Path,
+    observations_path: Path | None = None,
+) -> Path:
     """Write ``out/index.html`` (self-contained) and one PNG per figure; returns the HTML path.
+
+    Args:
+        observations_path: the observations' CSV: the detector's account beside it (``<stem>.detection.yaml``)
+            is shown when there is one.
 
     Raises:
         OutputError: ``out`` is a file.
@@ -165,7 +233,7 @@ def write_report(rig: RigSpec, observations: WandObservations, result_path: Path
 <h2>Warnings</h2>{warning_html}
 <h2>Parameters (&plusmn; one standard deviation)</h2>{_parameter_table(data)}
 <h2>Metrics</h2>{_metrics(data)}
-{_quality(data)}{_events(data)}
+{_quality(data)}{_events(data)}{_what_cameras_saw(observations_path)}
 {"".join(sections)}
 </body></html>
 """

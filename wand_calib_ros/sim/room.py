@@ -2,10 +2,10 @@
 
 Everything is in grey levels of an 8-bit image, per millisecond of exposure where it is light:
 
-- **LEDs.** The light an LED sends a camera falls as 1/d^2 with its distance and as
-  ((1 + cos a) / 2)^p with the angle a between its axis (the wand's ``facing``) and the camera. Over
-  the exposure the LED moves: its light is spread along its path (a motion streak, centred on the
-  mid-exposure position, which is the image's stamp).
+- **LEDs.** The light an LED sends a camera falls as 1/d^2 with its distance and, as diffused LEDs on
+  a wand glow around it, as sin(a)^p with the angle a between the wand and the line of sight (dim
+  when the wand points at the camera). Over the exposure the LED moves: its light is spread along
+  its path (a motion streak, centred on the mid-exposure position, which is the image's stamp).
 - **Optics.** Every light goes through the same point spread: a Gaussian core, a bloom (a few pixels)
   and a wide glare, so bright LEDs and lamps have halos, and the sensor clips them to flat tops.
 - **The room.** A wall lit unevenly (a gradient and vignetting); windows, bright panes split by bars;
@@ -158,7 +158,7 @@ class CameraRoom:
         led_peak: peak (grey levels per ms, before clipping) of a still LED seen on its axis from
             ``led_distance_mm``.
         led_distance_mm: the distance ``led_peak`` is quoted at.
-        led_falloff: the exponent p of the LEDs' fall-off off their axis.
+        led_falloff: the exponent p of the LEDs' fall-off as the wand turns towards the line of sight.
         led_colour: relative (R, G, B) response to the LEDs.
     """
 
@@ -171,7 +171,7 @@ class CameraRoom:
     vignetting: float = 0.35
     led_peak: float = 300.0
     led_distance_mm: float = 1000.0
-    led_falloff: float = 2.0
+    led_falloff: float = 3.0
     led_colour: tuple[float, float, float] = (1.0, 1.0, 1.0)
 
 
@@ -461,10 +461,10 @@ def render_camera(
 # --- a take -----------------------------------------------------------------------------------------------
 
 
-def _falloff(to_camera: FloatArray, facing: FloatArray, power: float) -> FloatArray:
-    """((1 + cos a) / 2)^p of the angle a between an LED's axis and the camera."""
-    cosine = np.einsum("...i,...i->...", to_camera, facing) / np.linalg.norm(to_camera, axis=-1)
-    return ((1.0 + cosine) / 2.0) ** power
+def _falloff(to_camera: FloatArray, direction: FloatArray, power: float) -> FloatArray:
+    """sin(a)^p of the angle a between the wand's direction and the line of sight (a floor of 1e-3)."""
+    cosine = np.einsum("...i,...i->...", to_camera, direction) / np.linalg.norm(to_camera, axis=-1)
+    return np.maximum(np.sqrt(np.clip(1.0 - cosine**2, 0.0, 1.0)), 1e-3) ** power
 
 
 def _exposure_steps(streak_px: float) -> int:
@@ -484,7 +484,7 @@ def _led_light(
     seen = visibility(scenario, motion.wand_a, motion.direction, motion.facing)[:, camera]
     distance = np.linalg.norm(in_camera, axis=-1)
     to_camera = true_camera.pose.center[None, None, :] - points
-    falloff = _falloff(to_camera, motion.facing[:, None, :], room.led_falloff)
+    falloff = _falloff(to_camera, motion.direction[:, None, :], room.led_falloff)
     core = room.optics.terms()[0][0]
     energy = room.led_peak / core * 2 * np.pi * room.optics.core_sigma_px**2
     light = energy * (room.led_distance_mm / distance) ** 2 * falloff
@@ -600,7 +600,7 @@ class RoomOptions:
         lamp_row: three of each camera's lamps in a row, spaced as the wand's LEDs (a static false wand).
         led_peak: peak (grey levels, still, on axis, before clipping) of an LED at the camera's median
             distance of the wand, at REFERENCE_EXPOSURE_MS.
-        led_falloff: exponent of the LEDs' fall-off off their axis.
+        led_falloff: exponent of the LEDs' fall-off as the wand turns towards the line of sight.
         led_colour: (R, G, B) of the LEDs.
     """
 
@@ -609,8 +609,8 @@ class RoomOptions:
     windows: str = "one"
     lamp_near_path: bool = False
     lamp_row: bool = False
-    led_peak: float = 1500.0
-    led_falloff: float = 2.0
+    led_peak: float = 400.0
+    led_falloff: float = 3.0
     led_colour: tuple[float, float, float] = (1.0, 1.0, 1.0)
 
 
@@ -730,6 +730,7 @@ ROOM_SCENES: dict[str, Callable[[], RoomOptions]] = {
     "window_everywhere": lambda: RoomOptions(Sensor(exposure_ms=6.0), windows="every"),
     "mono16": lambda: RoomOptions(Sensor(exposure_ms=6.0, encoding="mono16")),
     "bayer": lambda: RoomOptions(Sensor(exposure_ms=6.0, encoding="bayer_rggb8")),
+    "hard": lambda: RoomOptions(Sensor(exposure_ms=16.0), lamps=4, windows="every", lamp_near_path=True, lamp_row=True),
 }
 
 
