@@ -13,6 +13,7 @@ dropped.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -198,18 +199,23 @@ def _measure(
     x0, y0 = max(x - w, 0), max(y - w, 0)
     x1, y1 = min(x + bw + w, width), min(y + bh + w, height)
     window = gray[y0:y1, x0:x1].astype(np.float64)
-    level = float(background.at(np.array([[x + bw / 2.0, y + bh / 2.0]]))[0][0])
-    threshold = float(background.threshold[min(y + bh // 2, height - 1), min(x + bw // 2, width - 1)])
-    contrast = max(threshold - level, 1.0)
+    row, col = min(y + bh // 2, height - 1), min(x + bw // 2, width - 1)
+    step, levels = background.step, background.level
+    level = float(levels[min(round(row / step), levels.shape[0] - 1), min(round(col / step), levels.shape[1] - 1)])
+    contrast = max(float(background.threshold[row, col]) - level, 1.0)
     peak = float(window.max()) - level
-    core = (window > level + CORE_FRACTION * peak).astype(np.uint8)
-    cores, _ = cv2.findContours(core, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
-    whole: tuple[int, int, int, int] = tuple(cv2.boundingRect(core))  # type: ignore[assignment]
-    parts: list[tuple[NDArray[np.bool_] | None, tuple[int, int, int, int]]] = [(None, whole)]
-    if peak >= CORE_SPLIT * contrast and len(cores) >= 2:
+    bright = peak >= CORE_SPLIT * contrast
+    near_border = x <= w or y <= w or x + bw >= width - w or y + bh >= height - w
+    parts: list[tuple[NDArray[np.bool_] | None, tuple[int, int, int, int]]] = [(None, (x - x0, y - y0, bw, bh))]
+    cores: Sequence[NDArray[Any]] = ()
+    if bright or near_border:  # its core: where it splits, and whether the border cuts it
+        core = (window > level + CORE_FRACTION * peak).astype(np.uint8)
+        cores, _ = cv2.findContours(core, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+        parts = [(None, tuple(cv2.boundingRect(core)))]  # type: ignore[list-item]
+    if bright and len(cores) >= 2:
         split: list[tuple[NDArray[np.bool_] | None, tuple[int, int, int, int]]] = []
         for outline in cores:
-            drawn = np.zeros_like(core)
+            drawn = np.zeros(window.shape, np.uint8)
             cv2.drawContours(drawn, [outline], -1, 1, -1)
             # a spot of its own: as bright as half the region's peak, and more than a fleck (noise on a streak)
             if drawn.sum() < options.min_area or float(window[drawn > 0].max()) - level < 0.3 * peak:

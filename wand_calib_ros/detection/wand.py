@@ -18,6 +18,7 @@ wand (still lights, learned or not yet) are left out by the caller (``usable``).
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -37,8 +38,8 @@ REASONS = ("no_blobs", "too_few_blobs", "not_collinear", "competing_triples", "a
 
 def distance_to(points: FloatArray, prediction: FloatArray) -> float:
     """The largest distance (px) of a view's points from a prediction's, in the nearer of the two orders."""
-    straight = float(np.max(np.linalg.norm(points - prediction, axis=1)))
-    swapped = float(np.max(np.linalg.norm(points[::-1] - prediction, axis=1)))
+    straight = float(np.sqrt(np.max(np.sum((points - prediction) ** 2, axis=1))))
+    swapped = float(np.sqrt(np.max(np.sum((points[::-1] - prediction) ** 2, axis=1))))
     return min(straight, swapped)
 
 
@@ -134,28 +135,31 @@ def _score(
             collinearity is judged in the image, else on the sphere (the wand's points lie on
             a great circle, however strongly a fisheye bends its image).
     """
-    # The ends of the longest side are A and C; the third point is B.
-    d01, d02, d12 = (np.linalg.norm(triple[i] - triple[j]) for i, j in ((0, 1), (0, 2), (1, 2)))
+    # The ends of the longest side are A and C; the third point is B. (Scalar arithmetic: numpy's calls cost more
+    # than the sums on three points.)
+    (x0, y0), (x1, y1), (x2, y2) = triple.tolist()
+    d01, d02, d12 = math.hypot(x1 - x0, y1 - y0), math.hypot(x2 - x0, y2 - y0), math.hypot(x2 - x1, y2 - y1)
     i, j, m, length = max(((0, 1, 2, d01), (0, 2, 1, d02), (1, 2, 0, d12)), key=lambda t: t[3])
     if length < options.min_length_px:
         return None
     a, c, b = triple[i], triple[j], triple[m]
     if bearings is None:
-        axis = (c - a) / length
-        off_line = abs(axis[0] * (b - a)[1] - axis[1] * (b - a)[0]) / length
+        ax, ay = (c[0] - a[0]) / length, (c[1] - a[1]) / length
+        off_line = abs(ax * (b[1] - a[1]) - ay * (b[0] - a[0])) / length
     else:
-        normal = np.cross(bearings[i], bearings[j])
-        span = float(np.linalg.norm(normal))  # sin of the angle between the ends' rays
-        off_line = abs(float(normal @ bearings[m])) / max(span * span, 1e-12) if span > 0 else np.inf
+        (p0, p1, p2), (q0, q1, q2), (r0, r1, r2) = bearings[i].tolist(), bearings[j].tolist(), bearings[m].tolist()
+        n0, n1, n2 = p1 * q2 - p2 * q1, p2 * q0 - p0 * q2, p0 * q1 - p1 * q0  # normal of the ends' great circle
+        span = n0 * n0 + n1 * n1 + n2 * n2  # sin^2 of the angle between the ends' rays
+        off_line = abs(n0 * r0 + n1 * r1 + n2 * r2) / max(span, 1e-12) if span > 0 else math.inf
     if off_line > options.collinearity:
         return None
-    ab, bc = float(np.linalg.norm(b - a)), float(np.linalg.norm(c - b))
+    ab, bc = math.hypot(b[0] - a[0], b[1] - a[1]), math.hypot(c[0] - b[0], c[1] - b[1])
     if min(ab, bc) <= 0:
         return None
     if ab < bc:  # A is the end farther from B
         a, c, ab, bc = c, a, bc, ab
     ratio = ab / bc
-    ratio_error = abs(float(np.log(ratio / options.ratio)))
+    ratio_error = abs(math.log(ratio / options.ratio))
     score = off_line / options.collinearity + 0.25 * ratio_error
     return score, np.stack([a, b, c]), ratio
 
