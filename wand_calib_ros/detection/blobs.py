@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.detection.background import Background, BackgroundOptions, estimate_background
+from wand_calib_ros.detection.background import BOX, Background, BackgroundOptions, box_sums, estimate_background
 from wand_calib_ros.detection.centres import spot_centre
 from wand_calib_ros.detection.errors import ImageError
 
@@ -119,11 +119,13 @@ class Blobs:
         )
 
 
+#: A spot's centre weighs the pixels above its background by how far they are above this many noise sigmas ...
+CENTRE_FLOOR_SIGMAS = 2.0
 #: A region's core is where it stands above its background by this fraction of its peak ...
 CORE_FRACTION = 0.25
-#: ... and a region whose peak is this many times the threshold's contrast is split where it has two cores each
-#: as bright as 0.3 of its peak.
-CORE_SPLIT = 4.0
+#: ... (and a third of this many noise sigmas); a region whose peak is this many noise sigmas is split where it
+#: has two cores each as bright as 0.3 of its peak.
+CORE_SPLIT = 10.0
 #: A blob of at most this fraction of the area of a blob it touches is a fringe of that blob.
 FRINGE_AREA = 0.1
 #: Blobs touch when they are closer than their radii (from their areas) plus this, px.
@@ -201,15 +203,20 @@ def _measure(
     window = gray[y0:y1, x0:x1].astype(np.float64)
     row, col = min(y + bh // 2, height - 1), min(x + bw // 2, width - 1)
     step, levels = background.step, background.level
-    level = float(levels[min(round(row / step), levels.shape[0] - 1), min(round(col / step), levels.shape[1] - 1)])
-    contrast = max(float(background.threshold[row, col]) - level, 1.0)
+    sample = (min(round(row / step), levels.shape[0] - 1), min(round(col / step), levels.shape[1] - 1))
+    level = float(levels[sample])
+    contrast = max(float(background.threshold[row, col]) - level, 1.0) / BOX**2  # in grey levels (of a pixel)
+    level /= BOX**2
+    noise = float(background.noise[sample]) / BOX  # a pixel's, from its box sums'
+    unit = 1.0 if gray.dtype == np.uint8 else 257.0
+    floor = max(CENTRE_FLOOR_SIGMAS * noise, 0.5 * options.background.min_contrast * unit)
     peak = float(window.max()) - level
-    bright = peak >= CORE_SPLIT * contrast
+    bright = peak >= CORE_SPLIT * noise
     near_border = x <= w or y <= w or x + bw >= width - w or y + bh >= height - w
     parts: list[tuple[NDArray[np.bool_] | None, tuple[int, int, int, int]]] = [(None, (x - x0, y - y0, bw, bh))]
     cores: Sequence[NDArray[Any]] = ()
     if bright or near_border:  # its core: where it splits, and whether the border cuts it
-        core = (window > level + CORE_FRACTION * peak).astype(np.uint8)
+        core = (window > level + max(CORE_FRACTION * peak, CORE_SPLIT / 3 * noise)).astype(np.uint8)
         cores, _ = cv2.findContours(core, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
         parts = [(None, tuple(cv2.boundingRect(core)))]  # type: ignore[list-item]
     if bright and len(cores) >= 2:
@@ -226,8 +233,8 @@ def _measure(
     touches = mask is not None and bool(mask[max(y - 1, 0) : y + bh + 1, max(x - 1, 0) : x + bw + 1].any())
     measured: list[tuple[float, ...]] = []
     for part, (cx, cy, cw, ch) in parts:
-        floor = 0.5 * contrast if part is None else CORE_FRACTION * peak
-        spot = spot_centre(window, floor, part)
+        spot_floor = floor if part is None else CORE_FRACTION * peak
+        spot = spot_centre(window, spot_floor, part)
         if spot is None:
             continue
         cut = x0 + cx == 0 or y0 + cy == 0 or x0 + cx + cw == width or y0 + cy + ch == height
@@ -256,15 +263,17 @@ def find_blobs(
         saturation: the value of a saturated pixel (default: the dtype's maximum; 65535 for a 12-bit camera's
             mono16 scaled to 16 bits).
         mask: (H, W) uint8, non-zero where pixels are ignored (lamps, windows), or None.
-        background: the image's background (:func:`~wand_calib_ros.detection.background.estimate_background`;
-            a recent image's will do: it changes slowly), or None: estimated here.
+        background: the background of the image's box sums (:func:`~wand_calib_ros.detection.background.box_sums`,
+            :func:`~wand_calib_ros.detection.background.estimate_background`; a recent image's will do: it changes
+            slowly), or None: estimated here.
     """
     if gray.dtype not in (np.uint8, np.uint16):
         gray = np.clip(np.round(gray), 0, 65535).astype(np.uint16)
     full = saturation_of(gray) if saturation is None else saturation
-    if background is None or background.threshold.shape != gray.shape or background.threshold.dtype != gray.dtype:
-        background = estimate_background(gray, options.background)
-    above = cv2.compare(gray, background.threshold, cv2.CMP_GT)
+    sums, unit = box_sums(gray) if background is None or background.sums is None else (background.sums, background.unit)
+    if background is None or background.threshold.shape != sums.shape or background.threshold.dtype != sums.dtype:
+        background = estimate_background(sums, options.background, unit=unit)
+    above = cv2.compare(sums, background.threshold, cv2.CMP_GT)
     if mask is not None:
         above = cv2.subtract(above, mask)
     # External contours of a sparse mask are much cheaper than labelling the whole image.

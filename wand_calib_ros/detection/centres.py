@@ -16,8 +16,10 @@ halves and the centre moved back to the streak's middle.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
 
@@ -66,28 +68,24 @@ def spot_centre(window: FloatArray, floor: float, region: NDArray[np.bool_] | No
     """
     height, width = window.shape
     level, slope_u, slope_v = side_plane(window)
-    cols = np.arange(width) - (width - 1) / 2.0
-    rows = np.arange(height) - (height - 1) / 2.0
-    plane = level + slope_u * cols[None, :] + slope_v * rows[:, None]
-    above = window - plane
+    cols = np.arange(width, dtype=np.float32) - (width - 1) / 2.0
+    rows = np.arange(height, dtype=np.float32) - (height - 1) / 2.0
+    above = window.astype(np.float32) - (level + slope_u * cols[None, :] + slope_v * rows[:, None])
     weights = np.maximum(above - floor, 0.0)
     if region is not None:
         weights = weights * region
-    total = float(weights.sum())
+    moments = cv2.moments(weights)  # one call for the sums the centre and the spread need
+    total = moments["m00"]
     if total <= 0.0:
         return None
-    along_u, along_v = weights.sum(axis=0), weights.sum(axis=1)
-    du, dv = float(along_u @ cols) / total, float(along_v @ rows) / total
-    cu, cv = cols - du, rows - dv
-    suu = float(along_u @ cu**2) / total
-    svv = float(along_v @ cv**2) / total
-    suv = float(cu @ weights.T @ cv) / total
-    spread = np.sqrt(max((suu - svv) ** 2 + 4.0 * suv**2, 0.0))  # major minus minor variance
-    length = float(np.sqrt(12.0 * spread))
+    du, dv = moments["m10"] / total - (width - 1) / 2.0, moments["m01"] / total - (height - 1) / 2.0
+    suu, svv, suv = moments["mu20"] / total, moments["mu02"] / total, moments["mu11"] / total
+    spread = math.sqrt(max((suu - svv) ** 2 + 4.0 * suv**2, 0.0))  # major minus minor variance
+    length = math.sqrt(12.0 * spread)
     if length >= MIN_STREAK_PX:  # the mid-exposure point of a streak whose brightness changes along it
-        angle = 0.5 * np.arctan2(2.0 * suv, suu - svv)
-        axis = np.array([np.cos(angle), np.sin(angle)])
-        along = cu[None, :] * axis[0] + cv[:, None] * axis[1]
+        angle = 0.5 * math.atan2(2.0 * suv, suu - svv)
+        axis = (math.cos(angle), math.sin(angle))
+        along = (cols - du)[None, :] * axis[0] + (rows - dv)[:, None] * axis[1]
         ahead, behind = float(weights[along > 0].sum()), float(weights[along < 0].sum())
         gradient = 4.0 * (ahead - behind) / max(ahead + behind, 1e-12)  # g of I0 (1 + g s / L) over the streak
         du, dv = du - gradient * length / 12.0 * axis[0], dv - gradient * length / 12.0 * axis[1]

@@ -8,17 +8,26 @@ stays where it is for STATIC_LEARN_S, in most images, without belonging to the w
 track, is a lamp, a reflection or a bright spot of a window, and its footprint is masked
 from then on. A source that is no longer there (its centre no longer stands out) for
 STATIC_FORGET_S is unmasked again: a wand left lying, a lamp switched off.
+
+A learned light's halo (a lamp's glare reaches tens of pixels) is then learned too, as the mean
+light it adds around it (:class:`LightPatch`), from images where nothing else is near it; once
+known, it is subtracted from every image (:meth:`StaticSources.clean`) and only the light's
+saturated core stays masked (the halo is scaled to each image's brightness of the light: lamps
+flicker): an LED passing close to a lamp is found and measured on a clean background instead of
+being cut by a wide mask.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from wand_calib_ros.detection.background import BOX
 from wand_calib_ros.detection.blobs import Blobs
 from wand_calib_ros.detection.errors import MaskError
 from wand_calib_ros.io.rig_yaml import MaskSpec
@@ -42,6 +51,25 @@ CANDIDATE_GAP_S = 0.3
 STATIC_FORGET_S = 5.0
 #: A source's mask reaches this far (px) beyond the largest blob it made.
 MASK_MARGIN_PX = 2.0
+#: A learned light's halo is learned this far (px) beyond its mask.
+PATCH_MARGIN_PX = 30
+#: A halo is subtracted once learned from this many images; its mean follows the newest this many.
+PATCH_IMAGES = 8
+#: Pixels of a learned light this close to the image's full scale (a fraction) stay masked: nothing shows there ...
+SATURATED_FRACTION = 0.98
+#: Lamps flicker from image to image (mains-powered ones by 10 % and more): a halo is subtracted scaled by how
+#: bright it is in this image, measured where it adds this many grey levels or more (of an 8-bit image) ...
+REFERENCE_LEVELS = 20.0
+#: ... on at least this many pixels (else as learned; a sample of this many is enough).
+REFERENCE_PIXELS = 12
+REFERENCE_SAMPLE = 64
+#: A halo is subtracted where it adds this many grey levels (of an 8-bit image) or more.
+HALO_LEVELS = 0.5
+#: A known halo keeps learning from every this-many-th image.
+PATCH_EVERY = 8
+#: A light's surroundings are one wall when the quartiles of its patch's border are within this many grey levels
+#: (of an 8-bit image).
+UNEVEN_LEVELS = 8.0
 
 
 def empty_mask(size: tuple[int, int]) -> Mask:
@@ -124,6 +152,94 @@ class Source:
     seen_ns: int
 
 
+class LightPatch:
+    """The light a static source adds around it: the mean, over the images where nothing else was near it,
+    of the image above its wall (the median of the patch's border). Where it is saturated it stays masked
+    (nothing shows there); elsewhere it is subtracted, scaled to this image's brightness of the light
+    (:meth:`subtract`). A light whose patch's border is not one wall (it straddles a window's edge) is not
+    learned: it stays masked as a disc (:attr:`usable`)."""
+
+    def __init__(self, source: Source, size: tuple[int, int]) -> None:
+        reach = int(np.ceil(source.radius_px)) + PATCH_MARGIN_PX
+        u, v = round(source.centre[0]), round(source.centre[1])
+        self.u0, self.v0 = max(u - reach, 0), max(v - reach, 0)
+        self.u1, self.v1 = min(u + reach + 1, size[0]), min(v + reach + 1, size[1])
+        self.excess = np.zeros((self.v1 - self.v0, self.u1 - self.u0), np.float32)
+        self.images = 0
+        self.seen = 0
+        self.uneven = 0  # images whose border was not one wall
+        self.saturated = np.zeros(self.excess.shape, dtype=bool)
+        self.reference = np.zeros(0, dtype=np.int64)  # flat indices where the halo is bright, not saturated
+        self.reach = (0, 0, 0, 0)  # (u0, v0, u1, v1) in the patch where the halo matters
+        self._halo = np.zeros((0, 0), np.float32)  # the excess there
+        self._reference_excess = np.zeros(0, np.float32)  # the excess at the reference pixels
+
+    @property
+    def usable(self) -> bool:
+        """Its border is one wall (in most images): its halo can be learned."""
+        return self.uneven <= self.images
+
+    @property
+    def known(self) -> bool:
+        """Its halo is learned (and usable)."""
+        return self.images >= PATCH_IMAGES and self.usable
+
+    def contains(self, points: FloatArray) -> NDArray[np.bool_]:
+        """(N,) which points lie in the patch."""
+        u, v = points[:, 0], points[:, 1]
+        return np.asarray((u >= self.u0) & (u < self.u1) & (v >= self.v0) & (v < self.v1))
+
+    @staticmethod
+    def _wall(patch: NDArray[Any], full: float) -> tuple[float, bool]:
+        """The wall behind a patch of the image (the median of its border), and whether the border is one wall:
+        its quartiles within UNEVEN_LEVELS (of an 8-bit image) of each other."""
+        border = np.concatenate([patch[0], patch[-1], patch[:, 0], patch[:, -1]]).astype(np.float32)
+        n = border.size
+        low, wall, high = np.partition(border, [n // 4, n // 2, 3 * n // 4])[[n // 4, n // 2, 3 * n // 4]]
+        return float(wall), bool(high - low <= UNEVEN_LEVELS * full / 255.0)
+
+    def due(self) -> bool:
+        """Whether this image is one to learn from: every image until known, then every PATCH_EVERY-th; none once
+        its surroundings proved not to be one wall."""
+        self.seen += 1
+        if self.uneven > PATCH_IMAGES and not self.usable:
+            return False
+        return not self.known or self.seen % PATCH_EVERY == 0
+
+    def add(self, gray: NDArray[Any], full: float) -> None:
+        """One image's light around the source (nothing else near it)."""
+        patch = gray[self.v0 : self.v1, self.u0 : self.u1]
+        wall, even = self._wall(patch, full)
+        if not even:
+            self.uneven += 1
+            return
+        self.images += 1
+        weight = 1.0 / min(self.images, PATCH_IMAGES)
+        self.excess += weight * (np.maximum(patch.astype(np.float32) - wall, 0.0) - self.excess)
+        self.saturated = np.asarray(patch >= SATURATED_FRACTION * full) | (self.saturated & (self.images > 1))
+        reference = np.flatnonzero((self.excess >= REFERENCE_LEVELS * full / 255.0) & ~self.saturated)
+        self.reference = reference[:: max(reference.size // REFERENCE_SAMPLE, 1)]  # (a sample is enough)
+        rows, cols = np.nonzero(self.excess >= HALO_LEVELS * full / 255.0)  # where subtracting it matters
+        self.reach = (0, 0, 0, 0) if not rows.size else (cols.min(), rows.min(), cols.max() + 1, rows.max() + 1)
+        u0, v0, u1, v1 = self.reach
+        self._halo = np.ascontiguousarray(self.excess[v0:v1, u0:u1])
+        self._reference_excess = self.excess.reshape(-1)[self.reference]
+
+    def subtract(self, window: NDArray[Any], full: float) -> None:
+        """Take the halo out of ``window`` (this patch of the image, in place), scaled to the light's brightness
+        in it (the median ratio of its light to the learned light where that is bright and not saturated), where
+        it adds HALO_LEVELS or more."""
+        scale = 1.0
+        n = self.reference.size
+        if n >= REFERENCE_PIXELS:
+            wall, _ = self._wall(window, full)
+            ratios = (window.reshape(-1)[self.reference].astype(np.float32) - wall) / self._reference_excess
+            scale = max(float(np.partition(ratios, n // 2)[n // 2]), 0.0)
+        u0, v0, u1, v1 = self.reach
+        part = window[v0:v1, u0:u1]
+        cv2.subtract(part, np.minimum(scale * self._halo + 0.5, full).astype(window.dtype), dst=part)  # (clips at 0)
+
+
 class StaticSources:
     """One camera's learned static lights (see the module docstring).
 
@@ -139,25 +255,48 @@ class StaticSources:
         self._first = np.zeros(0, dtype=np.int64)
         self._last = np.zeros(0, dtype=np.int64)
         self._count = np.zeros(0, dtype=np.int64)
-        self._images: list[int] = []  # stamps of the images observed (to measure presence)
+        self._seen = 0  # images observed (to measure presence)
+        self._newest: int | None = None  # the newest image's stamp
+        self._born = np.zeros(0, dtype=np.int64)  # the image (count) each candidate was first seen in
         self._start: int | None = None  # the first image's stamp
         self._mask: Mask | None = None
+        self.patches: list[LightPatch] = []  # each source's halo, in the order of ``sources``
 
     @property
     def mask(self) -> Mask:
-        """The learned sources' footprints (255), for :func:`~wand_calib_ros.detection.blobs.find_blobs`."""
+        """The learned sources' footprints (255), for :func:`~wand_calib_ros.detection.blobs.find_blobs`: a disc
+        until the source's halo is known, then its saturated core (and a pixel around it)."""
         if self._mask is None:
-            self._mask = mask_from_shapes(self.size, [(s.centre[0], s.centre[1], s.radius_px) for s in self.sources])
+            pairs = zip(self.sources, self.patches, strict=True)
+            discs = [(s.centre[0], s.centre[1], s.radius_px) for s, p in pairs if not p.known]
+            mask = mask_from_shapes(self.size, discs)
+            for patch in self.patches:
+                if patch.known and patch.saturated.any():
+                    core = cv2.dilate(patch.saturated.astype(np.uint8) * 255, np.ones((3, 3), np.uint8))
+                    window = mask[patch.v0 : patch.v1, patch.u0 : patch.u1]
+                    np.maximum(window, core, out=window)
+            self._mask = mask
         return self._mask
+
+    def clean(self, gray: NDArray[Any]) -> NDArray[Any]:
+        """The image without the known halos of the learned lights (the same array when none is known)."""
+        known = [p for p in self.patches if p.known]
+        if not known:
+            return gray
+        out = gray.copy()
+        full = float(np.iinfo(gray.dtype).max) if gray.dtype.kind == "u" else 255.0
+        for patch in known:
+            patch.subtract(out[patch.v0 : patch.v1, patch.u0 : patch.u1], full)
+        return out
 
     def still(self, blobs: Blobs) -> NDArray[np.bool_]:
         """(N,) blobs at a place where a blob has been, in most images, for STILL_S or more, or since the stream's
         first image in STILL_IMAGES images (what was there from the start and has not moved is no wand)."""
-        if not self._centres.size or not blobs.centres.size or not self._images:
+        if not self._centres.size or not blobs.centres.size or self._newest is None:
             return np.zeros(blobs.centres.shape[0], dtype=bool)
         nearest, index = self._nearest(blobs)
-        age = (self._images[-1] - self._first[index]) / 1e9
-        presence = self._count[index] / np.maximum(self._observed_since(self._first[index]), 1)
+        age = (self._newest - self._first[index]) / 1e9
+        presence = self._count[index] / (self._seen - self._born[index] + 1)
         from_start = (self._first[index] == self._start) & (self._count[index] >= STILL_IMAGES)
         return nearest & ((age >= STILL_S) | from_start) & (presence >= STATIC_PRESENCE)
 
@@ -168,6 +307,7 @@ class StaticSources:
         claimed: NDArray[np.bool_],
         standing_out: NDArray[np.bool_] | None = None,
         track_since_ns: int | None = None,
+        gray: NDArray[Any] | None = None,
     ) -> bool:
         """Learn from one image.
 
@@ -179,34 +319,32 @@ class StaticSources:
             standing_out: (S,) whether each current source's centre still stands out in this image (None:
                 not checked; every source stays).
             track_since_ns: when the wand's track began (None: no track).
+            gray: the image as it came (its lights' halos learned from it), or None.
 
         Returns:
             Whether the mask changed.
         """
-        self._images.append(stamp_ns)
+        self._seen, self._newest = self._seen + 1, stamp_ns
         self._start = stamp_ns if self._start is None else self._start
-        horizon = stamp_ns - int(4 * STATIC_LEARN_S * 1e9)
-        if self._images[0] < horizon:
-            self._images = [s for s in self._images if s >= horizon]
         changed = self._forget(stamp_ns, standing_out)
         if blobs.centres.size:
             self._match(stamp_ns, blobs, claimed, track_since_ns)
         keep = (stamp_ns - self._last) <= CANDIDATE_GAP_S * 1e9
         age = (stamp_ns - self._first) / 1e9
-        presence = self._count / np.maximum(self._observed_since(self._first), 1)
+        presence = self._count / (self._seen - self._born + 1)
         learned = keep & (age >= STATIC_LEARN_S) & (presence >= STATIC_PRESENCE)
         for i in np.flatnonzero(learned):
             centre = (float(self._centres[i, 0]), float(self._centres[i, 1]))
-            self.sources.append(Source(centre, float(self._radii[i]) + MASK_MARGIN_PX, int(self._first[i]), stamp_ns))
+            source = Source(centre, float(self._radii[i]) + MASK_MARGIN_PX, int(self._first[i]), stamp_ns)
+            self.sources.append(source)
+            self.patches.append(LightPatch(source, self.size))
             changed = True
+        if gray is not None:
+            changed |= self._learn_halos(gray, blobs)
         self._keep(keep & ~learned)
         if changed:
             self._mask = None
         return changed
-
-    def _observed_since(self, first: NDArray[np.int64]) -> NDArray[np.int64]:
-        stamps = np.asarray(self._images, dtype=np.int64)
-        return len(stamps) - np.searchsorted(stamps, first)
 
     def _nearest(self, blobs: Blobs) -> tuple[NDArray[np.bool_], NDArray[np.int64]]:
         """(N,) whether each blob matches a candidate, and the nearest candidate's index."""
@@ -239,32 +377,58 @@ class StaticSources:
             self._first = np.concatenate([self._first, np.full(n, stamp_ns, dtype=np.int64)])
             self._last = np.concatenate([self._last, np.full(n, stamp_ns, dtype=np.int64)])
             self._count = np.concatenate([self._count, np.ones(n, dtype=np.int64)])
+            self._born = np.concatenate([self._born, np.full(n, self._seen, dtype=np.int64)])
 
     def _keep(self, keep: NDArray[np.bool_]) -> None:
         self._centres, self._radii = self._centres[keep], self._radii[keep]
         self._first, self._last, self._count = self._first[keep], self._last[keep], self._count[keep]
+        self._born = self._born[keep]
+
+    def _learn_halos(self, gray: NDArray[Any], blobs: Blobs) -> bool:
+        """Each learned light's halo from this image, where no other blob is near it; whether a mask changed (a
+        halo became known)."""
+        full = float(np.iinfo(gray.dtype).max) if gray.dtype.kind == "u" else 255.0
+        changed = False
+        for source, patch in zip(self.sources, self.patches, strict=True):
+            if not patch.due():
+                continue
+            inside = patch.contains(blobs.centres) if blobs.centres.size else np.zeros(0, dtype=bool)
+            others = np.linalg.norm(blobs.centres[inside] - np.array(source.centre), axis=1) > MATCH_PX + 2.0
+            if others.any():
+                continue
+            was = patch.known
+            patch.add(gray, full)
+            changed |= patch.known and not was
+        return changed
 
     def _forget(self, stamp_ns: int, standing_out: NDArray[np.bool_] | None) -> bool:
         if standing_out is None or not self.sources:
             return False
-        kept = []
-        for source, there in zip(self.sources, standing_out, strict=True):
+        kept, patches = [], []
+        for source, patch, there in zip(self.sources, self.patches, standing_out, strict=True):
             if there:
                 kept.append(Source(source.centre, source.radius_px, source.since_ns, stamp_ns))
+                patches.append(patch)
             elif stamp_ns - source.seen_ns <= STATIC_FORGET_S * 1e9:
                 kept.append(source)
+                patches.append(patch)
         changed = len(kept) != len(self.sources)
-        self.sources = kept
+        self.sources, self.patches = kept, patches
         return changed
 
     def centres_standing_out(self, gray: NDArray[np.generic], threshold: NDArray[np.generic]) -> NDArray[np.bool_]:
-        """(S,) whether each source's centre pixel is above the image's threshold there."""
+        """(S,) whether each source's centre still stands out: the BOX x BOX sum of the grey image there above the
+        box sums' threshold (:func:`~wand_calib_ros.detection.background.box_sums`)."""
         if not self.sources:
             return np.zeros(0, dtype=bool)
-        centres = np.array([s.centre for s in self.sources])
-        u = np.clip(np.round(centres[:, 0]).astype(int), 0, self.size[0] - 1)
-        v = np.clip(np.round(centres[:, 1]).astype(int), 0, self.size[1] - 1)
-        return np.asarray(gray[v, u] > threshold[v, u])
+        half = BOX // 2
+        out = []
+        for source in self.sources:
+            u = min(max(round(source.centre[0]), half), self.size[0] - 1 - half)
+            v = min(max(round(source.centre[1]), half), self.size[1] - 1 - half)
+            total = float(gray[v - half : v + half + 1, u - half : u + half + 1].astype(np.float64).sum())
+            out.append(total > float(threshold[v, u]))
+        return np.array(out, dtype=bool)
 
 
 class MaskTaker:

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from collections import Counter, deque
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -32,7 +32,7 @@ from wand_calib_ros.core.initialise.intrinsics_init import nominal_bearings
 from wand_calib_ros.core.model.bearings import BearingTable
 from wand_calib_ros.core.model.camera_model import CameraModel
 from wand_calib_ros.core.model.rig import CameraSpec, RigSpec, WandObservations
-from wand_calib_ros.detection.background import Background, estimate_background
+from wand_calib_ros.detection.background import Background, box_sums, estimate_background
 from wand_calib_ros.detection.blobs import BlobOptions, Blobs, find_blobs, to_gray
 from wand_calib_ros.detection.errors import ImageError
 from wand_calib_ros.detection.health import CameraHealth, HealthReport, ViewLight, health_report, view_light
@@ -177,6 +177,7 @@ class CameraStream:
             gray = to_gray(image, encoding)
         except ImageError:
             return None, None, "bad_image"
+        raw, gray = gray, self.sources.clean(gray)  # the learned lights' halos taken away
         background = self._background_of(gray)
         blobs = find_blobs(
             gray, self.blob_options, saturation=SATURATION.get(encoding, 255.0), mask=self._mask, background=background
@@ -194,9 +195,9 @@ class CameraStream:
         if detection.points is not None and prediction is not None and prediction.moved and blobs.centres.size:
             gaps = np.linalg.norm(blobs.centres[:, None] - detection.points[None], axis=-1).min(axis=1)
             claimed |= gaps < 1e-6
-        standing_out = self.sources.centres_standing_out(gray, background.threshold)
+        standing_out = self.sources.centres_standing_out(raw, background.threshold)
         since = self.labeller.since_ns if prediction is not None else None
-        if self.sources.observe(stamp_ns, blobs, claimed, standing_out, since):  # the mask changed
+        if self.sources.observe(stamp_ns, blobs, claimed, standing_out, since, raw):  # the mask changed
             learned, given = self.sources.mask, self.given_mask
             self._mask = learned if given is None else np.maximum(given, learned).astype(np.uint8)
         if detection.points is not None:
@@ -228,14 +229,18 @@ class CameraStream:
         return health_report(self.spec.name, stats.images, stats.detected, stats.rejected, self.health, sources, masked)
 
     def _background_of(self, gray: NDArray[Any]) -> Background:
-        """The background, estimated again every BACKGROUND_REFRESH images (or when the image changed kind)."""
+        """The background of the image's box sums, estimated again every BACKGROUND_REFRESH images (or when the
+        image changed kind)."""
         current = self._background
         stale = self._since_background >= BACKGROUND_REFRESH
-        if current is None or stale or current.threshold.shape != gray.shape or current.threshold.dtype != gray.dtype:
-            self._background, self._since_background = estimate_background(gray, self.blob_options.background), 0
+        depth = np.uint16 if gray.dtype == np.uint8 else np.float32
         self._since_background += 1
-        assert self._background is not None
-        return self._background
+        if current is None or stale or current.threshold.shape != gray.shape or current.threshold.dtype != depth:
+            sums, unit = box_sums(gray)
+            self._background = estimate_background(sums, self.blob_options.background, unit=unit)
+            self._since_background = 1
+            return replace(self._background, sums=sums)  # this image's sums: find_blobs need not sum again
+        return current
 
     def label(self, stamp_ns: int, detection: WandDetection | None, reason: str | None) -> list[Labelled]:
         """Hand one image's detection to the labeller; returns the outcomes it releases."""

@@ -29,6 +29,7 @@ views the vote cannot decide come out unsettled. Results come out in time order.
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -100,8 +101,9 @@ def resolve_with_previous(detection: WandDetection, previous: FloatArray | None)
     """
     if detection.points is None or previous is None:
         return detection
-    straight = np.linalg.norm(detection.points - previous, axis=1).sum()
-    swapped = np.linalg.norm(detection.points[::-1] - previous, axis=1).sum()
+    mine, theirs = detection.points.tolist(), previous.tolist()  # (scalar sums: cheaper than numpy's calls here)
+    straight = sum(math.dist(a, b) for a, b in zip(mine, theirs, strict=True))
+    swapped = sum(math.dist(a, b) for a, b in zip(mine[::-1], theirs, strict=True))
     if min(straight, swapped) > CONTINUITY_MARGIN * max(straight, swapped):
         return WandDetection(detection.points, detection.quality, None, True, detection.image_ratio)
     points = detection.points if straight <= swapped else detection.points[::-1].copy()
@@ -121,6 +123,7 @@ class StreamLabeller:
         self._since = 0  # and their stamp
         self._views = 0  # views in the track
         self._start: int | None = None  # the stream's first view
+        self._predicted: tuple[int, Prediction] | None = None  # the newest prediction, by its stamp
         self._track = -1  # its number
         self._moved = False
         self._vote = 0.0
@@ -140,11 +143,18 @@ class StreamLabeller:
         """Where the current track expects the wand at ``stamp_ns`` (None: no track that recent)."""
         if self._last is None or not 0 <= stamp_ns - self._last[0] <= TRACK_GAP_NS:
             return None
+        if self._predicted is not None and self._predicted[0] == stamp_ns:
+            return self._predicted[1]
         last_ns, points = self._last
-        step = np.zeros_like(points) if self._velocity is None else self._velocity * (stamp_ns - last_ns)
-        length = float(np.linalg.norm(points[-1] - points[0]))
-        gate = GATE_PX + GATE_MOTION * float(np.max(np.linalg.norm(step, axis=1))) + GATE_LENGTH * length
-        return Prediction(points + step, gate, self._moved)
+        length = math.dist(points[-1].tolist(), points[0].tolist())
+        if self._velocity is None:
+            prediction = Prediction(points, GATE_PX + GATE_LENGTH * length, self._moved)
+        else:
+            step = self._velocity * (stamp_ns - last_ns)
+            moves = math.sqrt(float((step * step).sum(axis=1).max()))
+            prediction = Prediction(points + step, GATE_PX + GATE_MOTION * moves + GATE_LENGTH * length, self._moved)
+        self._predicted = (stamp_ns, prediction)
+        return prediction
 
     def push(self, stamp_ns: int, detection: WandDetection) -> list[Released]:
         """Add a detection (in time order); returns the views it releases."""
@@ -170,11 +180,13 @@ class StreamLabeller:
             self._track += 1
         self._views += 1
         assert self._first is not None
-        self._moved = self._moved or bool(np.all(np.linalg.norm(points - self._first, axis=1) >= self.min_motion_px))
-        same = bool(np.array_equal(points, detection.points))
-        vote = float(np.clip(np.log(max(detection.image_ratio, 1e-6)), -1.0, 1.0)) * (1.0 if same else -1.0)
+        if not self._moved:
+            gone = [math.dist(a, b) for a, b in zip(points.tolist(), self._first.tolist(), strict=True)]
+            self._moved = min(gone) >= self.min_motion_px
+        same = points is detection.points or bool(np.array_equal(points, detection.points))
+        vote = min(max(math.log(max(detection.image_ratio, 1e-6)), -1.0), 1.0) * (1.0 if same else -1.0)
         self._vote += vote
-        self._last = (stamp_ns, points)
+        self._last, self._predicted = (stamp_ns, points), None
         if self._forward is not None:  # a decided track: its views go at once (unless it turned out still)
             labelled = points if self._forward else points[::-1].copy()
             still = self._still()
@@ -190,7 +202,7 @@ class StreamLabeller:
     def flush(self) -> list[Released]:
         """End the current track: decide and release what it holds (end of a recording, /calibrate)."""
         released = self._decide()
-        self._held, self._last, self._vote, self._forward = [], None, 0.0, None
+        self._held, self._last, self._vote, self._forward, self._predicted = [], None, 0.0, None, None
         self._velocity, self._first, self._moved = None, None, False
         return released
 

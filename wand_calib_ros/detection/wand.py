@@ -38,8 +38,9 @@ REASONS = ("no_blobs", "too_few_blobs", "not_collinear", "competing_triples", "a
 
 def distance_to(points: FloatArray, prediction: FloatArray) -> float:
     """The largest distance (px) of a view's points from a prediction's, in the nearer of the two orders."""
-    straight = float(np.sqrt(np.max(np.sum((points - prediction) ** 2, axis=1))))
-    swapped = float(np.sqrt(np.max(np.sum((points[::-1] - prediction) ** 2, axis=1))))
+    mine, theirs = points.tolist(), prediction.tolist()  # (scalar arithmetic: cheaper than numpy's calls here)
+    straight = max(math.dist(a, b) for a, b in zip(mine, theirs, strict=True))
+    swapped = max(math.dist(a, b) for a, b in zip(mine[::-1], theirs, strict=True))
     return min(straight, swapped)
 
 
@@ -224,10 +225,10 @@ def _find_wand(
     else:
         bearings = unproject(model, blobs.centres)
     merged = touching(blobs.centres, blobs.areas, 0.0)  # overlapping blobs: parts of one spot, never two LEDs
-    for triple in itertools.combinations(range(n), 3):
-        index = list(triple)
-        if merged[np.ix_(index, index)][np.triu_indices(3, 1)].any():
+    for i, j, k in itertools.combinations(range(n), 3):
+        if merged[i, j] or merged[i, k] or merged[j, k]:
             continue
+        index = [i, j, k]
         outcome = _score(blobs.centres[index], options, None if bearings is None else bearings[index])
         if outcome is not None:
             scored.append((*outcome, index))

@@ -84,6 +84,13 @@ def right_views(observations: WandObservations, truth: tuple[CameraTruth, ...]) 
     return _compare(observations, truth)[0]
 
 
+def right_and_labelled(observations: WandObservations, truth: tuple[CameraTruth, ...]) -> NDArray[np.bool_]:
+    """(F, C) the returned views that are right with A and C in the right order: the floor a calibration from the
+    detections is measured against."""
+    right, swapped, _, _ = _compare(observations, truth)
+    return np.asarray(right & ~swapped)
+
+
 def _compare(
     observations: WandObservations, truth: tuple[CameraTruth, ...]
 ) -> tuple[NDArray[np.bool_], NDArray[np.bool_], FloatArray, list[NDArray[np.int64]]]:

@@ -1,0 +1,94 @@
+"""The detector in a real room: per scene, what ``wand-calib detect`` finds in rendered takes and what the
+calibration from its views is worth.
+
+For every scene of :data:`wand_calib_ros.sim.room.ROOM_SCENES` and several seeds: a wand waved for
+--seconds in front of the paper's three fisheyes (the mixed fisheye and conventional pair for
+colour_jpeg), rendered, detected as ``wand-calib detect`` detects a bag (its images decoded, the
+pipeline, the labels checked across cameras), then scored against the truth:
+
+- recall: the clearly visible views (every LED drawn, none on a lamp or a window, 6 px inside the image,
+  15 px apart, 10 grey levels and 5 noise sigmas above their background) with a right view returned;
+- false: returned views with a point more than 3 px from its LED in either order;
+- centres: RMS of the right views' points, per image coordinate (as the calibration's sigma) and 2D;
+- labels: right views with A and C in the right order;
+- calibration: the calibration from the detections against the calibration from the right views alone (the
+  floor), RMS over seeds and cameras of each error class (focal, principal point, E_r, E_t, distortion curve).
+
+Run: .venv/bin/python benchmarks/detection_rooms.py [--seeds 4] [--seconds 20] [--scenes lamps_window ...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from wand_calib_ros.core.judge.metrics import camera_errors, rereference
+from wand_calib_ros.core.model.result import CalibrationResult
+from wand_calib_ros.core.pipeline import calibrate
+from wand_calib_ros.sim.detection_score import DetectionScore, detect_room_recording, right_and_labelled, score
+from wand_calib_ros.sim.room import ROOM_SCENES, room_take
+from wand_calib_ros.sim.scenarios import Scenario, mixed_pair_scenario, paper_three_camera_scenario
+
+CLASSES = ("focal", "pp", "E_r", "E_t", "curve")
+
+
+def errors(scenario: Scenario, result: CalibrationResult) -> dict[str, list[float]]:
+    """Per error class the errors of a calibration against the scenario's truth."""
+    names = [c.spec.name for c in scenario.cameras]
+    poses = rereference({n: result.camera(n).pose for n in names}, names[0])
+    out: dict[str, list[float]] = {k: [] for k in CLASSES}
+    for c, camera in enumerate(scenario.cameras):
+        e = camera_errors(result.camera(camera.spec.name).model, poses[camera.spec.name], camera.model, camera.pose)
+        out["focal"].append(e.focal_px)
+        out["pp"].append(e.principal_point_px)
+        out["curve"].append(e.curve_px)
+        if c:
+            out["E_r"].append(e.rotation_deg)
+            out["E_t"].append(e.translation)
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, default=4)
+    parser.add_argument("--seconds", type=float, default=20.0)
+    parser.add_argument("--scenes", nargs="+", default=[*ROOM_SCENES])
+    args = parser.parse_args()
+    print(
+        f"{'scene':18s} {'rig':7s} {'clear':>6s} {'recall':>7s} {'false':>7s} {'centre px':>10s} {'(2D)':>6s} "
+        f"{'labels':>7s}  calibration / floor: " + " ".join(f"{k:>6s}" for k in CLASSES) + "   s/seed"
+    )
+    for scene in args.scenes:
+        scenario = mixed_pair_scenario() if scene == "colour_jpeg" else paper_three_camera_scenario()
+        total: DetectionScore | None = None
+        found: dict[str, list[float]] = {k: [] for k in CLASSES}
+        floor: dict[str, list[float]] = {k: [] for k in CLASSES}
+        started = time.perf_counter()
+        for seed in range(args.seeds):
+            rng = np.random.default_rng(seed)
+            recording = room_take(scenario, ROOM_SCENES[scene](), args.seconds, rng)
+            observations, _ = detect_room_recording(recording, scenario.rig)
+            measured = score(observations, recording.truth)
+            total = measured if total is None else total + measured
+            right = right_and_labelled(observations, recording.truth)
+            alone = observations.with_uv(np.where(right[..., None, None], observations.uv, np.nan))
+            for kind, views in ((found, observations), (floor, alone)):
+                for key, values in errors(scenario, calibrate(scenario.rig, views)).items():
+                    kind[key] += values
+        assert total is not None
+        ratios = [np.sqrt(np.mean(np.square(found[k]))) / np.sqrt(np.mean(np.square(floor[k]))) for k in CLASSES]
+        rig = "mixed" if scene == "colour_jpeg" else "paper3"
+        print(
+            f"{scene:18s} {rig:7s} {total.clearly_visible:6d} {100 * total.recall:6.1f}% "
+            f"{100 * total.false_rate:6.2f}% {total.centre_rms_px / np.sqrt(2):10.3f} {total.centre_rms_px:6.3f} "
+            f"{100 * total.labels_right:6.1f}%  "
+            f"{'':21s}"
+            + " ".join(f"{r:6.2f}" for r in ratios)
+            + f"   {(time.perf_counter() - started) / args.seeds:5.1f}"
+        )
+
+
+if __name__ == "__main__":
+    main()
