@@ -8,10 +8,11 @@ dark pixels adds nothing). The weighting is symmetric, so it is exact for any sy
 spot: a Gaussian, a saturated flat top with its halo, or a motion streak, whose centre is
 where the LED was at mid-exposure when it moved evenly. The same moments give the streak's
 length: a uniform streak of length L has variance L^2 / 12 along it beyond the spot's own.
-An LED whose brightness changes as it moves (nearer, turning towards the camera) makes a
-streak brighter at one end, whose weighted mean lies g L / 12 towards that end for a
-brightness I0 (1 + g s / L) along it; g is measured from the weight of the streak's two
-halves and the centre moved back to the streak's middle.
+A streak's centre is where the LED was on average over the exposure, weighted by its light:
+an LED that sped up moves it by a T^2 / 24 from mid-exposure, one that brightened along the
+streak by g L / 12 towards its bright end. It is not corrected: a streak brighter at one end
+looks the same whether the LED brightened or slowed down there, and for the second the
+weighted mean is already the better estimate (the streak's middle would be off by a T^2 / 8).
 """
 
 from __future__ import annotations
@@ -24,9 +25,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 FloatArray = NDArray[np.float64]
-
-#: Streaks at least this long (px) have their centre corrected for a brightness that changes along them.
-MIN_STREAK_PX = 8.0
 
 
 @dataclass(frozen=True)
@@ -82,13 +80,6 @@ def spot_centre(window: FloatArray, floor: float, region: NDArray[np.bool_] | No
     suu, svv, suv = moments["mu20"] / total, moments["mu02"] / total, moments["mu11"] / total
     spread = math.sqrt(max((suu - svv) ** 2 + 4.0 * suv**2, 0.0))  # major minus minor variance
     length = math.sqrt(12.0 * spread)
-    if length >= MIN_STREAK_PX:  # the mid-exposure point of a streak whose brightness changes along it
-        angle = 0.5 * math.atan2(2.0 * suv, suu - svv)
-        axis = (math.cos(angle), math.sin(angle))
-        along = (cols - du)[None, :] * axis[0] + (rows - dv)[:, None] * axis[1]
-        ahead, behind = float(weights[along > 0].sum()), float(weights[along < 0].sum())
-        gradient = 4.0 * (ahead - behind) / max(ahead + behind, 1e-12)  # g of I0 (1 + g s / L) over the streak
-        du, dv = du - gradient * length / 12.0 * axis[0], dv - gradient * length / 12.0 * axis[1]
     return SpotCentre(
         du + (width - 1) / 2.0,
         dv + (height - 1) / 2.0,

@@ -10,7 +10,8 @@ from then on. A source that is no longer there (its centre no longer stands out)
 STATIC_FORGET_S is unmasked again: a wand left lying, a lamp switched off.
 
 A learned light's halo (a lamp's glare reaches tens of pixels) is then learned too, as the mean
-light it adds around it (:class:`LightPatch`), from images where nothing else is near it; once
+light it adds around it (:class:`LightPatch`), from images with nothing else near it (or away
+from what lingers there); once
 known, it is subtracted from every image (:meth:`StaticSources.clean`) and only the light's
 saturated core stays masked (the halo is scaled to each image's brightness of the light: lamps
 flicker): an LED passing close to a lamp is found and measured on a clean background instead of
@@ -63,6 +64,10 @@ REFERENCE_LEVELS = 20.0
 #: ... on at least this many pixels (else as learned; a sample of this many is enough).
 REFERENCE_PIXELS = 12
 REFERENCE_SAMPLE = 64
+#: A halo is learned from images with nothing else near it; after this many in a row with something near (an LED
+#: lingering), from the next, away from (this far, px, beyond) the other blobs.
+PATCH_PATIENCE = 30
+OTHER_MARGIN_PX = 6.0
 #: A halo is subtracted where it adds this many grey levels (of an 8-bit image) or more.
 HALO_LEVELS = 0.5
 #: A known halo keeps learning from every this-many-th image.
@@ -165,6 +170,8 @@ class LightPatch:
         self.u0, self.v0 = max(u - reach, 0), max(v - reach, 0)
         self.u1, self.v1 = min(u + reach + 1, size[0]), min(v + reach + 1, size[1])
         self.excess = np.zeros((self.v1 - self.v0, self.u1 - self.u0), np.float32)
+        self.counts = np.zeros(self.excess.shape, np.int32)  # images each pixel was learned from
+        self.waited = 0  # images passed over since the last it was learned from (something else was near)
         self.images = 0
         self.seen = 0
         self.uneven = 0  # images whose border was not one wall
@@ -194,7 +201,10 @@ class LightPatch:
         """The wall behind a patch of the image (the median of its border), and whether the border is one wall:
         its quartiles within UNEVEN_LEVELS (of an 8-bit image) of each other."""
         border = np.concatenate([patch[0], patch[-1], patch[:, 0], patch[:, -1]]).astype(np.float32)
+        border = border[np.isfinite(border)]
         n = border.size
+        if n < 8:  # (another light covers its border)
+            return 0.0, False
         low, wall, high = np.partition(border, [n // 4, n // 2, 3 * n // 4])[[n // 4, n // 2, 3 * n // 4]]
         return float(wall), bool(high - low <= UNEVEN_LEVELS * full / 255.0)
 
@@ -206,15 +216,20 @@ class LightPatch:
             return False
         return not self.known or self.seen % PATCH_EVERY == 0
 
-    def add(self, gray: NDArray[Any], full: float) -> None:
-        """One image's light around the source (nothing else near it)."""
+    def add(self, gray: NDArray[Any], full: float, others: list[tuple[float, float, float]]) -> None:
+        """One image's light around the source, away from ``others`` ((u, v, radius px) of other blobs in the patch:
+        the pixels within OTHER_MARGIN_PX of them are left as they were)."""
         patch = gray[self.v0 : self.v1, self.u0 : self.u1]
-        wall, even = self._wall(patch, full)
+        free = np.ones(self.excess.shape, np.uint8)
+        for u, v, radius in others:
+            cv2.circle(free, (round(u - self.u0), round(v - self.v0)), round(radius + OTHER_MARGIN_PX), 0, -1)
+        wall, even = self._wall(np.where(free > 0, patch, np.nan) if others else patch, full)  # (their light aside)
         if not even:
             self.uneven += 1
             return
         self.images += 1
-        weight = 1.0 / min(self.images, PATCH_IMAGES)
+        self.counts += free.astype(np.int32)
+        weight = free / np.minimum(np.maximum(self.counts, 1), PATCH_IMAGES).astype(np.float32)
         self.excess += weight * (np.maximum(patch.astype(np.float32) - wall, 0.0) - self.excess)
         self.saturated = np.asarray(patch >= SATURATED_FRACTION * full) | (self.saturated & (self.images > 1))
         reference = np.flatnonzero((self.excess >= REFERENCE_LEVELS * full / 255.0) & ~self.saturated)
@@ -292,13 +307,18 @@ class StaticSources:
     def still(self, blobs: Blobs) -> NDArray[np.bool_]:
         """(N,) blobs at a place where a blob has been, in most images, for STILL_S or more, or since the stream's
         first image in STILL_IMAGES images (what was there from the start and has not moved is no wand)."""
-        if not self._centres.size or not blobs.centres.size or self._newest is None:
+        if not blobs.centres.size or self._newest is None:
             return np.zeros(blobs.centres.shape[0], dtype=bool)
+        on_source = np.zeros(blobs.centres.shape[0], dtype=bool)
+        for source in self.sources:  # what is left of a learned light (its flicker, its masked core's edge)
+            on_source |= np.linalg.norm(blobs.centres - np.array(source.centre), axis=1) <= MATCH_PX + 2.0
+        if not self._centres.size:
+            return on_source
         nearest, index = self._nearest(blobs)
         age = (self._newest - self._first[index]) / 1e9
         presence = self._count[index] / (self._seen - self._born[index] + 1)
         from_start = (self._first[index] == self._start) & (self._count[index] >= STILL_IMAGES)
-        return nearest & ((age >= STILL_S) | from_start) & (presence >= STATIC_PRESENCE)
+        return on_source | (nearest & ((age >= STILL_S) | from_start) & (presence >= STATIC_PRESENCE))
 
     def observe(
         self,
@@ -385,19 +405,23 @@ class StaticSources:
         self._born = self._born[keep]
 
     def _learn_halos(self, gray: NDArray[Any], blobs: Blobs) -> bool:
-        """Each learned light's halo from this image, where no other blob is near it; whether a mask changed (a
+        """Each learned light's halo from this image, away from the other blobs near it; whether a mask changed (a
         halo became known)."""
         full = float(np.iinfo(gray.dtype).max) if gray.dtype.kind == "u" else 255.0
         changed = False
         for source, patch in zip(self.sources, self.patches, strict=True):
             if not patch.due():
                 continue
-            inside = patch.contains(blobs.centres) if blobs.centres.size else np.zeros(0, dtype=bool)
-            others = np.linalg.norm(blobs.centres[inside] - np.array(source.centre), axis=1) > MATCH_PX + 2.0
-            if others.any():
+            inside = np.flatnonzero(patch.contains(blobs.centres)) if blobs.centres.size else np.zeros(0, np.int64)
+            distance = np.linalg.norm(blobs.centres[inside] - np.array(source.centre), axis=1)
+            radii = _radii(blobs)
+            others = [(*blobs.centres[i], radii[i]) for i, d in zip(inside, distance, strict=True) if d > MATCH_PX + 2]
+            if others and patch.waited < PATCH_PATIENCE:  # rather an image with nothing else near
+                patch.waited += 1
                 continue
+            patch.waited = 0
             was = patch.known
-            patch.add(gray, full)
+            patch.add(gray, full, others)
             changed |= patch.known and not was
         return changed
 

@@ -1,0 +1,53 @@
+"""Spot centres: exact for symmetric spots (a saturated flat top with its halo, a streak), the streak's middle
+when its brightness changes along it, and on a sloping background."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from wand_calib_ros.detection.centres import spot_centre
+from wand_calib_ros.sim.room import CameraRoom, Sensor, render_camera
+
+SIZE = (64, 48)
+QUIET = Sensor(read_noise=0.0, levels_per_electron=0.0, black_level=0.0)
+
+
+def _window(path: np.ndarray, energy: np.ndarray, room: CameraRoom | None = None) -> np.ndarray:
+    """The rendered spot of one LED along ``path`` (M, 2), in a 31 x 31 window centred on (32, 24)."""
+    room = room or CameraRoom(sensor=QUIET, wall_level=0.0)
+    (image,), _, _, _ = render_camera(room, SIZE, [path[None]], [energy[None]], np.random.default_rng(0))
+    return np.asarray(image, dtype=np.float64)[9:40, 17:48]
+
+
+def _error(window: np.ndarray, truth: tuple[float, float], floor: float = 2.0) -> float:
+    spot = spot_centre(window, floor)
+    assert spot is not None
+    return float(np.hypot(spot.u + 17 - truth[0], spot.v + 9 - truth[1]))
+
+
+@pytest.mark.parametrize("offset", [(0.0, 0.0), (0.3, -0.2), (0.5, 0.45)])
+def test_a_saturated_flat_top_with_its_halo_is_centred(offset: tuple[float, float]) -> None:
+    truth = (32.0 + offset[0], 24.0 + offset[1])
+    window = _window(np.tile(truth, (5, 1)), np.full(5, 60_000.0 / 5))
+    assert np.count_nonzero(window == 255) >= 9  # clipped to a flat top
+    assert _error(window, truth) < 0.05  # (the rounding of its halo to whole grey levels)
+
+
+def test_a_streak_is_centred_on_its_mid_exposure_position_or_where_its_light_is() -> None:
+    t = np.linspace(-0.5, 0.5, 41)
+    path = np.column_stack([32.1 + 14.0 * t, 24.3 + 6.0 * t])  # 15 px long, moving evenly
+    even = _window(path, np.full(41, 3000.0 / 41))
+    assert _error(even, (32.1, 24.3)) < 0.05
+    spot = spot_centre(even, 2.0)
+    assert spot is not None and spot.length_px == pytest.approx(np.hypot(14.0, 6.0), abs=0.5)
+    brightening = _window(path, (1.0 + 0.6 * t) * 3000.0 / 41)  # 60 % brighter at its end than at its start
+    weighted = np.sum(path * (1.0 + 0.6 * t)[:, None], axis=0) / np.sum(1.0 + 0.6 * t)  # the light's mean
+    assert _error(brightening, tuple(weighted)) < 0.08  # (g L / 12 = 0.8 px from mid-exposure: documented)
+
+
+def test_a_spot_on_a_sloping_background_is_centred() -> None:
+    # the wall from 5 to 15 grey levels across the image
+    room = CameraRoom(sensor=QUIET, wall_level=10.0 / 6.0, wall_gradient=(1.0, 0.8), vignetting=0.0)
+    window = _window(np.tile((32.2, 23.9), (5, 1)), np.full(5, 600.0 / 5), room)
+    assert _error(window, (32.2, 23.9), floor=1.0) < 0.05
