@@ -68,6 +68,8 @@ REFERENCE_SAMPLE = 64
 #: lingering), from the next, away from (this far, px, beyond) the other blobs.
 PATCH_PATIENCE = 30
 OTHER_MARGIN_PX = 6.0
+#: A blob on a subtracted halo with a peak below this fraction of the halo there may be the light's flicker.
+RESIDUE_FRACTION = 0.3
 #: A halo is subtracted where it adds this many grey levels (of an 8-bit image) or more.
 HALO_LEVELS = 0.5
 #: A known halo keeps learning from every this-many-th image.
@@ -191,6 +193,14 @@ class LightPatch:
         """Its halo is learned (and usable)."""
         return self.images >= PATCH_IMAGES and self.usable
 
+    def residue(self, centres: FloatArray, peaks: FloatArray) -> NDArray[np.bool_]:
+        """(N,) blobs that may be what is left of the halo once subtracted (the light flickers): in the patch,
+        with a peak below RESIDUE_FRACTION of the halo learned at their centre."""
+        inside = self.contains(centres)
+        u = np.clip(np.round(centres[:, 0]).astype(int) - self.u0, 0, self.excess.shape[1] - 1)
+        v = np.clip(np.round(centres[:, 1]).astype(int) - self.v0, 0, self.excess.shape[0] - 1)
+        return np.asarray(inside & (peaks < RESIDUE_FRACTION * self.excess[v, u]))
+
     def contains(self, points: FloatArray) -> NDArray[np.bool_]:
         """(N,) which points lie in the patch."""
         u, v = points[:, 0], points[:, 1]
@@ -310,8 +320,12 @@ class StaticSources:
         if not blobs.centres.size or self._newest is None:
             return np.zeros(blobs.centres.shape[0], dtype=bool)
         on_source = np.zeros(blobs.centres.shape[0], dtype=bool)
-        for source in self.sources:  # what is left of a learned light (its flicker, its masked core's edge)
-            on_source |= np.linalg.norm(blobs.centres - np.array(source.centre), axis=1) <= MATCH_PX + 2.0
+        for source, patch in zip(self.sources, self.patches, strict=True):  # what is left of a learned light:
+            distance = np.linalg.norm(blobs.centres - np.array(source.centre), axis=1)
+            if patch.known:  # its flicker's residue (dim against the halo it stands on) ...
+                on_source |= (distance <= MATCH_PX + 2.0) | patch.residue(blobs.centres, blobs.peaks)
+            else:  # ... or its halo flickering beyond its disc
+                on_source |= distance <= source.radius_px + MASK_MARGIN_PX + 2.0
         if not self._centres.size:
             return on_source
         nearest, index = self._nearest(blobs)
