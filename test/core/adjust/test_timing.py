@@ -126,6 +126,22 @@ def test_views_are_moved_along_their_cameras_image_track_to_the_placement_time()
         assert np.allclose(aligned[middle, c, 0], at_placement, atol=1e-6)
 
 
+@pytest.mark.parametrize("markers", [2, 3, 5])
+def test_views_of_any_wand_are_moved_with_the_cameras_timing(markers: int) -> None:
+    # Each camera's estimated offset (and readout) moves every marker of its views, whatever the wand's count.
+    n = 40
+    t = np.arange(n) * PERIOD
+    track = lambda time: np.stack([100 + 600 * time, 50 + 300 * time**2], axis=-1)  # noqa: E731  px
+    offset = np.array([0.0, 0.011])
+    stamps = 1.7e9 + np.repeat(t[:, None], 2, axis=1)  # stamped together, exposed 11 ms apart
+    uv = np.stack([np.repeat(track(t + o)[:, None, :], markers, axis=1) for o in offset], axis=1)
+    line = timeline(WandObservations(np.arange(n), ("a", "b"), uv, stamps))
+    aligned = align_views(uv, line, np.array([[0.0, 0.0], [-0.011, 0.0]]), np.array([480.0, 480.0]))
+    middle = slice(6, n - 6)
+    for c in range(2):
+        assert np.allclose(aligned[middle, c], track(t[middle])[:, None, :], atol=1e-6)
+
+
 def test_significance_is_a_joint_chi_square_test() -> None:
     covariance = np.diag([1e-6, 1e-6])  # 1 ms standard deviations
     assert not significant(np.array([0.001, -0.001]), covariance)  # chi2 2 < 9.2

@@ -342,7 +342,8 @@ def choose_window(times: FloatArray, points: FloatArray, period: float) -> tuple
 def align_views(
     uv: FloatArray, line: Timeline, camera_timing: FloatArray | None = None, heights: FloatArray | None = None
 ) -> FloatArray:
-    """(P, C, 3, 2) each complete view moved along its camera's own image track to its placement's time.
+    """(P, C, K, 2) each complete view of a K-marker wand moved along its camera's own image track to its
+    placement's time.
 
     Each camera's pixels of consecutive frames give its image velocity; a point seen ``tau`` after its
     placement's time is moved back by that motion (to third order). Before any calibration ``tau`` is
@@ -356,7 +357,7 @@ def align_views(
     out = np.array(uv, dtype=np.float64)
     for c in range(uv.shape[1]):
         seen = np.flatnonzero(np.all(np.isfinite(uv[:, c]), axis=(1, 2)))
-        tau = np.repeat(line.view_times[seen, c][:, None], 3, axis=1)  # (N, 3)
+        tau = np.repeat(line.view_times[seen, c][:, None], uv.shape[2], axis=1)  # (N, K)
         track = fit_motion(line.placement_times[seen] + tau[:, 0], uv[seen, c], line.period)  # the views' own times
         if camera_timing is not None and heights is not None:
             tau = tau - camera_timing[c, 0] + camera_timing[c, 1] * uv[seen, c, :, 1] / heights[c]
