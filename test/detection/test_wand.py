@@ -193,6 +193,25 @@ def test_a_camera_repeating_a_stamp_is_labelled_without_error() -> None:
     assert len(out) == 40 and [o.stamp_ns for o in out] == sorted(o.stamp_ns for o in out)
 
 
+def test_images_without_a_view_wait_behind_the_views_the_labeller_holds() -> None:
+    """A camera's outcomes leave in stamp order, whatever the labeller holds back (the synchroniser downstream
+    drops a stamp going backwards as a lossy transport's)."""
+    from wand_calib_ros.detection.recording import CameraStream
+
+    scenario = paper_fisheye_scenario()
+    recording = render_recording(scenario, 40, 30.0, RenderOptions(), np.random.default_rng(6))
+    stream = CameraStream(scenario.cameras[0].spec, WandOptions(ratio=2.0))
+    out, held = [], 0
+    for i, (_, stamp, image) in enumerate(f for f in recording.frames if f[0] == "cam0"):
+        blank = i % 5 == 4  # every fifth image lost its view
+        out += stream.push(stamp, np.zeros_like(image) if blank else image, "mono8")
+        held = max(held, i + 1 - len(out))
+    out += stream.flush()
+    assert held > 1  # the labeller did hold views back while blank images came
+    assert [o.stamp_ns for o in out] == sorted(f[1] for f in recording.frames if f[0] == "cam0")
+    assert sum(o.points is None for o in out) >= 8
+
+
 def test_a_wand_with_an_led_cut_by_the_border_is_not_written() -> None:
     points = [[2.0, 100.0], [102.0, 100.0], [152.0, 100.0]]
     whole = _blobs(points)

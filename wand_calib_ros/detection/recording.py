@@ -141,7 +141,8 @@ class CameraStream:
         self._background: Background | None = None
         self._since_background = 0
         self._mask: Mask | None = mask
-        self._pending: deque[tuple[WandDetection, ViewLight | None]] = deque()  # pushed, not yet released
+        self._pending: deque[tuple[int, WandDetection, ViewLight | None]] = deque()  # pushed, not yet released
+        self._gaps: deque[Labelled] = deque()  # images without a view, waiting behind older held views
         self._taker: MaskTaker | None = None  # a mask being taken (take_mask)
         self._taking_ns = 0
         self._taking_from: int | None = None
@@ -247,13 +248,14 @@ class CameraStream:
         light = self._lights.pop(stamp_ns, None)
         if reason is not None or detection is None:
             self.stats.rejected[reason or "no_wand"] += 1
-            return [Labelled(stamp_ns, None)]
+            self._gaps.append(Labelled(stamp_ns, None))
+            return self._in_order([])
         if self.wand_options.n_points != 3 or detection.tool:  # two or a tool: the calibration labels them
             self.stats.detected += 1
             self.health.add(light)
             return [*self.flush(), Labelled(stamp_ns, detection.points)]
-        self._pending.append((detection, light))
-        return self._released(self.labeller.push(stamp_ns, detection))
+        self._pending.append((stamp_ns, detection, light))
+        return self._in_order(self._released(self.labeller.push(stamp_ns, detection)))
 
     def push(self, stamp_ns: int, image: NDArray[Any], encoding: str) -> list[Labelled]:
         """:meth:`detect` then :meth:`label`."""
@@ -262,12 +264,20 @@ class CameraStream:
 
     def flush(self) -> list[Labelled]:
         """Release what the labeller holds back (unsettled)."""
-        return self._released(self.labeller.flush())
+        return self._in_order(self._released(self.labeller.flush()))
+
+    def _in_order(self, released: list[Labelled]) -> list[Labelled]:
+        """The released views and the images without a view older than every view still held, in stamp order
+        (a synchroniser downstream takes a camera's stamps going backwards for a lossy transport)."""
+        held_from = self._pending[0][0] if self._pending else None
+        count = len(self._gaps) if held_from is None else sum(g.stamp_ns < held_from for g in self._gaps)
+        gaps = [self._gaps.popleft() for _ in range(count)]
+        return sorted([*released, *gaps], key=lambda outcome: outcome.stamp_ns)
 
     def _released(self, results: list[Released]) -> list[Labelled]:
         out = []
         for stamp, points, reason, track in results:
-            detection, light = self._pending.popleft()
+            _, detection, light = self._pending.popleft()
             if points is not None:
                 self.stats.detected += 1
                 self.health.add(light)
