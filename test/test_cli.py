@@ -7,6 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 import yaml
@@ -373,3 +374,55 @@ def test_a_five_led_wand_from_a_rendered_bag_to_the_calibration(tmp_path: Path) 
     errors = np.linalg.norm(detected.uv - drawn, axis=-1).max(axis=-1)[both]  # labels in order
     assert both.sum() > 300 and (errors > 0.5).mean() <= 0.005, np.sort(errors)[-5:]
     _calibrated_near_the_truth(tmp_path, argv, truth)
+
+
+def test_a_room_bag_sent_as_jpeg_is_detected_from_the_rig_files_topics_with_its_masks(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    out = tmp_path / "room"
+    render = ["-q", "render", "mixed", "--room", "colour_jpeg", "--frames", "90", "--seed", "4", "--out", str(out)]
+    assert main(render) == 0
+    # image_transport's compressed topics only: the rig file names the raw topic, detect finds <topic>/compressed
+    rig = yaml.safe_load((out / "cameras.yaml").read_text())
+    for camera in rig["cameras"]:
+        camera["image_topic"] = f"/{camera['name']}/image_raw"
+    rig["cameras"][0]["mask"] = {"rectangles": [[0, 0, 20, 20]]}
+    (out / "cameras.yaml").write_text(yaml.safe_dump(rig))
+    detect = ["-q", "detect", str(out / "bag"), "--cameras", str(out / "cameras.yaml"), "--output", str(out / "o.csv")]
+    assert main(detect) == 0
+    printed = capsys.readouterr().out
+    assert "cam0: 90 images (/cam0/image_raw/compressed)" in printed
+    summary = yaml.safe_load((out / "o.detection.yaml").read_text())["cameras"]
+    assert summary["cam0"]["images"] == 90 and summary["cam0"]["views"] > 30
+    assert summary["cam0"]["mask"] == "o.masks/cam0.png" and (out / "o.masks" / "cam0.png").exists()
+    assert summary["cam0"]["masked_fraction"] > 20 * 20 / (658 * 492)  # the rig file's rectangle at least
+    detected = read_observations(out / "o.csv", ("cam0", "cam1"))
+    drawn = read_observations(out / "drawn.csv", ("cam0", "cam1"))
+    assert detected.stamps is not None and drawn.stamps is not None
+    for c in range(2):  # every clearly visible view drawn was found, at its drawn pixels
+        shown = np.isfinite(drawn.stamps[:, c])
+        found = {round(s, 6): uv for s, uv in zip(detected.stamps[:, c], detected.uv[:, c], strict=True)}
+        hits = [found.get(round(s, 6)) for s in drawn.stamps[shown, c]]
+        close = [h is not None and np.all(np.isfinite(h)) and np.abs(h - d).max() < 1.0
+                 for h, d in zip(hits, drawn.uv[shown, c], strict=True)]  # fmt: skip
+        assert np.mean(close) >= 0.9, (c, np.mean(close))
+    # the report shows what each camera saw
+    calibrate_argv = ["-q", "calibrate", "--cameras", str(out / "cameras.yaml"), "--observations", str(out / "o.csv")]
+    assert main([*calibrate_argv, "--output", str(out / "result.yaml")]) == 0
+    report = ["-q", "report", "--result", str(out / "result.yaml"), "--cameras", str(out / "cameras.yaml")]
+    assert main([*report, "--observations", str(out / "o.csv"), "--out", str(out / "report")]) == 0
+    page = (out / "report" / "index.html").read_text()
+    assert "What each camera saw" in page and "cam0 mask" in page
+
+
+def test_a_mask_taken_from_a_stretch_of_a_bag(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    out = tmp_path / "room"
+    assert main(["-q", "render", "paper", "--room", "lamps_window", "--frames", "20", "--out", str(out)]) == 0
+    masks = tmp_path / "masks"
+    argv = ["-q", "mask", str(out / "bag"), "--cameras", str(out / "cameras.yaml"), "--out", str(masks)]
+    assert main([*argv, "--seconds", "0.3"]) == 0
+    printed = capsys.readouterr().out
+    assert "mask: ../masks/cam0.png" in printed
+    for name in ("cam0", "cam1"):  # the paper's two fisheyes
+        picture = cv2.imread(str(masks / f"{name}.png"), cv2.IMREAD_GRAYSCALE)
+        assert picture is not None and picture.shape == (480, 640) and picture.max() == 255
+    assert main([*argv, "--start", "100"]) == 2
+    assert "no image between 100 and 101 s" in capsys.readouterr().err

@@ -132,3 +132,13 @@ def test_a_mask_taken_from_the_view_ignores_its_lights_from_then_on() -> None:
     taker = MaskTaker(SIZE)
     taker.add(_blobs([(10.0, 10.0)]))
     assert taker.images == 1 and taker.mask[10, 10] == 255
+
+
+def test_the_debug_picture_outlines_the_mask() -> None:
+    from wand_calib_ros.detection.overlay import draw_overlay
+
+    mask = mask_from_shapes(SIZE, circles=[(100.0, 80.0, 12.0)], rectangles=[])
+    picture = draw_overlay(np.full(SIZE[::-1], 40, np.uint8), "mono8", None, None, "no_blobs", mask)
+    magenta = np.all(picture == (255, 0, 255), axis=2)
+    v, u = np.nonzero(magenta)
+    assert magenta.sum() > 50 and np.hypot(u - 100, v - 80).max() <= 13.5 and np.hypot(u - 100, v - 80).min() >= 10

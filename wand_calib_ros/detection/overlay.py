@@ -16,9 +16,15 @@ _COLOURS = {"A": (0, 0, 255), "B": (0, 200, 0), "C": (255, 0, 0)}  # BGR
 
 
 def draw_overlay(
-    image: NDArray[Any], encoding: str, blobs: Blobs | None, detection: WandDetection | None, reason: str | None
+    image: NDArray[Any],
+    encoding: str,
+    blobs: Blobs | None,
+    detection: WandDetection | None,
+    reason: str | None,
+    mask: NDArray[np.uint8] | None = None,
 ) -> NDArray[np.uint8]:
-    """A BGR picture: blobs as grey circles, A/B/C in red/green/blue, the rejection reason as text."""
+    """A BGR picture: the mask's outlines in magenta, blobs as grey circles, A/B/C in red/green/blue, the
+    rejection reason as text. ``mask``: (H, W), non-zero where the detector ignores pixels."""
     try:
         gray = to_gray(image, encoding)
     except ImageError:
@@ -26,6 +32,9 @@ def draw_overlay(
     if gray.dtype != np.uint8:
         gray = np.clip(gray.astype(np.float64) / max(float(gray.max()), 1.0) * 255, 0, 255).astype(np.uint8)
     picture = cv2.cvtColor(gray, cv2.COLOR_GRAY2BGR)
+    if mask is not None and mask.shape == gray.shape:
+        outlines, _ = cv2.findContours((mask > 0).astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+        cv2.drawContours(picture, outlines, -1, (255, 0, 255), 1)
     if blobs is not None:
         for u, v in blobs.centres:
             cv2.circle(picture, (round(float(u)), round(float(v))), 8, (160, 160, 160), 1)

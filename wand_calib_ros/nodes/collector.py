@@ -207,6 +207,7 @@ class CollectorNode(Node):
         self.mask_take_s = float(values["mask_take_s"])
         self._said: dict[str, set[str]] = {name: set() for name in self.rig.camera_names}  # warnings given
         self._summary_saved = 0.0  # when observations.detection.yaml was last written (monotonic)
+        self._summary_images = 0  # images received by then
         self.received = dict.fromkeys(self.rig.camera_names, 0)
         self.malformed = dict.fromkeys(self.rig.camera_names, 0)
         self.lock = threading.Lock()
@@ -299,7 +300,7 @@ class CollectorNode(Node):
         if pixels is None or now - self._debug_shown[camera] < DEBUG_PERIOD_S or not publisher.get_subscription_count():
             return
         self._debug_shown[camera] = now
-        picture = draw_overlay(pixels, encoding, blobs, detection, reason)
+        picture = draw_overlay(pixels, encoding, blobs, detection, reason, self.streams[camera].mask)
         publisher.publish(messages.array_to_image(picture, stamp_ns, self.frame_ids[camera], "bgr8"))
 
     def _on_points(self, camera: str, message: PolygonStamped) -> None:
@@ -344,7 +345,8 @@ class CollectorNode(Node):
     def close(self) -> None:
         """At exit: store what is held and write the buffer and what the cameras saw through to the disk."""
         self.flush()
-        self._save_what_cameras_saw()
+        if sum(self.received.values()) != self._summary_images:
+            self._save_what_cameras_saw()
         with self.lock:
             self.buffer.sync()
             if self.watch is not None:
@@ -433,6 +435,7 @@ class CollectorNode(Node):
         with self.lock:
             reports = {name: stream.report() for name, stream in self.streams.items()}
             masks = {name: stream.mask for name, stream in self.streams.items()}
+            self._summary_images = sum(self.received.values())
         try:
             save_what_cameras_saw(self.buffer.path, reports, masks)
         except WandCalibError as error:
@@ -463,8 +466,9 @@ class CollectorNode(Node):
                 if cause not in self._said[name]:
                     self._said[name].add(cause)
                     self.get_logger().warning(line)
-        if time.monotonic() - self._summary_saved >= SUMMARY_PERIOD_S:
-            self._save_what_cameras_saw()
+        received = sum(self.received.values())
+        if received != self._summary_images and time.monotonic() - self._summary_saved >= SUMMARY_PERIOD_S:
+            self._save_what_cameras_saw()  # on news only: a resumed collection's summary stays until images come
         return notes
 
     def _counts(self) -> dict[str, dict[str, int | str]]:

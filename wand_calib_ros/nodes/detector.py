@@ -99,7 +99,7 @@ class DetectorNode(Node):
         now = time.monotonic()
         if pixels is not None and now - self._shown >= DEBUG_PERIOD_S and self.debug_image.get_subscription_count():
             self._shown = now
-            picture = draw_overlay(pixels, encoding, blobs, detection, reason)
+            picture = draw_overlay(pixels, encoding, blobs, detection, reason, self.stream.mask)
             self.debug_image.publish(messages.array_to_image(picture, stamp_ns, self.frame_id, "bgr8"))
 
     def _feedback(self) -> None:
