@@ -6,8 +6,10 @@ import cv2
 import numpy as np
 import pytest
 
+from wand_calib_ros.detection.background import box_sums, estimate_background, masked
 from wand_calib_ros.detection.blobs import find_blobs, to_gray
 from wand_calib_ros.detection.errors import ImageError
+from wand_calib_ros.detection.masks import mask_from_shapes
 from wand_calib_ros.sim.render import RenderOptions, render_image
 
 
@@ -72,3 +74,23 @@ def test_a_spot_cut_by_the_image_border_is_marked() -> None:
     near = [int(np.argmin(np.linalg.norm(blobs.centres - spot, axis=1))) for spot in spots]
     assert blobs.at_border[near].tolist() == [True, False, True, True, False]
     assert blobs.centres[near[0], 0] > 0.4 + 0.3  # what a cut spot does to its centre: pulled inwards
+
+
+@pytest.mark.parametrize("encoding", ["mono8", "mono16"])
+def test_a_mask_held_in_the_background_finds_what_the_mask_itself_finds(encoding: str) -> None:
+    # A stream puts its mask into the background's search threshold once; the blobs are those of the mask applied
+    # to the image: the masked spots gone, a spot the mask touches marked.
+    rng = np.random.default_rng(5)
+    spots = np.array([[100.3, 200.7], [300.5, 220.2], [500.1, 240.9], [320.0, 400.0]])
+    mono = render_image((640, 480), spots, RenderOptions(), rng)
+    gray = to_gray(mono.astype(np.uint16) * 257 if encoding == "mono16" else mono, encoding)
+    mask = mask_from_shapes((640, 480), circles=[(500.0, 241.0, 8.0), (324.0, 400.0, 3.0)])
+    sums, unit = box_sums(gray)
+    background = estimate_background(sums, unit=unit)
+    applied = find_blobs(gray, mask=mask, background=background)
+    held = find_blobs(gray, mask=mask, background=masked(background, mask))
+    assert applied.centres.shape[0] == 3 and not np.any(np.linalg.norm(applied.centres - spots[2], axis=1) < 5)
+    assert np.array_equal(held.centres, applied.centres) and np.array_equal(held.masked, applied.masked)
+    assert applied.masked is not None and applied.masked.sum() == 1  # the spot beside the small circle
+    alone = find_blobs(gray, background=masked(background, mask))  # the threshold alone keeps the masked spot out
+    assert alone.centres.shape[0] == 3 and not np.any(np.linalg.norm(alone.centres - spots[2], axis=1) < 5)

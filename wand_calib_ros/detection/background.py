@@ -22,7 +22,7 @@ about 1.6 times more clearly than its brightest pixel from the image.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import cv2
@@ -69,6 +69,8 @@ class Background:
             stream's background is used for several images; :func:`~wand_calib_ros.detection.blobs.find_blobs`
             takes them instead of summing again), else None.
         unit: the unit of min_contrast in the image it was estimated from.
+        search: (H, W) the threshold with a mask's pixels out of reach (:func:`masked`), which blobs are searched
+            against; None: ``threshold`` (and a mask is applied to each image).
     """
 
     level: FloatArray
@@ -77,6 +79,7 @@ class Background:
     step: int = STEP
     sums: NDArray[Any] | None = None
     unit: float = 1.0
+    search: NDArray[Any] | None = None
 
     def at(self, uv: FloatArray) -> tuple[FloatArray, FloatArray]:
         """(N,) background level and noise at (N, 2) pixels (their nearest samples')."""
@@ -137,7 +140,7 @@ def estimate_background(
             default 1 for uint8, 257 for uint16 images.
     """
     height, width = image.shape
-    full = float(np.iinfo(image.dtype).max) if image.dtype.kind == "u" else np.inf
+    full = saturation_of(image) if image.dtype.kind == "u" else np.inf
     unit = (1.0 if image.dtype == np.uint8 else 257.0) if unit is None else unit
     step = STEP if min(height, width) >= 2 * STEP * TILE_SAMPLES else 1  # (a small image: every pixel)
     sampled = cv2.resize(image, (width // step, height // step), interpolation=cv2.INTER_NEAREST)
@@ -150,6 +153,26 @@ def estimate_background(
     small = np.minimum(np.ceil(level + contrast), full).astype(image.dtype)
     threshold = cv2.resize(small, (width, height), interpolation=cv2.INTER_LINEAR)
     return Background(level.astype(np.float64), noise.astype(np.float64), threshold, step, None, unit)
+
+
+def masked(background: Background, mask: NDArray[np.uint8] | None) -> Background:
+    """The background whose search threshold no sum reaches where ``mask`` (H, W) is non-zero: a stream's
+    mask is then applied once per background rather than to each image."""
+    if mask is None:
+        return replace(background, search=None)
+    search = background.threshold.copy()
+    search[mask > 0] = saturation_of(search) if search.dtype.kind == "u" else np.inf
+    return replace(background, search=search)
+
+
+def saturation_of(gray: NDArray[Any]) -> float:
+    """The largest value an image of this dtype holds (what a saturated pixel reads; 255 for a float image)."""
+    dtype = gray.dtype
+    if dtype == np.uint8:  # (the common cases without numpy.iinfo, which costs microseconds a call)
+        return 255.0
+    if dtype == np.uint16:
+        return 65535.0
+    return float(np.iinfo(dtype).max) if dtype.kind == "u" else 255.0
 
 
 #: The sums that detect spots are over this many pixels square.

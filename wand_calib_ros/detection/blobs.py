@@ -21,7 +21,14 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.detection.background import BOX, Background, BackgroundOptions, box_sums, estimate_background
+from wand_calib_ros.detection.background import (
+    BOX,
+    Background,
+    BackgroundOptions,
+    box_sums,
+    estimate_background,
+    saturation_of,
+)
 from wand_calib_ros.detection.centres import spot_centre
 from wand_calib_ros.detection.errors import ImageError
 
@@ -132,10 +139,16 @@ FRINGE_AREA = 0.1
 TOUCH_PX = 2.0
 
 
+def distances(points: FloatArray, others: FloatArray) -> FloatArray:
+    """(N, M) the distances between (N, 2) and (M, 2) points, px (cheaper than numpy.linalg.norm for the
+    handful of blobs an image has)."""
+    return np.hypot(points[:, None, 0] - others[None, :, 0], points[:, None, 1] - others[None, :, 1])
+
+
 def touching(centres: FloatArray, areas: NDArray[np.int64], margin_px: float = TOUCH_PX) -> NDArray[np.bool_]:
     """(N, N) which blobs touch or overlap: closer than their radii (from their areas) plus ``margin_px`` (the
     diagonal True)."""
-    gaps = np.linalg.norm(centres[:, None] - centres[None], axis=-1)
+    gaps = distances(centres, centres)
     radii = np.sqrt(areas / np.pi)
     return np.asarray(gaps < radii[:, None] + radii[None, :] + margin_px)
 
@@ -175,11 +188,6 @@ def to_gray(image: NDArray[Any], encoding: str) -> NDArray[Any]:
     return array if array.dtype in (np.uint8, np.uint16) else array.astype(np.float32)
 
 
-def saturation_of(gray: NDArray[Any]) -> float:
-    """The largest value an image of this dtype holds (what a saturated pixel reads)."""
-    return float(np.iinfo(gray.dtype).max) if gray.dtype.kind == "u" else 255.0
-
-
 def _measure(
     gray: NDArray[Any],
     box: tuple[int, int, int, int],
@@ -200,7 +208,7 @@ def _measure(
     w = options.window
     x0, y0 = max(x - w, 0), max(y - w, 0)
     x1, y1 = min(x + bw + w, width), min(y + bh + w, height)
-    window = gray[y0:y1, x0:x1].astype(np.float64)
+    window = gray[y0:y1, x0:x1].astype(np.float32)  # (exact for 8- and 16-bit pixels)
     row, col = min(y + bh // 2, height - 1), min(x + bw // 2, width - 1)
     step, levels = background.step, background.level
     sample = (min(round(row / step), levels.shape[0] - 1), min(round(col / step), levels.shape[1] - 1))
@@ -230,7 +238,7 @@ def _measure(
             region = np.asarray(cv2.dilate(drawn, np.ones((3, 3), np.uint8)) > 0)
             split.append((region, tuple(cv2.boundingRect(outline))))  # type: ignore[arg-type]
         parts = split if len(split) >= 2 else parts
-    touches = mask is not None and bool(mask[max(y - 1, 0) : y + bh + 1, max(x - 1, 0) : x + bw + 1].any())
+    touches = mask is not None and cv2.countNonZero(mask[max(y - 1, 0) : y + bh + 1, max(x - 1, 0) : x + bw + 1]) > 0
     measured: list[tuple[float, ...]] = []
     for part, (cx, cy, cw, ch) in parts:
         spot_floor = floor if part is None else CORE_FRACTION * peak
@@ -265,7 +273,8 @@ def find_blobs(
         mask: (H, W) uint8, non-zero where pixels are ignored (lamps, windows), or None.
         background: the background of the image's box sums (:func:`~wand_calib_ros.detection.background.box_sums`,
             :func:`~wand_calib_ros.detection.background.estimate_background`; a recent image's will do: it changes
-            slowly), or None: estimated here.
+            slowly), or None: estimated here. Its ``search`` threshold, when set, must hold ``mask``
+            (:func:`~wand_calib_ros.detection.background.masked`).
     """
     if gray.dtype not in (np.uint8, np.uint16):
         gray = np.clip(np.round(gray), 0, 65535).astype(np.uint16)
@@ -273,9 +282,12 @@ def find_blobs(
     sums, unit = box_sums(gray) if background is None or background.sums is None else (background.sums, background.unit)
     if background is None or background.threshold.shape != sums.shape or background.threshold.dtype != sums.dtype:
         background = estimate_background(sums, options.background, unit=unit)
-    above = cv2.compare(sums, background.threshold, cv2.CMP_GT)
-    if mask is not None:
-        above = cv2.subtract(above, mask)
+    if background.search is not None and background.search.shape == sums.shape:  # the mask is in the threshold
+        above = cv2.compare(sums, background.search, cv2.CMP_GT)
+    else:
+        above = cv2.compare(sums, background.threshold, cv2.CMP_GT)
+        if mask is not None:
+            above = cv2.subtract(above, mask)
     # External contours of a sparse mask are much cheaper than labelling the whole image.
     contours, _ = cv2.findContours(above, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
     rows: list[tuple[float, ...]] = []

@@ -19,12 +19,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-FloatArray = NDArray[np.float64]
+Pixels = NDArray[np.floating[Any]]
 
 
 @dataclass(frozen=True)
@@ -45,18 +46,19 @@ class SpotCentre:
     length_px: float
 
 
-def side_plane(window: FloatArray) -> tuple[float, float, float]:
+def side_plane(window: Pixels) -> tuple[float, float, float]:
     """(level at the window's centre, slope along u, slope along v) of a plane through the medians of the
     window's four sides (grey levels, per px)."""
     height, width = window.shape
-    left, right = np.sort(window[:, [0, -1]], axis=0)[height // 2]  # (a middle value for an even count)
-    top, bottom = np.sort(window[[0, -1]], axis=1)[:, width // 2]
+    # (sorted Python lists: a side has a few dozen pixels, where numpy's per-call cost is most of the work)
+    left, right = (sorted(window[:, k].tolist())[height // 2] for k in (0, -1))  # (a middle value for an even count)
+    top, bottom = (sorted(window[k].tolist())[width // 2] for k in (0, -1))
     slope_u = float(right - left) / max(width - 1, 1)
     slope_v = float(bottom - top) / max(height - 1, 1)
     return 0.25 * float(left + right + top + bottom), slope_u, slope_v
 
 
-def spot_centre(window: FloatArray, floor: float, region: NDArray[np.bool_] | None = None) -> SpotCentre | None:
+def spot_centre(window: Pixels, floor: float, region: NDArray[np.bool_] | None = None) -> SpotCentre | None:
     """The centre of the spot in a window (see the module docstring), or None when nothing stands above the floor.
 
     Args:
@@ -68,7 +70,7 @@ def spot_centre(window: FloatArray, floor: float, region: NDArray[np.bool_] | No
     level, slope_u, slope_v = side_plane(window)
     cols = np.arange(width, dtype=np.float32) - (width - 1) / 2.0
     rows = np.arange(height, dtype=np.float32) - (height - 1) / 2.0
-    above = window.astype(np.float32) - (level + slope_u * cols[None, :] + slope_v * rows[:, None])
+    above = window.astype(np.float32, copy=False) - (level + slope_u * cols[None, :] + slope_v * rows[:, None])
     weights = np.maximum(above - floor, 0.0)
     if region is not None:
         weights = weights * region

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.detection.blobs import Blobs
+from wand_calib_ros.detection.blobs import Blobs, distances
 from wand_calib_ros.detection.masks import Mask, write_mask
 from wand_calib_ros.io.detection_summary import REASON_TEXT, masks_folder, write_summary
 
@@ -60,7 +60,7 @@ def view_light(blobs: Blobs, points: FloatArray) -> ViewLight | None:
     if blobs.lengths is None or blobs.contrast is None or not blobs.centres.size:
         return None
     finite = np.all(np.isfinite(points), axis=1)
-    nearest = np.argmin(np.linalg.norm(points[finite][:, None] - blobs.centres[None], axis=-1), axis=1)
+    nearest = np.argmin(distances(points[finite], blobs.centres), axis=1)
     return ViewLight(blobs.peaks[nearest], blobs.saturated[nearest], blobs.lengths[nearest], blobs.contrast[nearest])
 
 

@@ -28,8 +28,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.detection.background import BOX
-from wand_calib_ros.detection.blobs import Blobs
+from wand_calib_ros.detection.background import BOX, saturation_of
+from wand_calib_ros.detection.blobs import Blobs, distances
 from wand_calib_ros.detection.errors import MaskError
 from wand_calib_ros.io.rig_yaml import MaskSpec
 
@@ -197,6 +197,8 @@ class LightPatch:
         """(N,) blobs that may be what is left of the halo once subtracted (the light flickers): in the patch,
         with a peak below RESIDUE_FRACTION of the halo learned at their centre."""
         inside = self.contains(centres)
+        if not inside.any():
+            return inside
         u = np.clip(np.round(centres[:, 0]).astype(int) - self.u0, 0, self.excess.shape[1] - 1)
         v = np.clip(np.round(centres[:, 1]).astype(int) - self.v0, 0, self.excess.shape[0] - 1)
         return np.asarray(inside & (peaks < RESIDUE_FRACTION * self.excess[v, u]))
@@ -210,8 +212,9 @@ class LightPatch:
     def _wall(patch: NDArray[Any], full: float) -> tuple[float, bool]:
         """The wall behind a patch of the image (the median of its border), and whether the border is one wall:
         its quartiles within UNEVEN_LEVELS (of an 8-bit image) of each other."""
-        border = np.concatenate([patch[0], patch[-1], patch[:, 0], patch[:, -1]]).astype(np.float32)
-        border = border[np.isfinite(border)]
+        border = np.concatenate([patch[0], patch[-1], patch[:, 0], patch[:, -1]])
+        if border.dtype.kind == "f":
+            border = border[np.isfinite(border)]
         n = border.size
         if n < 8:  # (another light covers its border)
             return 0.0, False
@@ -309,7 +312,7 @@ class StaticSources:
         if not known:
             return gray
         out = gray.copy()
-        full = float(np.iinfo(gray.dtype).max) if gray.dtype.kind == "u" else 255.0
+        full = saturation_of(gray)
         for patch in known:
             patch.subtract(out[patch.v0 : patch.v1, patch.u0 : patch.u1], full)
         return out
@@ -320,12 +323,15 @@ class StaticSources:
         if not blobs.centres.size or self._newest is None:
             return np.zeros(blobs.centres.shape[0], dtype=bool)
         on_source = np.zeros(blobs.centres.shape[0], dtype=bool)
-        for source, patch in zip(self.sources, self.patches, strict=True):  # what is left of a learned light:
-            distance = np.linalg.norm(blobs.centres - np.array(source.centre), axis=1)
-            if patch.known:  # its flicker's residue (dim against the halo it stands on) ...
-                on_source |= (distance <= MATCH_PX + 2.0) | patch.residue(blobs.centres, blobs.peaks)
-            else:  # ... or its halo flickering beyond its disc
-                on_source |= distance <= source.radius_px + MASK_MARGIN_PX + 2.0
+        if self.sources:  # what is left of a learned light: its flicker's residue (dim against the halo it stands
+            # on) once its halo is known, its halo flickering beyond its disc before
+            pairs = list(zip(self.sources, self.patches, strict=True))
+            where = np.array([source.centre for source, _ in pairs])
+            reach = [MATCH_PX + 2.0 if p.known else s.radius_px + MASK_MARGIN_PX + 2.0 for s, p in pairs]
+            on_source = np.asarray((distances(blobs.centres, where) <= np.array(reach)).any(axis=1))
+            for _, patch in pairs:
+                if patch.known:
+                    on_source |= patch.residue(blobs.centres, blobs.peaks)
         if not self._centres.size:
             return on_source
         nearest, index = self._nearest(blobs)
@@ -382,7 +388,7 @@ class StaticSources:
 
     def _nearest(self, blobs: Blobs) -> tuple[NDArray[np.bool_], NDArray[np.int64]]:
         """(N,) whether each blob matches a candidate, and the nearest candidate's index."""
-        distance = np.linalg.norm(blobs.centres[:, None] - self._centres[None], axis=-1)
+        distance = distances(blobs.centres, self._centres)
         index = np.argmin(distance, axis=1)
         reach = MATCH_PX + 0.25 * np.maximum(_radii(blobs), self._radii[index])
         return distance[np.arange(index.size), index] <= reach, index
@@ -414,6 +420,8 @@ class StaticSources:
             self._born = np.concatenate([self._born, np.full(n, self._seen, dtype=np.int64)])
 
     def _keep(self, keep: NDArray[np.bool_]) -> None:
+        if keep.all():
+            return
         self._centres, self._radii = self._centres[keep], self._radii[keep]
         self._first, self._last, self._count = self._first[keep], self._last[keep], self._count[keep]
         self._born = self._born[keep]
@@ -421,14 +429,14 @@ class StaticSources:
     def _learn_halos(self, gray: NDArray[Any], blobs: Blobs) -> bool:
         """Each learned light's halo from this image, away from the other blobs near it; whether a mask changed (a
         halo became known)."""
-        full = float(np.iinfo(gray.dtype).max) if gray.dtype.kind == "u" else 255.0
+        full = saturation_of(gray)
         changed = False
+        radii = _radii(blobs)
         for source, patch in zip(self.sources, self.patches, strict=True):
             if not patch.due():
                 continue
             inside = np.flatnonzero(patch.contains(blobs.centres)) if blobs.centres.size else np.zeros(0, np.int64)
-            distance = np.linalg.norm(blobs.centres[inside] - np.array(source.centre), axis=1)
-            radii = _radii(blobs)
+            distance = distances(blobs.centres[inside], np.array([source.centre]))[:, 0]
             others = [(*blobs.centres[i], radii[i]) for i, d in zip(inside, distance, strict=True) if d > MATCH_PX + 2]
             if others and patch.waited < PATCH_PATIENCE:  # rather an image with nothing else near
                 patch.waited += 1

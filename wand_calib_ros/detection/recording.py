@@ -19,8 +19,9 @@ grouped into frames by nearest stamps, with the same synchroniser the live colle
 
 from __future__ import annotations
 
+import heapq
 from collections import Counter, deque
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any, NamedTuple
 
@@ -32,8 +33,8 @@ from wand_calib_ros.core.initialise.intrinsics_init import nominal_bearings
 from wand_calib_ros.core.model.bearings import BearingTable
 from wand_calib_ros.core.model.camera_model import CameraModel
 from wand_calib_ros.core.model.rig import CameraSpec, RigSpec, WandObservations
-from wand_calib_ros.detection.background import Background, box_sums, estimate_background
-from wand_calib_ros.detection.blobs import BlobOptions, Blobs, find_blobs, to_gray
+from wand_calib_ros.detection.background import Background, box_sums, estimate_background, masked
+from wand_calib_ros.detection.blobs import BlobOptions, Blobs, distances, find_blobs, to_gray
 from wand_calib_ros.detection.errors import ImageError
 from wand_calib_ros.detection.health import CameraHealth, HealthReport, ViewLight, health_report, view_light
 from wand_calib_ros.detection.masks import Mask, MaskTaker, StaticSources, mask_fraction
@@ -43,6 +44,10 @@ from wand_calib_ros.io.bags import ImageFrame
 
 #: A camera's background is estimated again every this many images.
 BACKGROUND_REFRESH = 8
+#: A recording's images are put in stamp order within this much of it (s): a bag stores them as they arrived, a
+#: little out of their stamps' order, and only this much of it is held in memory. An image stamped further back
+#: than that behind its camera's newest is counted "late" and not searched.
+REORDER_S = 2.0
 #: The value a saturated pixel of each encoding reads (a 12-bit camera's mono16 is scaled to 16 bits).
 SATURATION = {"mono16": 65520.0}
 
@@ -139,6 +144,7 @@ class CameraStream:
         self.health = CameraHealth()
         self._lights: dict[int, ViewLight] = {}  # the light of a detected view, until labelled
         self._background: Background | None = None
+        self._searched: tuple[Background, Mask | None, Background] | None = None  # (background, mask, both)
         self._since_background = 0
         self._mask: Mask | None = mask
         self._pending: deque[tuple[int, WandDetection, ViewLight | None]] = deque()  # pushed, not yet released
@@ -179,7 +185,7 @@ class CameraStream:
         except ImageError:
             return None, None, "bad_image"
         raw, gray = gray, self.sources.clean(gray)  # the learned lights' halos taken away
-        background = self._background_of(gray)
+        background = self._search_of(self._background_of(gray))
         blobs = find_blobs(
             gray, self.blob_options, saturation=SATURATION.get(encoding, 255.0), mask=self._mask, background=background
         )
@@ -188,13 +194,13 @@ class CameraStream:
         prediction = self.labeller.predict(stamp_ns)
         claimed = np.zeros(blobs.centres.shape[0], dtype=bool)
         if prediction is not None and prediction.moved and blobs.centres.size:
-            gaps = np.linalg.norm(blobs.centres[:, None] - prediction.points[None], axis=-1).min(axis=1)
+            gaps = distances(blobs.centres, prediction.points).min(axis=1)
             claimed = gaps <= prediction.gate_px
         usable = ~self.sources.still(blobs)  # (the wand's own blobs are never learned: it cannot be still)
         near = None if prediction is None else (prediction.points, prediction.gate_px)
         detection = identify_wand(blobs, self.wand_options, self.model, usable=usable, near=near)
         if detection.points is not None and prediction is not None and prediction.moved and blobs.centres.size:
-            gaps = np.linalg.norm(blobs.centres[:, None] - detection.points[None], axis=-1).min(axis=1)
+            gaps = distances(blobs.centres, detection.points).min(axis=1)
             claimed |= gaps < 1e-6
         standing_out = self.sources.centres_standing_out(raw, background.threshold)
         since = self.labeller.since_ns if prediction is not None else None
@@ -222,12 +228,27 @@ class CameraStream:
         self._taker = None
         return "taking_mask"
 
+    def late(self) -> str:
+        """Count an image that came after newer ones of this camera (it is not searched); its reason."""
+        self.stats.images += 1
+        self.stats.rejected["late"] += 1
+        return "late"
+
     def report(self) -> HealthReport:
         """What this camera saw so far (:mod:`~wand_calib_ros.detection.health`)."""
         sources = tuple((s.centre[0], s.centre[1], s.radius_px) for s in self.sources.sources)
         masked = 0.0 if self._mask is None else mask_fraction(self._mask)
         stats = self.stats
         return health_report(self.spec.name, stats.images, stats.detected, stats.rejected, self.health, sources, masked)
+
+    def _search_of(self, background: Background) -> Background:
+        """The background with the current mask in its search threshold (made again when either changed)."""
+        current, mask = self._background, self._mask
+        assert current is not None
+        if self._searched is None or self._searched[0] is not current or self._searched[1] is not mask:
+            self._searched = (current, mask, masked(current, mask))
+        searched = self._searched[2]
+        return searched if background.sums is None else replace(searched, sums=background.sums)
 
     def _background_of(self, gray: NDArray[Any]) -> Background:
         """The background of the image's box sums, estimated again every BACKGROUND_REFRESH images (or when the
@@ -291,6 +312,20 @@ class CameraStream:
         return out
 
 
+def in_stamp_order(frames: Iterable[ImageFrame], window_ns: int) -> Iterator[ImageFrame]:
+    """The frames in stamp order, holding only those within ``window_ns`` of the newest stamp seen so far (a
+    frame stamped further back than that comes out as soon as it arrives, out of order)."""
+    held: list[tuple[int, int, ImageFrame]] = []  # (stamp, arrival, frame): a heap
+    newest: int | None = None
+    for arrival, frame in enumerate(frames):
+        heapq.heappush(held, (frame.stamp_ns, arrival, frame))
+        newest = frame.stamp_ns if newest is None else max(newest, frame.stamp_ns)
+        while held[0][0] < newest - window_ns:
+            yield heapq.heappop(held)[2]
+    while held:
+        yield heapq.heappop(held)[2]
+
+
 def detect_recording(
     frames: Iterable[ImageFrame],
     rig: RigSpec,
@@ -302,7 +337,8 @@ def detect_recording(
 ) -> Detections:
     """Wand observations of a recording, with per-camera counts (detected, rejected by reason).
 
-    Images are grouped into frames by nearest stamps (:func:`wand_calib_ros.collection.sync.group_by_stamps`,
+    Images are searched in stamp order (within REORDER_S: a recording is read as it goes, only that much of it in
+    memory) and grouped into frames by nearest stamps (:func:`wand_calib_ros.collection.sync.group_by_stamps`,
     hardware-triggered or free-running cameras alike); frame ids count every frame of the recording
     and each view keeps its image's stamp.
 
@@ -322,8 +358,15 @@ def detect_recording(
         for c in rig.cameras
     }
     outcomes: list[tuple[str, Labelled]] = []
-    for frame in sorted(frames, key=lambda f: f.stamp_ns):
+    newest: dict[str, int] = {}
+    for frame in in_stamp_order(frames, int(REORDER_S * 1e9)):
         stream = streams[frame.camera]
+        if frame.stamp_ns < newest.setdefault(frame.camera, frame.stamp_ns):
+            skipped = stream.late()
+            if inspect is not None:
+                inspect(frame, None, None, skipped)
+            continue
+        newest[frame.camera] = frame.stamp_ns
         blobs, detection, reason = stream.detect(frame.image, frame.encoding, frame.stamp_ns)
         if inspect is not None:
             inspect(frame, blobs, detection, reason)

@@ -45,6 +45,7 @@ REASON_TEXT = {
     "wrong_size": "an image of another size than the rig file's",
     "bad_image": "an image that could not be read",
     "taking_mask": "taking the mask",
+    "late": "stamped well before images already read (the recording is out of order)",
     "no_wand": "no wand",
 }
 

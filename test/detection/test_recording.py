@@ -1,0 +1,58 @@
+"""A recording's images through the detector: stamp order from a bag's arrival order, in bounded memory."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import numpy as np
+
+from wand_calib_ros.detection.recording import REORDER_S, detect_recording, in_stamp_order
+from wand_calib_ros.io.bags import ImageFrame
+from wand_calib_ros.sim.render import RenderOptions, render_recording
+from wand_calib_ros.sim.scenarios import paper_fisheye_scenario
+
+PIXEL = np.zeros((1, 1), np.uint8)
+
+
+def test_frames_come_in_stamp_order_holding_only_the_reorder_window() -> None:
+    rng = np.random.default_rng(0)
+    stamps = np.arange(600) * 10_000_000 + rng.integers(0, 300_000_000, 600)  # 10 ms apart, up to 0.3 s late
+    arrived = [ImageFrame("cam", int(s), PIXEL, "mono8") for s in stamps]
+    read = 0
+
+    def reading() -> Iterator[ImageFrame]:
+        nonlocal read
+        for frame in arrived:
+            read += 1
+            yield frame
+
+    held = []
+    out = []
+    for frame in in_stamp_order(reading(), 500_000_000):
+        out.append(frame.stamp_ns)
+        held.append(read - len(out))
+    assert out == sorted(stamps.tolist())
+    assert max(held) <= 0.5e9 / 10e6 + 30 + 1  # the window's frames and the ones arriving late into it, not all 600
+
+
+def test_images_arriving_out_of_order_are_searched_in_order_and_a_late_one_is_counted() -> None:
+    scenario = paper_fisheye_scenario()
+    recording = render_recording(scenario, 240, 30.0, RenderOptions(), np.random.default_rng(3))
+    frames = [ImageFrame(camera, stamp, image, "mono8") for camera, stamp, image in recording.frames]
+    in_order = detect_recording(frames, scenario.rig)
+    # as a bag may store them: each camera's images a few frames behind the others'
+    delay = {name: 0.1 * c for c, name in enumerate(scenario.rig.camera_names)}
+    arrived = sorted(frames, key=lambda f: f.stamp_ns + delay[f.camera] * 1e9)
+    shuffled = detect_recording(arrived, scenario.rig)
+    assert np.array_equal(shuffled.observations.uv, in_order.observations.uv, equal_nan=True)
+    # one image stored long after its time: counted late, everything else as before
+    first = next(k for k, f in enumerate(frames) if f.camera == "cam1" and f.stamp_ns > frames[0].stamp_ns + 1e9)
+    stored_late = [*frames[:first], *frames[first + 1 :]]
+    stored_late.insert(
+        next(k for k, f in enumerate(stored_late) if f.stamp_ns > frames[first].stamp_ns + 1.5e9 * REORDER_S),
+        frames[first],
+    )
+    late = detect_recording(stored_late, scenario.rig)
+    assert late.stats["cam1"].rejected["late"] == 1
+    assert late.stats["cam1"].images == in_order.stats["cam1"].images
+    assert late.reports["cam1"].no_view.get("late") == 1
