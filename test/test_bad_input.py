@@ -351,6 +351,10 @@ CASES: dict[str, tuple[Spoil, str]] = {
     "column missing": (_observations(_row(1, lambda c: c[:4])), "row 1: missing column(s) v"),
     "row too short": (_observations(_row(5, lambda c: c[:3])), "row 5: expected at least 5 columns"),
     "frame not an integer": (_observations(_cell(4, 0, "1.5")), "row 4: frame must be an integer"),
+    "frame beyond 64 bits": (
+        _observations(_cell(4, 0, "100000000000000000000")),
+        "row 4: frame 100000000000000000000 is out of range (a frame id is a 64-bit integer)",
+    ),
     "point D": (_observations(_cell(3, 2, "D")), "row 3: point must be A, B or C"),
     "decimal comma": (_observations(_cell(6, 3, "12,5")), "row 6: 6 cells where the header has 5 (a decimal comma?"),
     "v text": (_observations(_cell(6, 4, "high")), "row 6: u, v must be numbers"),
@@ -427,6 +431,22 @@ CASES: dict[str, tuple[Spoil, str]] = {
     "detect topic with a broken brace": (_detect("/{camera/image_raw"), "--topic '/{camera/image_raw'"),
     "detect topic shared by the cameras": (_detect("/cam0/image_raw"), "gives every camera the same topic"),
     "detect bag missing": (_detect("/{camera}/image_raw"), "no-bag"),
+    "detect sync tolerance NaN": (
+        lambda f: [*_detect("/{camera}/image_raw")(f), "--sync-tolerance-ms", "nan"],
+        "--sync-tolerance-ms must be a finite number, got nan",
+    ),
+    "detect sync tolerance negative": (
+        lambda f: [*_detect("/{camera}/image_raw")(f), "--sync-tolerance-ms", "-3"],
+        "--sync-tolerance-ms must be 0 or more",
+    ),
+    "simulate noise infinite": (
+        _argv("simulate", "paper", "--noise", "inf", "--out", "{folder}/out"),
+        "--noise must be a finite number, got inf",
+    ),
+    "simulate a frame rate NaN": (
+        _argv("simulate", "paper3", "--take", "2", "--fps", "30", "nan", "30", "--out", "{folder}/out"),
+        "--fps must be a finite number, got nan",
+    ),
     # the surfaces added since (issue 25): --floor
     "floor file line not a frame": (
         _floor(_floor_file(b"12\nabc\n")),

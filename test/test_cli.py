@@ -426,3 +426,37 @@ def test_a_mask_taken_from_a_stretch_of_a_bag(tmp_path: Path, capsys) -> None:  
         assert picture is not None and picture.shape == (480, 640) and picture.max() == 255
     assert main([*argv, "--start", "100"]) == 2
     assert "no image between 100 and 101 s" in capsys.readouterr().err
+
+
+def test_a_full_disk_is_one_line_exit_2_and_leaves_no_result(
+    simulated: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys
+) -> None:  # type: ignore[no-untyped-def]
+    import os
+    import tempfile
+
+    def full_disk(*args: object, **kwargs: object) -> tuple[int, str]:  # every staged output on a full device
+        return os.open("/dev/full", os.O_WRONLY), str(tmp_path / "staged.tmp")
+
+    monkeypatch.setattr(tempfile, "mkstemp", full_disk)
+    output = tmp_path / "result.yaml"
+    argv = ["calibrate", "--cameras", str(simulated / "cameras.yaml"), "--observations"]
+    assert main(["-q", *argv, str(simulated / "observations.csv"), "--output", str(output)]) == 2
+    assert capsys.readouterr().err.strip() == f"wand-calib: error: cannot write {output}: No space left on device"
+    assert not output.exists()
+
+
+def test_a_library_write_that_fails_names_the_commands_output(
+    simulated: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys
+) -> None:  # type: ignore[no-untyped-def]
+    import errno
+
+    from wand_calib_ros.commands import report
+
+    def no_space(args: object) -> int:  # as matplotlib's savefig on a full disk: an OSError without a file name
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(report, "run", no_space)
+    out = tmp_path / "report"
+    argv = ["report", "--result", "r.yaml", "--cameras", "c.yaml", "--observations", "o.csv", "--out", str(out)]
+    assert main(argv) == 2
+    assert capsys.readouterr().err.strip() == f"wand-calib: error: cannot write {out}: No space left on device"

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import sys
 from collections.abc import Sequence
 from types import ModuleType
@@ -53,19 +54,36 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
+def check_numbers(args: argparse.Namespace) -> None:
+    """Every number option finite (argparse's float takes 'nan' and 'inf').
+
+    Raises:
+        WandCalibError: naming the option.
+    """
+    for name, value in vars(args).items():
+        for number in value if isinstance(value, list) else [value]:
+            if isinstance(number, float) and not math.isfinite(number):
+                raise WandCalibError(f"--{name.replace('_', '-')} must be a finite number, got {number}")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``wand-calib``."""
     args = _parser().parse_args(argv)
     level = logging.DEBUG if args.verbose else logging.WARNING if args.quiet else logging.INFO
     logging.basicConfig(level=level, format="wand-calib: %(message)s", stream=sys.stderr)
     try:
+        check_numbers(args)
         code: int = COMMANDS[args.command].run(args)
         return code
     except WandCalibError as error:
         print(f"wand-calib: error: {error}", file=sys.stderr)
         return 2
     except OSError as error:
-        print(f"wand-calib: error: {error.filename or ''}: {error.strerror}", file=sys.stderr)
+        if error.filename:
+            print(f"wand-calib: error: {error.filename}: {error.strerror or error}", file=sys.stderr)
+        else:  # (a library's write: the command's output is what failed)
+            target = getattr(args, "output", None) or getattr(args, "out", None) or "an output"
+            print(f"wand-calib: error: cannot write {target}: {error.strerror or error}", file=sys.stderr)
         return 2
 
 

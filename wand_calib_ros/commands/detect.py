@@ -95,6 +95,8 @@ def run(args: argparse.Namespace) -> int:
     from wand_calib_ros.io.bags import count_images, read_image_frames
     from wand_calib_ros.io.rig_yaml import load_camera_masks
 
+    if args.sync_tolerance_ms < 0 or args.debug_every < 1:
+        raise WandCalibError("--sync-tolerance-ms must be 0 or more and --debug-every at least 1")
     cv2.setNumThreads(1)  # per-image work is small: OpenCV's thread pool only adds overhead here
     rig = load_rig(args.cameras)
     masks = {

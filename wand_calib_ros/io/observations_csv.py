@@ -257,6 +257,10 @@ def _parse(
             frame = int(frame_text)
         except ValueError:
             raise FormatError(path, f"frame must be an integer, got {frame_text!r}", row=row_number) from None
+        if not -(2**63) <= frame < 2**63:
+            raise FormatError(
+                path, f"frame {frame_text} is out of range (a frame id is a 64-bit integer)", row=row_number
+            )
         if point not in label_index:
             named = f"{', '.join(labels[:-1])} or {labels[-1]}"
             raise FormatError(path, f"point must be {named} (the wand's markers), got {point!r}", row=row_number)

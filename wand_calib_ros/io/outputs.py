@@ -47,17 +47,20 @@ def write_together(documents: Mapping[Path, str]) -> None:
         OutputError: a file could not be written; no output was replaced (the temporaries are removed).
     """
     staged: list[tuple[Path, Path]] = []
+    current = next(iter(documents), Path())
     try:
         for path, text in documents.items():
+            current = path
             check_writable([path])
             handle, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
             staged.append((Path(name), path))
             with os.fdopen(handle, "w", encoding="utf-8", newline="\n") as stream:
                 stream.write(text)
         for temporary, path in staged:
+            current = path
             os.replace(temporary, path)
     except OSError as error:
-        raise OutputError(error.filename or next(iter(documents)), error.strerror or str(error)) from None
+        raise OutputError(error.filename or current, error.strerror or str(error)) from None
     finally:
         for temporary, _ in staged:
             temporary.unlink(missing_ok=True)
