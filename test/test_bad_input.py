@@ -216,6 +216,22 @@ def _given_intrinsics(edit: Callable[[dict], dict]) -> Spoil:  # type: ignore[ty
     return spoil
 
 
+def _plumb_bob_given(p1: float, p2: float) -> Spoil:
+    """A conventional rig of plumb_bob lenses, cam1 given its true K and D but for tangential terms p1, p2."""
+
+    def spoil(folder: Path) -> list[str]:
+        rig = folder / "plumb_bob"
+        assert main(["-q", "simulate", "conventional", "--plumb-bob", "--seed", "2", "--out", str(rig)]) == 0
+        truth = yaml.safe_load((rig / "truth.yaml").read_text())["cameras"]["cam1"]["opencv"]
+        D = [*truth["distortion"][:2], p1, p2, *truth["distortion"][4:]]
+        document = yaml.safe_load((rig / "cameras.yaml").read_text())
+        document["cameras"][1]["intrinsics"] = {"K": truth["camera_matrix"], "D": D, "distortion_model": "plumb_bob"}
+        (rig / "bad-cameras.yaml").write_text(yaml.safe_dump(document))
+        return _calibrate(rig, cameras="bad-cameras.yaml")
+
+    return spoil
+
+
 def _scaled_focal(given: dict) -> dict:  # type: ignore[type-arg]
     k = np.array(given["K"], dtype=float)
     k[0, 0] *= 1.25
@@ -466,6 +482,10 @@ CASES: dict[str, tuple[Spoil, str]] = {
     "given focal 25 % too large": (
         _given_intrinsics(_scaled_focal),
         "camera 'cam1': the views disagree with its given intrinsics",
+    ),
+    "given tangential terms of 0.01": (
+        _plumb_bob_given(0.01, 0.01),
+        "its given tangential terms p1 0.01, p2 0.01 are larger than a lens's (a few thousandths)",
     ),
     "given principal point outside the image": (
         _given_intrinsics(lambda g: {**g, "K": [[g["K"][0][0], 0, 900], [0, g["K"][1][1], 250], [0, 0, 1]]}),

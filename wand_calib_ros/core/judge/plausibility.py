@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 
 from wand_calib_ros.core.adjust.bundle_adjustment import N_CAMERA_PARAMS, BundleResult
 from wand_calib_ros.core.errors import PlausibilityError
+from wand_calib_ros.core.model.camera_model import CameraModel, to_opencv
 from wand_calib_ros.core.model.result import CalibrationResult
 from wand_calib_ros.core.model.rig import CameraSpec, RigSpec, WandObservations, WandSpec
 
@@ -226,6 +227,25 @@ def check_given_intrinsics(rig: RigSpec, result: BundleResult, free: NDArray[np.
                 f"camera '{spec.name}': the views disagree with its given intrinsics: they put its focal length at "
                 f"fx {fx * (1 + focal):.0f} +- {fx * std[0] / model.k[0]:.0f} px against the given {fx:.0f} "
                 f"({100 * focal:+.0f} %) and its principal point at ({seen[0]:.0f}, {seen[1]:.0f}) against "
-                f"({model.principal_point[0]:.0f}, {model.principal_point[1]:.0f}): check that K is this camera's "
-                "and for this image size, or give them as a start (fixed: false)"
+                f"({model.principal_point[0]:.0f}, {model.principal_point[1]:.0f}): "
+                + (_tangential_hint(model) or "check that K is this camera's and for this image size")
+                + ", or give them as a start (fixed: false)"
             )
+
+
+#: OpenCV tangential terms (p1, p2) of real lenses stay below this (a few thousandths); larger ones shift the image as
+#: a displaced principal point would.
+TANGENTIAL_LIMIT = 0.005
+
+
+def _tangential_hint(model: CameraModel) -> str | None:
+    """What to check when a given pinhole model's tangential terms are larger than a lens's, else None."""
+    if not model.is_pinhole:
+        return None
+    p1, p2 = (float(v) for v in to_opencv(model).distortion[2:4])
+    if max(abs(p1), abs(p2)) <= TANGENTIAL_LIMIT:
+        return None
+    return (
+        f"its given tangential terms p1 {p1:g}, p2 {p2:g} are larger than a lens's (a few thousandths) and move "
+        "the image as the principal point would: check D's order (k1, k2, p1, p2, k3)"
+    )
