@@ -124,7 +124,7 @@ def test_unusable_images_are_counted_by_reason_not_raised() -> None:
     detected = detect_recording(frames, scenario.rig)
     observations, stats = detected.observations, detected.stats
     assert stats["cam0"].rejected["wrong_size"] == 1
-    assert stats["cam0"].rejected["bad_image"] == 1
+    assert stats["cam0"].rejected["encoding"] == 1  # named for what it is, not as a wrong size
     assert stats["cam0"].rejected["no_blobs"] == 2
     # the first images show a wand not yet seen to move: no view until it has moved from where it began
     assert 12 - 3 <= stats["cam0"].detected == observations.complete[:, 0].sum() <= 12

@@ -34,7 +34,7 @@ from wand_calib_ros.core.model.bearings import BearingTable
 from wand_calib_ros.core.model.camera_model import CameraModel
 from wand_calib_ros.core.model.rig import CameraSpec, RigSpec, WandObservations
 from wand_calib_ros.detection.background import Background, box_sums, estimate_background, masked
-from wand_calib_ros.detection.blobs import BlobOptions, Blobs, distances, find_blobs, to_gray
+from wand_calib_ros.detection.blobs import ENCODINGS, BlobOptions, Blobs, distances, find_blobs, to_gray
 from wand_calib_ros.detection.errors import ImageError
 from wand_calib_ros.detection.health import CameraHealth, HealthReport, ViewLight, health_report, view_light
 from wand_calib_ros.detection.masks import Mask, MaskTaker, StaticSources, mask_fraction
@@ -177,6 +177,8 @@ class CameraStream:
         self.stats.images += 1
         if image is None:
             return None, None, "bad_image"
+        if encoding not in ENCODINGS:
+            return None, None, "encoding"
         height, width = image.shape[:2]
         if (width, height) != self.spec.image_size:
             return None, None, "wrong_size"

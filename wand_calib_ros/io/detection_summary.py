@@ -44,6 +44,7 @@ REASON_TEXT = {
     "still": "still lights, not a moving wand",
     "wrong_size": "an image of another size than the rig file's",
     "bad_image": "an image that could not be read",
+    "encoding": "an image encoding the detector does not read",
     "taking_mask": "taking the mask",
     "late": "stamped well before images already read (the recording is out of order)",
     "no_wand": "no wand",

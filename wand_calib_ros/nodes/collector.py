@@ -57,6 +57,7 @@ from wand_calib_ros.collection.coverage import CoverageTracker
 from wand_calib_ros.collection.estimate import MAX_PLACEMENTS, Estimate, RunningEstimate, converged
 from wand_calib_ros.collection.floor import FLOOR_FILE, FloorWindow, append_floor_frame
 from wand_calib_ros.collection.recovery import backup_path
+from wand_calib_ros.collection.stream_faults import Said, StreamFaults, image_problem
 from wand_calib_ros.collection.sync import FrameSynchroniser, SyncedFrame
 from wand_calib_ros.collection.watch import BumpWatch
 from wand_calib_ros.core.model.result import CalibrationResult
@@ -210,6 +211,10 @@ class CollectorNode(Node):
         self._summary_images = 0  # images received by then
         self.received = dict.fromkeys(self.rig.camera_names, 0)
         self.malformed = dict.fromkeys(self.rig.camera_names, 0)
+        topics = {
+            name: e.image_topic if values["input"] == "images" else e.points_topic for name, e in self.endpoints.items()
+        }
+        self.faults = StreamFaults(self.rig.camera_names, topics)  # silences, stamp jumps, unusable images, drops
         self.lock = threading.Lock()
         self._logged: tuple[bool, float] | None = None  # (ready, when) of the last coverage log line
         # A single-threaded executor runs these callbacks (see nodes.runner): each camera's
@@ -273,12 +278,19 @@ class CollectorNode(Node):
 
     def _on_image(self, camera: str, stamp_ns: int, pixels: NDArray[Any] | None, encoding: str) -> None:
         stream = self.streams[camera]
+        arrival = time.monotonic_ns()
         with self.lock:
+            stamp_ns, said = self.faults.arrived(camera, stamp_ns, arrival)
             taking = stream.taking_mask
             blobs, detection, reason = stream.detect(pixels, encoding, stamp_ns)
+            if reason is not None:
+                size = self.rig.cameras[self.rig.camera_names.index(camera)].image_size
+                problem = image_problem(reason, None if pixels is None else pixels.shape, encoding, size)
+                said += self.faults.unusable(camera, reason, problem, arrival)
             self.received[camera] += 1
             self._offer(camera, stream.label(stamp_ns, detection, reason))
             taken = stream.taken if taking and not stream.taking_mask else None
+        self._say(said)
         if taken is not None:
             write_mask(self._taken_path(camera), taken)
             self.get_logger().info(f"{camera}: mask taken ({100 * float((taken > 0).mean()):.2f} % of the image)")
@@ -312,13 +324,23 @@ class CollectorNode(Node):
                 self.malformed[camera] += 1
             return
         with self.lock:
+            stamp_ns, said = self.faults.arrived(camera, messages.stamp_ns(message.header), time.monotonic_ns())
             self.received[camera] += 1
             stats = self.streams[camera].stats  # the detector node labelled it: count it the same way
             if points is None:
                 stats.rejected["no_wand"] += 1
             else:
                 stats.detected += 1
-            self._offer(camera, [Labelled(messages.stamp_ns(message.header), points)])
+            self._offer(camera, [Labelled(stamp_ns, points)])
+        self._say(said)
+
+    def _say(self, said: list[Said]) -> None:
+        """Log what the stream faults said."""
+        for item in said:  # (one call site per severity: rclpy refuses a call site's severity changing)
+            if item.level == "warning":
+                self.get_logger().warning(item.line)
+            else:
+                self.get_logger().info(item.line)
 
     def _offer(self, camera: str, outcomes: list[Labelled]) -> None:
         """Synchronise released outcomes and store completed frames (caller holds the lock)."""
@@ -479,6 +501,7 @@ class CollectorNode(Node):
             if self.malformed[name]:
                 counts[name]["malformed_points"] = self.malformed[name]
             counts[name] |= messages.timing_values(self.sync, name, self.timing)
+            counts[name] |= self.faults.values(name)
         return counts
 
     def _publish_feedback(self) -> None:
@@ -500,6 +523,8 @@ class CollectorNode(Node):
             }
             cells = {name: self.coverage.cells[c].copy() for c, name in enumerate(self.rig.camera_names)}
             watch = self.watch
+            faults, said = self.faults.check(time.monotonic_ns())
+        self._say(said)
         now = time.monotonic()
         notes = self._detection_feedback(counts)
         self._estimate_feedback(now, status.ready, counts, rig_values)
@@ -515,13 +540,19 @@ class CollectorNode(Node):
             self._moved_logged = moved
         stamp = self.get_clock().now().to_msg()
         source = self.get_fully_qualified_name().lstrip("/")  # e.g. rig1/wand_calib_collector
-        self.diagnostics.publish(messages.diagnostics_message(status, counts, rig_values, stamp, source, moved, notes))
+        self.diagnostics.publish(
+            messages.diagnostics_message(status, counts, rig_values, stamp, source, moved, notes, faults)
+        )
         for spec in self.rig.cameras:
             self.heat_maps[spec.name].publish(
                 messages.heat_map_message(cells[spec.name], spec.image_size, stamp, spec.name)
             )
+        faulty = [f"{name}: {'; '.join(lines)}" for name, lines in faults.items() if lines]
         if self._logged is None or self._logged[0] != status.ready or (not status.ready and now - self._logged[1] > 10):
-            if status.ready:
+            if status.ready and faulty:
+                frames = rig_values["frames_stored"]
+                self.get_logger().info(f"ready to calibrate ({frames} frames), but " + " | ".join(faulty))
+            elif status.ready:
                 self.get_logger().info(f"ready to calibrate ({rig_values['frames_stored']} frames): call /calibrate")
             else:
                 self.get_logger().info("still missing: " + " | ".join(status.messages()))

@@ -211,6 +211,7 @@ def diagnostics_message(
     source: str = "wand_calib_collector",
     moved: Mapping[str, str] | None = None,
     notes: Mapping[str, list[str]] | None = None,
+    faults: Mapping[str, list[str]] | None = None,
 ) -> DiagnosticArray:
     """/diagnostics: one OK/WARN entry per camera (what is missing) and one for the rig, named
     ``<source>: <camera>`` and ``<source>: rig`` (``source`` the collector's namespaced name, so an
@@ -224,6 +225,8 @@ def diagnostics_message(
         moved: cameras judged to have moved since the calibration, with their message (ERROR entries).
         notes: per camera warnings of what its detector sees (LEDs saturating, too dim): added to its message
             (WARN).
+        faults: per camera what is wrong with its stream now (silent, unusable images): first in its message
+            (WARN), and named in the rig's (WARN, even when the coverage is ready).
     """
     array = DiagnosticArray()
     array.header.stamp = stamp
@@ -231,7 +234,7 @@ def diagnostics_message(
         entry = DiagnosticStatus(name=f"{source}: {camera.name}", hardware_id=camera.name)
         entry.level = DiagnosticStatus.OK if camera.ok else DiagnosticStatus.WARN
         entry.message = "ready" if camera.ok else "; ".join(camera.missing)
-        said = (notes or {}).get(camera.name, [])
+        said = [*(faults or {}).get(camera.name, []), *(notes or {}).get(camera.name, [])]
         if said:
             entry.level = DiagnosticStatus.WARN
             entry.message = "; ".join([*([] if camera.ok else camera.missing), *said])
@@ -249,6 +252,9 @@ def diagnostics_message(
     rig = DiagnosticStatus(name=f"{source}: rig", hardware_id="rig")
     rig.level = DiagnosticStatus.OK if status.ready else DiagnosticStatus.WARN
     rig.message = "ready to calibrate" if status.ready else " | ".join(status.messages())
+    faulty = [f"{name}: {'; '.join(lines)}" for name, lines in (faults or {}).items() if lines]
+    if faulty:
+        rig.level, rig.message = DiagnosticStatus.WARN, " | ".join([*faulty, rig.message])
     rig.values = [KeyValue(key=key, value=str(value)) for key, value in rig_values.items()]
     array.status.append(rig)
     return array

@@ -1,0 +1,151 @@
+"""What goes wrong with a live rig's camera streams, said once per cause and shown while it lasts.
+
+A camera falls silent (unplugged, its driver stopped) while the others send; its images cannot be
+used (another size than the rig file's, an encoding the detector does not read, truncated data);
+its stamps jump (a restarted driver, a clock step, a bag played again: :mod:`segments`); images go
+missing between the camera and the node (gaps in its stamps). :class:`StreamFaults` keeps the
+evidence per camera: the node feeds it every arrival and every unusable image, asks it once a
+second what is wrong now (the cameras' diagnostics go to WARN with these lines) and logs the lines
+it hands back, each once per cause (and again once the cause went away and came back). Nothing
+here drops an image: a usable image between unusable ones is used.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+from wand_calib_ros.collection.segments import StampSegments
+
+#: A camera without an image for this long (s) while another camera sends is silent.
+SILENT_S = 2.0
+#: An unusable image is shown as the camera's fault for this long (s) after the last one.
+PROBLEM_HOLD_S = 5.0
+#: Dropped images are said once this many are missing (diagnostics count every one).
+DROPS_SAID = 10
+
+
+@dataclass(frozen=True)
+class Said:
+    """A line for the log: ``warning`` or ``info``."""
+
+    level: str
+    line: str
+
+
+def image_problem(reason: str, shape: tuple[int, ...] | None, encoding: str, size: tuple[int, int]) -> str | None:
+    """What is wrong with an image the detector refused (None: nothing a user must fix).
+
+    Args:
+        reason: the detector's reason (``wrong_size``, ``encoding``, ``bad_image``; others are no fault).
+        shape: the image's array shape, None when its data could not be read.
+        encoding: its encoding.
+        size: the camera's (width, height) in the rig file.
+    """
+    if reason == "wrong_size" and shape is not None and len(shape) >= 2:
+        return (
+            f"its images are {shape[1]}x{shape[0]}, the rig file says {size[0]}x{size[1]}: check its image_size "
+            "and image_topic (a scaled or cropped stream?)"
+        )
+    if reason == "encoding":
+        return (
+            f"its images are {encoding}, which the detector does not read (mono8, mono16, bgr8, rgb8, bgra8, "
+            "rgba8, bayer_*8): publish one of those"
+        )
+    if reason == "bad_image":
+        return f"an image ({encoding}) could not be read: its data are truncated or corrupt"
+    return None
+
+
+@dataclass
+class _Camera:
+    arrived_ns: int | None = None
+    silent_since_ns: int | None = None  # when it was said silent (its last arrival), until it sends again
+    problems: dict[str, tuple[int, str]] = field(default_factory=dict)  # reason -> (last arrival, text)
+    said: set[str] = field(default_factory=set)
+    drops_said: bool = False
+
+
+class StreamFaults:
+    """The rig's camera streams' faults (see the module docstring)."""
+
+    def __init__(self, cameras: tuple[str, ...], topics: Mapping[str, str]) -> None:
+        self.cameras = cameras
+        self.topics = dict(topics)
+        self.segments = StampSegments(cameras)
+        self._state = {name: _Camera() for name in cameras}
+
+    def arrived(self, camera: str, stamp_ns: int, arrival_ns: int) -> tuple[int, list[Said]]:
+        """An image (or detector points) of a camera arrived: its stamp continued across jumps
+        (:class:`~wand_calib_ros.collection.segments.StampSegments`), and what to say about it.
+
+        Args:
+            camera: the camera.
+            stamp_ns: its header stamp.
+            arrival_ns: when it arrived, on a steady clock.
+        """
+        state = self._state[camera]
+        said: list[Said] = []
+        if state.silent_since_ns is not None:
+            gone = (arrival_ns - state.silent_since_ns) / 1e9
+            said.append(Said("info", f"{camera}: images again after {gone:.1f} s without"))
+            state.silent_since_ns = None
+        continued, jump = self.segments.continuous(camera, stamp_ns, arrival_ns)
+        if jump is not None and (jump.kind != "unstamped" or "unstamped" not in state.said):
+            state.said.add(jump.kind)
+            said.append(Said("warning", jump.describe()))
+        state.arrived_ns = arrival_ns
+        return continued, said
+
+    def unusable(self, camera: str, reason: str, text: str | None, arrival_ns: int) -> list[Said]:
+        """An image of a camera the detector could not use, for ``reason`` (``text``: what is wrong, None: no
+        fault of the stream); what to say about it."""
+        if text is None:
+            return []
+        state = self._state[camera]
+        fresh = reason not in state.problems or arrival_ns - state.problems[reason][0] > PROBLEM_HOLD_S * 1e9
+        state.problems[reason] = (arrival_ns, text)
+        return [Said("warning", f"{camera}: {text}")] if fresh else []
+
+    def check(self, now_ns: int) -> tuple[dict[str, list[str]], list[Said]]:
+        """(per camera its faults now, what to say now): silence, unusable images, dropped images."""
+        faults: dict[str, list[str]] = {name: [] for name in self.cameras}
+        said: list[Said] = []
+        heard = [s.arrived_ns for s in self._state.values() if s.arrived_ns is not None]
+        newest = max(heard) if heard else None
+        others_send = newest is not None and now_ns - newest <= SILENT_S * 1e9
+        for name, state in self._state.items():
+            if others_send and (state.arrived_ns is None or now_ns - state.arrived_ns > SILENT_S * 1e9):
+                line = self._silence(name, state, now_ns)
+                faults[name].append(line)
+                if state.silent_since_ns is None:
+                    state.silent_since_ns = state.arrived_ns if state.arrived_ns is not None else now_ns
+                    said.append(Said("warning", f"{name}: {line}"))
+            state.problems = {
+                reason: (when, text)
+                for reason, (when, text) in state.problems.items()
+                if now_ns - when <= PROBLEM_HOLD_S * 1e9
+            }
+            faults[name] += [text for _, text in state.problems.values()]
+            dropped = self.segments.dropped(name)
+            if dropped >= DROPS_SAID and not state.drops_said:
+                state.drops_said = True
+                said.append(
+                    Said(
+                        "warning",
+                        f"{name}: {dropped} images missing in its stamps so far (lost between the camera and this "
+                        "node: check the bandwidth, the QoS depth and the CPU load)",
+                    )
+                )
+        return faults, said
+
+    def values(self, camera: str) -> dict[str, int]:
+        """Diagnostics counters of a camera's stream."""
+        return {"dropped": self.segments.dropped(camera), "stamp_segments": self.segments.segments(camera)}
+
+    def _silence(self, name: str, state: _Camera, now_ns: int) -> str:
+        if state.arrived_ns is None:
+            topic = self.topics.get(name, "its topic")
+            return f"no image on {topic} yet while the other cameras send (check its topic)"
+        gone = (now_ns - state.arrived_ns) / 1e9
+        return f"no image for {gone:.0f} s while the other cameras send (unplugged? its driver stopped?)"
