@@ -25,13 +25,17 @@ from wand_calib_ros.nodes.runner import EXIT_SETTINGS  # noqa: E402
 @pytest.mark.parametrize(
     ("node", "overrides", "message"),
     [
-        (CollectorNode, {}, "parameter cameras_file is required"),
+        (CollectorNode, {}, "wand_calib_collector's parameter cameras_file is required (in its section"),
         (CollectorNode, {"cameras_file": "missing.yaml"}, "no such file"),
-        (CollectorNode, {"sync_tolerance_ms": 5}, "sync_tolerance_ms must be a float (write 5.0, not 5)"),
+        (CollectorNode, {"sync_tolerance_ms": 5}, "sync_tolerance_ms must be a number with a decimal point (write 5.0"),
         (CollectorNode, {"buffer_capacity": 5}, "buffer_capacity must lie in [100"),
         (CollectorNode, {"input": "video"}, "input must be one of images, points"),
         (CollectorNode, {"min_image_fraction": 1.5}, "min_image_fraction must lie in [0.0, 1.0]"),
-        (CalibratorNode, {"commit_to_drivers": "yes"}, "commit_to_drivers must be a bool"),
+        (
+            CalibratorNode,
+            {"commit_to_drivers": "yes"},
+            "wand_calib_calibrator's parameter commit_to_drivers must be true",
+        ),
         (CalibratorNode, {"export_formats": "opencv, mat"}, "export_formats: unknown format(s) mat; known: opencv"),
         (DetectorNode, {}, "parameter camera is required"),
         (DetectorNode, {"camera": "cam7"}, "'cam7' is not in"),
@@ -93,7 +97,7 @@ def test_start_up_parameters_refuse_a_later_set_with_a_reason(ros: Ros, tmp_path
     calibrator = ros.add(CalibratorNode(context=ros.context, parameter_overrides=overrides))
     for node, name, value in ((collector, "input", "bogus"), (calibrator, "commit_to_drivers", True)):
         result = node.set_parameters([Parameter(name, value=value)])[0]
-        assert not result.successful and "read-only" in result.reason
+        assert not result.successful and "read-only" in result.reason and "restart the node" in result.reason
     assert collector.get_parameter("input").value == "images"
     assert calibrator.drivers == {}  # not committing: no set_camera_info clients to list
     assert not any("set_camera_info" in name for name, _ in ros.helper.get_service_names_and_types())
@@ -135,3 +139,40 @@ def test_a_relative_rig_path_is_also_looked_up_in_the_installed_share_folder(
     assert existing_file({"cameras_file": "config/rig.yaml"}, "cameras_file") == Path("config/rig.yaml")
     with pytest.raises(SettingsError, match=r"no such file config/none.yaml \(nor in .*share/wand_calib_ros\)"):
         existing_file({"cameras_file": "config/none.yaml"}, "cameras_file")
+
+
+def test_an_in_process_calibrator_takes_the_collectors_settings_and_folder(
+    ros: Ros, tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    # A params file with a section for the collector only; or a calibrator section naming another output_dir.
+    save_rig(paper_fisheye_scenario().rig, tmp_path / "cameras.yaml")
+    collector_values = {"cameras_file": str(tmp_path / "cameras.yaml"), "output_dir": str(tmp_path / "rig")}
+    alone = ros.add(CalibratorNode(context=ros.context, collector_values=collector_values))
+    assert alone.output_dir == tmp_path / "rig" and alone.rig.camera_names == ("cam0", "cam1")
+    other = Parameter("output_dir", value=str(tmp_path / "elsewhere"))
+    node = CalibratorNode(context=ros.context, collector_values=collector_values, parameter_overrides=[other])
+    ros.add(node)
+    assert node.output_dir == tmp_path / "rig"
+    assert (
+        f"output_dir {tmp_path / 'elsewhere'} of wand_calib_calibrator is not its collector's" in capfd.readouterr().err
+    )
+
+
+def test_a_second_collector_on_the_same_folder_refuses(ros: Ros, tmp_path: Path) -> None:
+    from wand_calib_ros.collection.errors import CollectionError
+
+    save_rig(paper_fisheye_scenario().rig, tmp_path / "cameras.yaml")
+    overrides = [
+        Parameter("cameras_file", value=str(tmp_path / "cameras.yaml")),
+        Parameter("output_dir", value=str(tmp_path / "out")),
+        Parameter("with_calibrator", value=False),
+        Parameter("running_estimate", value=False),
+    ]
+    first = ros.add(CollectorNode(context=ros.context, parameter_overrides=overrides))
+    with pytest.raises(
+        CollectionError, match=r"output_dir .*out is being written by another collector \(process \d+\)"
+    ):
+        CollectorNode(context=ros.context, parameter_overrides=overrides)
+    first.close()  # its folder is free again
+    again = CollectorNode(context=ros.context, parameter_overrides=overrides)
+    again.close()

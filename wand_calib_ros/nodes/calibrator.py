@@ -125,6 +125,7 @@ class CalibratorNode(Node):
         *,
         before_calibrate: Callable[[], None] | None = None,
         after_calibrate: Callable[[CalibrationResult], None] | None = None,
+        collector_values: dict[str, Any] | None = None,
         **kwargs: Any,
     ) -> None:
         """
@@ -133,10 +134,19 @@ class CalibratorNode(Node):
                 stores what it still holds).
             after_calibrate: called with each successful result (the in-process collector shows
                 its time offsets on /diagnostics).
+            collector_values: the in-process collector's parameters: what this node's own section leaves
+                at its defaults comes from them, and its ``output_dir`` is always the collector's (so that
+                /calibrate reads what this rig's collector writes).
             **kwargs: passed to :class:`rclpy.node.Node` (context, parameter_overrides, ...).
         """
         super().__init__("wand_calib_calibrator", **kwargs)
-        values = declare(self, PARAMS)
+        values = declare(self, PARAMS, collector_values)
+        if collector_values is not None and values["output_dir"] != collector_values["output_dir"]:
+            self.get_logger().warning(
+                f"output_dir {values['output_dir']} of {self.get_name()} is not its collector's: /calibrate reads "
+                f"and writes the collector's {collector_values['output_dir']}"
+            )
+            values["output_dir"] = collector_values["output_dir"]
         cameras_file = existing_file(values, "cameras_file")
         self.rig = load_rig(cameras_file)
         self.endpoints = load_camera_endpoints(cameras_file)

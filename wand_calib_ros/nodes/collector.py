@@ -56,6 +56,7 @@ from wand_calib_ros.collection.buffer import BUFFER_FILE, ObservationBuffer
 from wand_calib_ros.collection.coverage import CoverageTracker
 from wand_calib_ros.collection.estimate import MAX_PLACEMENTS, Estimate, RunningEstimate, converged
 from wand_calib_ros.collection.floor import FLOOR_FILE, FloorWindow, append_floor_frame
+from wand_calib_ros.collection.lock import CollectionLock
 from wand_calib_ros.collection.recovery import backup_path
 from wand_calib_ros.collection.stream_faults import Said, StreamFaults, image_problem
 from wand_calib_ros.collection.sync import FrameSynchroniser, SyncedFrame
@@ -158,12 +159,15 @@ class CollectorNode(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("wand_calib_collector", **kwargs)
         values = declare(self, PARAMS)
+        self.values = values  #: its parameters (an in-process calibrator falls back to them)
         cameras_file = existing_file(values, "cameras_file")
         self.rig = load_rig(cameras_file)
         self.endpoints = load_camera_endpoints(cameras_file)
         self.with_calibrator = bool(values["with_calibrator"])
+        output_dir = Path(values["output_dir"]).expanduser()
+        self.hold = CollectionLock(output_dir)  # one writer per folder
         self.buffer = ObservationBuffer.open(
-            Path(values["output_dir"]).expanduser() / BUFFER_FILE,
+            output_dir / BUFFER_FILE,
             self.rig,
             capacity=values["buffer_capacity"],
             min_motion_px=values["min_motion_px"],
@@ -375,6 +379,7 @@ class CollectorNode(Node):
                 self.watch.close()
         if self.estimates is not None:
             self.estimates.close()
+        self.hold.release()
 
     def after_calibrate(self, result: CalibrationResult) -> None:
         """Keep a calibration's result: /diagnostics then shows its time offsets, and the frames that
@@ -614,6 +619,7 @@ def build(context: Context, args: Sequence[str] = ()) -> list[Node]:
         context=context,
         before_calibrate=collector.flush,
         after_calibrate=collector.after_calibrate,
+        collector_values=collector.values,
         cli_args=second_node_arguments(args),
         use_global_arguments=False,
     )

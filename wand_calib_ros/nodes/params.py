@@ -8,14 +8,16 @@ names the parameter and what to write instead.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+import functools
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType, SetParametersResult
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.node import Node
+from rclpy.parameter import Parameter as RclpyParameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 
 from wand_calib_ros.collection.coverage import CoverageThresholds
@@ -30,7 +32,19 @@ _TYPES = {
 
 
 class SettingsError(WandCalibError):
-    """A node parameter that cannot be used; the message names it."""
+    """A node parameter that cannot be used; the message names it and the node (its params-file section).
+
+    Attributes:
+        node: the node's name (its log lines are its own).
+    """
+
+    def __init__(self, message: str, node: str = "") -> None:
+        super().__init__(message)
+        self.node = node
+
+
+#: A parameter's type as a sentence says it.
+_KINDS = {bool: "true or false", int: "an integer", float: "a number with a decimal point", str: "a string"}
 
 
 @dataclass(frozen=True)
@@ -59,7 +73,6 @@ class Param:
         descriptor = ParameterDescriptor(
             description=self.description,
             type=_TYPES[type(self.default)],
-            read_only=True,  # read once at start-up: `ros2 param set` is refused with this reason
         )
         if isinstance(self.default, float) and self.low is not None and self.high is not None:
             descriptor.floating_point_range = [FloatingPointRange(from_value=self.low, to_value=self.high, step=0.0)]
@@ -72,30 +85,63 @@ class Param:
         return descriptor
 
 
-def declare(node: Node, params: Iterable[Param]) -> dict[str, Any]:
-    """Declare ``params`` on ``node`` and return their validated values by name.
+def declare(node: Node, params: Iterable[Param], fallback: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """Declare ``params`` on ``node`` and return their validated values by name. They are read once, at
+    start-up: a later ``ros2 param set`` is refused with the reason (a restart applies a new value).
+
+    Args:
+        node: the node.
+        params: its parameters.
+        fallback: values for the parameters its own settings leave at their defaults (an in-process
+            calibrator takes the collector's ``cameras_file``, ``output_dir``, ...).
 
     Raises:
-        SettingsError: naming the first unusable parameter and what it accepts.
+        SettingsError: naming the node, the first unusable parameter and what it accepts.
     """
     values: dict[str, Any] = {}
-    for param in params:
-        kind = type(param.default).__name__
+    where = f"{node.get_name()}'s parameter"
+    declared = list(params)
+    for param in declared:
         try:
             value = node.declare_parameter(param.name, param.default, param.descriptor()).value
         except InvalidParameterTypeException:
             hint = " (write 5.0, not 5)" if isinstance(param.default, float) else ""
-            raise SettingsError(f"parameter {param.name} must be a {kind}{hint}: {param.description}") from None
+            kind = _KINDS[type(param.default)]
+            raise SettingsError(
+                f"{where} {param.name} must be {kind}{hint}: {param.description}", node.get_name()
+            ) from None
         except InvalidParameterValueException:
             raise SettingsError(
-                f"parameter {param.name} must lie in [{param.low}, {param.high}]: {param.description}"
+                f"{where} {param.name} must lie in [{param.low}, {param.high}]: {param.description}", node.get_name()
             ) from None
+        if fallback is not None and param.name in fallback and value == param.default:
+            value = fallback[param.name]
         if param.choices and value not in param.choices:
-            raise SettingsError(f"parameter {param.name} must be one of {', '.join(param.choices)}, got {value!r}")
+            raise SettingsError(
+                f"{where} {param.name} must be one of {', '.join(param.choices)}, got {value!r}", node.get_name()
+            )
         if param.required and value == "":
-            raise SettingsError(f"parameter {param.name} is required: {param.description}")
+            raise SettingsError(
+                f"{where} {param.name} is required (in its section {node.get_name()}: of the params file, or "
+                f"-p {param.name}:=...): {param.description}",
+                node.get_name(),
+            )
         values[param.name] = value
+    names = {param.name for param in declared}
+    node.add_on_set_parameters_callback(functools.partial(_read_at_start, names))
     return values
+
+
+def _read_at_start(names: set[str], parameters: list[RclpyParameter]) -> SetParametersResult:
+    """Refuse a change of a start-up parameter, saying what applies one."""
+    changed = [p.name for p in parameters if p.name in names]
+    if not changed:
+        return SetParametersResult(successful=True)
+    return SetParametersResult(
+        successful=False,
+        reason=f"{', '.join(changed)} is read-only: read at start-up; restart the node with the new value "
+        "(-p NAME:=VALUE or its params file) to apply it",
+    )
 
 
 def package_share() -> Path | None:

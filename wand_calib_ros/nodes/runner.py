@@ -271,8 +271,8 @@ def run(
             rclpy.logging.get_logger(name).warning(line)
         while context.ok() and not stopped.wait(0.2):
             pass
-    except WandCalibError as error:
-        rclpy.logging.get_logger(name).fatal(str(error))
+    except WandCalibError as error:  # (in the log of the node it concerns, when it names one)
+        rclpy.logging.get_logger(getattr(error, "node", "") or name).fatal(str(error))
         code = EXIT_SETTINGS
     except KeyboardInterrupt:  # Ctrl-C (also while the nodes were being built): a clean stop
         code = 0
