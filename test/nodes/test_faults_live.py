@@ -265,3 +265,44 @@ def test_images_it_cannot_use_are_said_and_the_good_ones_between_are_kept(
     good = [stamp for k, (camera, stamp, _) in enumerate(recording.frames) if camera == "cam1"]
     usable = [s for k, s in enumerate(good) if not (k % 3 == 1 and 30 <= k < 60)]
     assert len([s for s in usable if round(s / 1e9, 6) in kept]) >= len(usable) - 6  # the first: still, unseen
+
+
+def test_a_calibration_whose_take_was_reset_meanwhile_is_set_aside(ros: Ros, tmp_path: Path) -> None:
+    scenario = paper_fisheye_scenario()
+    uv = simulate(scenario, 0.5, np.random.default_rng(13), n=200).observations.uv
+    collector = _collector(ros, tmp_path, scenario.rig)
+    _play(ros, collector, uv, _steady)
+    calibrated: list[Any] = []
+    reset = ros.helper.create_client(Trigger, "reset")
+    asked: list[int] = []
+
+    def take_then_reset() -> int:  # a /reset arrives while the solve runs (before its end is checked)
+        if asked:
+            assert reset.call(Trigger.Request(), timeout_sec=10).success
+        asked.append(collector.take)
+        return asked[-1]
+
+    overrides = [
+        Parameter("cameras_file", value=str(tmp_path / "cameras.yaml")),
+        Parameter("output_dir", value=str(tmp_path / "out")),
+        Parameter("require_coverage", value=False),
+        Parameter("time_offsets", value="fixed"),
+    ]
+    ros.add(
+        CalibratorNode(
+            context=ros.context,
+            parameter_overrides=overrides,
+            before_calibrate=collector.flush,
+            after_calibrate=calibrated.append,
+            take=take_then_reset,
+        )
+    )
+    client = ros.helper.create_client(Trigger, "calibrate")
+    assert client.wait_for_service(timeout_sec=5) and reset.wait_for_service(timeout_sec=5)
+    response = client.call(Trigger.Request(), timeout_sec=120)
+    assert response is not None and not response.success
+    assert "/reset cleared the take this calibration was solving" in response.message
+    out = tmp_path / "out"
+    assert not (out / "result.yaml").exists() and not (out / "camera_info").exists() and calibrated == []
+    aside = [p for p in out.iterdir() if p.name.startswith("reset.") and p.is_dir()]
+    assert len(aside) == 1 and (aside[0] / "result.yaml").exists() and (aside[0] / "camera_info" / "cam0.yaml").exists()

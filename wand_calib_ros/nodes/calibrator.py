@@ -28,6 +28,7 @@ calibrator``) on the buffer file of a collector that runs elsewhere or has stopp
 
 from __future__ import annotations
 
+import os
 import sys
 import threading
 import time
@@ -54,6 +55,7 @@ from visualization_msgs.msg import MarkerArray
 from wand_calib_ros.collection.buffer import BUFFER_FILE, has_rows
 from wand_calib_ros.collection.floor import FLOOR_FILE, read_floor_frames
 from wand_calib_ros.collection.job import CalibrationFiles, refine_calibration, run_calibration, summary
+from wand_calib_ros.collection.recovery import backup_path
 from wand_calib_ros.core.adjust.timing import TIMING_MODES
 from wand_calib_ros.core.after.rig_scene import rig_scene
 from wand_calib_ros.core.model.result import CalibrationResult
@@ -126,6 +128,7 @@ class CalibratorNode(Node):
         before_calibrate: Callable[[], None] | None = None,
         after_calibrate: Callable[[CalibrationResult], None] | None = None,
         collector_values: dict[str, Any] | None = None,
+        take: Callable[[], int] | None = None,
         **kwargs: Any,
     ) -> None:
         """
@@ -137,6 +140,8 @@ class CalibratorNode(Node):
             collector_values: the in-process collector's parameters: what this node's own section leaves
                 at its defaults comes from them, and its ``output_dir`` is always the collector's (so that
                 /calibrate reads what this rig's collector writes).
+            take: the in-process collector's take (counted up by each /reset): a calibration of a take that a
+                /reset cleared while it solved is neither published nor kept as the new take's.
             **kwargs: passed to :class:`rclpy.node.Node` (context, parameter_overrides, ...).
         """
         super().__init__("wand_calib_calibrator", **kwargs)
@@ -164,6 +169,7 @@ class CalibratorNode(Node):
         )
         self.before_calibrate = before_calibrate
         self.after_calibrate = after_calibrate
+        self.take = take
         self._running = threading.Lock()
         self._stopping = threading.Event()
         self._worker: threading.Thread | None = None
@@ -282,6 +288,7 @@ class CalibratorNode(Node):
     def _calibrate(self) -> tuple[bool, str]:
         if self.before_calibrate is not None:
             self.before_calibrate()
+        take = self.take() if self.take is not None else None
         path = self.output_dir / BUFFER_FILE
         if not path.exists() or not has_rows(path):
             return False, f"nothing collected yet in {path}: is the collector running and the wand in view?"
@@ -300,8 +307,26 @@ class CalibratorNode(Node):
             )
         except WandCalibError as error:
             return False, f"calibration failed: {error}"
+        if self.take is not None and self.take() != take:  # a /reset cleared its take meanwhile
+            kept = self._set_aside(files)
+            return False, (
+                f"/reset cleared the take this calibration was solving: its result is not published nor kept "
+                f"as the new take's (its files are in {kept}); wave the wand and /calibrate again"
+            )
         self.result, self._calibrated_through = result, int(observations.frames.max())
         return self._publish(result, files, observations.uv, "calibrated", ())
+
+    def _set_aside(self, files: CalibrationFiles) -> Path:
+        """Move a calibration's files (result, camera_info, report, exports) out of ``output_dir`` into a new
+        ``output_dir/reset-<time>/``; returns it."""
+        folder = backup_path(self.output_dir / "reset", "take")
+        folder.unlink()  # (a free name: the files go into a folder of that name)
+        folder.mkdir()
+        written = [files.result, *files.camera_info, *([] if files.report is None else [files.report]), *files.exports]
+        tops = {p.relative_to(self.output_dir).parts[0] for p in written if p.is_relative_to(self.output_dir)}
+        for name in sorted(tops):
+            os.replace(self.output_dir / name, folder / name)
+        return folder
 
     def _read_buffer(self, path: Path) -> WandObservations:
         """The collector's buffer file as the rig's observations (FormatError naming the file and row)."""

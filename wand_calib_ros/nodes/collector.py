@@ -201,6 +201,7 @@ class CollectorNode(Node):
         #: the in-process calibrator's, for auto_calibrate: (source, when done(success, answer)) -> started
         self.calibrate_now: Callable[[str, Callable[[bool, str], None]], bool] | None = None
         self.calibrated = False  # a final calibration since the start or the last /reset: estimates stop
+        self.take = 0  #: counted up by each /reset (a calibration of a cleared take is not this one's)
         self._auto_state: str | None = None  # auto_calibrate: None (not started), calibrating, failed ...
         self._auto_round: Estimate | None = None  # the round that started it
         self._moved_logged: dict[str, str] = {}
@@ -595,6 +596,7 @@ class CollectorNode(Node):
                 if kept.exists():
                     os.replace(kept, backup_path(kept, "bak"))
             self.floor.lays = 0
+            self.take += 1
             self.coverage = CoverageTracker(self.rig, self.coverage.thresholds)
             self.calibrated, self._auto_state = False, None
         if self.estimates is not None:  # the next round starts cold on the new buffer
@@ -620,6 +622,7 @@ def build(context: Context, args: Sequence[str] = ()) -> list[Node]:
         before_calibrate=collector.flush,
         after_calibrate=collector.after_calibrate,
         collector_values=collector.values,
+        take=lambda: collector.take,
         cli_args=second_node_arguments(args),
         use_global_arguments=False,
     )
