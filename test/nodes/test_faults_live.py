@@ -116,7 +116,9 @@ def test_stamps_that_jump_start_a_segment_and_lose_nothing(
     uv = simulate(scenario, 0.5, np.random.default_rng(7), n=240).observations.uv
     collector = _collector(ros, tmp_path, scenario.rig)
     stamps, said = FAULTS[fault]
-    _play(ros, collector, uv, stamps)
+    if fault == "unstamped":  # stamped by their arrival: sent at the camera's own pace
+        uv = uv[:90]
+    _play(ros, collector, uv, stamps, pace_s=PERIOD / 1e9 if fault == "unstamped" else 0.002)
     complete = int(np.all(np.isfinite(uv), axis=(2, 3)).all(axis=1).sum())
     stored = collector.buffer.observations()
     assert int(stored.complete.all(axis=1).sum()) == complete  # every frame all cameras saw, whole
@@ -306,3 +308,48 @@ def test_a_calibration_whose_take_was_reset_meanwhile_is_set_aside(ros: Ros, tmp
     assert not (out / "result.yaml").exists() and not (out / "camera_info").exists() and calibrated == []
     aside = [p for p in out.iterdir() if p.name.startswith("reset.") and p.is_dir()]
     assert len(aside) == 1 and (aside[0] / "result.yaml").exists() and (aside[0] / "camera_info" / "cam0.yaml").exists()
+
+
+def test_two_rigs_in_their_own_namespaces_store_their_own_views(ros: Ros, tmp_path: Path) -> None:
+    scenario = paper_fisheye_scenario()
+    save_rig(scenario.rig, tmp_path / "cameras.yaml")
+    collectors = {}
+    for rig in ("rigA", "rigB"):
+        values = {
+            "cameras_file": str(tmp_path / "cameras.yaml"),
+            "output_dir": str(tmp_path / rig),
+            "input": "points",
+            "with_calibrator": False,
+            "running_estimate": False,
+            "min_motion_px": 0.0,
+        }
+        node = CollectorNode(
+            context=ros.context,
+            namespace=f"/{rig}",
+            parameter_overrides=[Parameter(k, value=v) for k, v in values.items()],
+        )
+        collectors[rig] = ros.add(node)
+    uv = {
+        rig: simulate(scenario, 0.5, np.random.default_rng(seed), n=60).observations.uv
+        for seed, rig in enumerate(collectors)
+    }
+    publishers = {
+        (rig, n): ros.helper.create_publisher(PolygonStamped, f"/{rig}/{n}/wand_points", POINTS_QOS)
+        for rig in collectors
+        for n in scenario.rig.camera_names
+    }
+    assert wait_until(lambda: all(p.get_subscription_count() == 1 for p in publishers.values()), 10)
+    for k in range(60):
+        for rig in collectors:
+            for c, name in enumerate(scenario.rig.camera_names):
+                points = uv[rig][k, c] if np.all(np.isfinite(uv[rig][k, c])) else None
+                header = Header(stamp=time_message(_steady(k, c)), frame_id=name)
+                publishers[(rig, name)].publish(points_message(points, header))
+        time.sleep(0.002)
+    for rig, collector in collectors.items():
+        assert wait_until(lambda c=collector: sum(c.received.values()) == 60 * 2, 10)
+        collector.flush()
+        stored = collector.buffer.observations()
+        seen = np.all(np.isfinite(uv[rig]), axis=(2, 3))
+        ours = uv[rig][seen.all(axis=1)]
+        assert np.allclose(stored.uv[stored.complete.all(axis=1)], ours, atol=1e-3)  # its own only (float32 points)

@@ -229,6 +229,22 @@ def read_image_frames(path: Path, topics: dict[str, str]) -> Iterator[ImageFrame
         yield ImageFrame(camera, stamp_ns, image, encoding)
 
 
+def absolute_topic(topic: str, available: dict[str, str]) -> str:
+    """A rig file's topic as a bag names it: an absolute name as it is; a relative one (``cam0/image_raw``,
+    resolved in the recording node's namespace) in the root namespace, or the one namespace the bag
+    recorded it in (``/rigA/cam0/image_raw``)."""
+    if topic.startswith("/"):
+        return topic
+    rooted = "/" + topic
+    if rooted in available or rooted + COMPRESSED_SUFFIX in available:
+        return rooted
+    for suffix in ("", COMPRESSED_SUFFIX):
+        found = sorted(t[: len(t) - len(suffix)] for t in available if t.endswith(rooted + suffix))
+        if len(found) == 1:
+            return found[0]
+    return rooted
+
+
 def choose_topics(available: dict[str, str], wanted: dict[str, str], transport: str) -> dict[str, str]:
     """Per camera the topic to read: its raw image topic, or image_transport's ``<topic>/compressed``.
 
@@ -239,6 +255,7 @@ def choose_topics(available: dict[str, str], wanted: dict[str, str], transport: 
     """
     chosen = {}
     for camera, topic in wanted.items():
+        topic = absolute_topic(topic, available)
         compressed = topic + COMPRESSED_SUFFIX
         if transport == "compressed" or (transport == "auto" and topic not in available and compressed in available):
             chosen[camera] = compressed

@@ -334,8 +334,14 @@ class CameraEndpoints:
 
 
 def _ros_name(path: Path, where: str, value: Any) -> str:
-    if not isinstance(value, str) or not value.startswith("/") or value.endswith("/") or " " in value:
-        raise FormatError(path, f"{where} must be an absolute ROS name such as /cam0/image_raw, got {value!r}")
+    """A topic or service name: absolute (``/cam0/image_raw``) or relative to the node's namespace
+    (``cam0/image_raw``)."""
+    bad = not isinstance(value, str) or not value or value.endswith("/") or "//" in value
+    if bad or any(c.isspace() for c in value) or value.startswith("~"):
+        raise FormatError(
+            path, f"{where} must be a ROS name such as cam0/image_raw (in the node's namespace) or /cam0/image_raw, "
+            f"got {value!r}"
+        )  # fmt: skip
     return value
 
 
@@ -354,13 +360,14 @@ def load_camera_endpoints(path: str | Path) -> dict[str, CameraEndpoints]:
     endpoints = {}
     for name in rig.camera_names:
         item = items[name]
-        image = _ros_name(path, f"camera '{name}' image_topic", item.get("image_topic", f"/{name}/image_raw"))
-        namespace = image.rsplit("/", 1)[0]
+        # (relative defaults: a node started in a namespace, __ns:=/rigA, listens to /rigA/cam0/image_raw)
+        image = _ros_name(path, f"camera '{name}' image_topic", item.get("image_topic", f"{name}/image_raw"))
+        beside = image.rsplit("/", 1)[0] + "/" if "/" in image.lstrip("/") else ("/" if image.startswith("/") else "")
         endpoints[name] = CameraEndpoints(
             image,
-            _ros_name(path, f"camera '{name}' points_topic", item.get("points_topic", f"{namespace}/wand_points")),
+            _ros_name(path, f"camera '{name}' points_topic", item.get("points_topic", f"{beside}wand_points")),
             _ros_name(
-                path, f"camera '{name}' set_camera_info", item.get("set_camera_info", f"{namespace}/set_camera_info")
+                path, f"camera '{name}' set_camera_info", item.get("set_camera_info", f"{beside}set_camera_info")
             ),
             _frame_id(path, name, item.get("frame_id", name)),
         )

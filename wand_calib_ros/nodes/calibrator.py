@@ -394,7 +394,7 @@ class CalibratorNode(Node):
         failures = []
         for name, client in self.drivers.items():
             if not client.wait_for_service(timeout_sec=self.driver_timeout):
-                failures.append(f"{name}: no service {client.srv_name}")
+                failures.append(f"{name}: no service {self.resolve_service_name(client.srv_name)}")
                 continue
             info = messages.camera_info_message(result, name, stamp, self.frame_ids[name])
             request = SetCameraInfo.Request(camera_info=info)
@@ -404,7 +404,7 @@ class CalibratorNode(Node):
             future.add_done_callback(lambda _, d=done: d.set())
             if not done.wait(self.driver_timeout):
                 future.cancel()
-                failures.append(f"{name}: {self.drivers[name].srv_name} did not answer")
+                failures.append(f"{name}: {self.resolve_service_name(self.drivers[name].srv_name)} did not answer")
             elif not future.result().success:
                 failures.append(f"{name}: {future.result().status_message}")
         return failures
