@@ -460,3 +460,22 @@ def test_a_library_write_that_fails_names_the_commands_output(
     argv = ["report", "--result", "r.yaml", "--cameras", "c.yaml", "--observations", "o.csv", "--out", str(out)]
     assert main(argv) == 2
     assert capsys.readouterr().err.strip() == f"wand-calib: error: cannot write {out}: No space left on device"
+
+
+def test_a_distortion_free_plumb_bob_start_says_its_principal_point_is_weak(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    # cam1 given a plumb_bob start without distortion (fixed: false): its tangential terms trade against the
+    # principal point, which these views fix to several px only. The result says so, with a std that holds.
+    rig = tmp_path / "rig"
+    assert main(["-q", "simulate", "conventional", "--plumb-bob", "--seed", "2", "--out", str(rig)]) == 0
+    truth = yaml.safe_load((rig / "truth.yaml").read_text())["cameras"]["cam1"]
+    document = yaml.safe_load((rig / "cameras.yaml").read_text())
+    start = {"K": truth["opencv"]["camera_matrix"], "D": [0.0] * 5, "distortion_model": "plumb_bob", "fixed": False}
+    document["cameras"][1]["intrinsics"] = start
+    (rig / "start.yaml").write_text(yaml.safe_dump(document))
+    argv = ["-q", "calibrate", "--cameras", str(rig / "start.yaml"), "--observations", str(rig / "observations.csv")]
+    assert main([*argv, "--output", str(tmp_path / "result.yaml")]) == 0
+    assert "warning: cam1: its principal point is uncertain by +-" in capsys.readouterr().out
+    camera = yaml.safe_load((tmp_path / "result.yaml").read_text())["cameras"]["cam1"]
+    error = np.subtract(camera["principal_point"], truth["principal_point"])
+    std = np.array([camera["std"]["u0"], camera["std"]["v0"]])
+    assert np.all(np.abs(error) < 3 * std) and np.hypot(*std) > 5.0

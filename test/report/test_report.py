@@ -141,3 +141,28 @@ def test_report_of_a_live_session_shows_its_running_estimate_and_events(tmp_path
     assert "<h2>running estimate</h2>" in page and "Session events" in page
     assert "cam1 moved: residual 1.8 px, was 1.0" in page
     assert "<h2>Quality: " in page
+
+
+def test_each_camera_is_reported_in_its_own_model_with_plain_metric_names(tmp_path: Path) -> None:
+    import yaml
+
+    rig = tmp_path / "rig"
+    assert main(["-q", "simulate", "mixed", "--plumb-bob", "--seed", "1", "--out", str(rig)]) == 0
+    document = yaml.safe_load((rig / "cameras.yaml").read_text())
+    document["cameras"][1]["camera_model"] = "plumb_bob"  # the conventional camera, in OpenCV's pinhole model
+    (rig / "cameras.yaml").write_text(yaml.safe_dump(document))
+    argv = ["-q", "calibrate", "--cameras", str(rig / "cameras.yaml"), "--observations", str(rig / "observations.csv")]
+    assert main([*argv, "--output", str(tmp_path / "result.yaml")]) == 0
+    report = ["-q", "report", "--result", str(tmp_path / "result.yaml"), "--cameras", str(rig / "cameras.yaml")]
+    assert main([*report, "--observations", str(rig / "observations.csv"), "--out", str(tmp_path / "r")]) == 0
+    page = (tmp_path / "r" / "index.html").read_text()
+    result = yaml.safe_load((tmp_path / "result.yaml").read_text())["cameras"]
+    models = {name: camera["opencv"]["distortion_model"] for name, camera in result.items()}
+    assert sorted(models.values()) == ["equidistant", "plumb_bob"]
+    pinhole = next(name for name, model in models.items() if model == "plumb_bob")
+    fisheye = next(name for name, model in models.items() if model == "equidistant")
+    p1 = result[pinhole]["opencv"]["distortion"][2]
+    assert f"p1 {p1:.4g}" in page and "<th>fx (px)</th>" in page and "<th>k1 (mm)</th>" not in page
+    assert f"{fisheye}: exactly OpenCV fisheye (cv2.fisheye) / ROS equidistant" in page
+    assert f"{pinhole}: exactly OpenCV pinhole (cv2.projectPoints, 5 coefficients) / ROS plumb_bob" in page
+    assert "free_parameters" not in page and "parameters estimated (cameras and wand placements)" in page

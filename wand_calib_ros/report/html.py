@@ -12,6 +12,7 @@ import cv2
 import matplotlib.pyplot as plt
 import numpy as np
 
+from wand_calib_ros.core.model.camera_model import EQUIDISTANT, PLUMB_BOB, RATIONAL_POLYNOMIAL, to_opencv
 from wand_calib_ros.core.model.rig import RigSpec, WandObservations
 from wand_calib_ros.io.detection_summary import REASON_TEXT, read_summary, summary_path
 from wand_calib_ros.io.errors import OutputError
@@ -52,32 +53,81 @@ img { max-width: 100%; }
 """
 
 
-#: Parameter table columns: result key, header (unit), factor from the result's unit.
-_COLUMNS = (
-    *((f"k{i}", f"k{i} (mm)", 1.0) for i in range(1, 6)),
-    ("u0", "u0 (px)", 1.0),
-    ("v0", "v0 (px)", 1.0),
+#: OpenCV's names of each model's distortion coefficients D (ROS camera_info).
+_DISTORTION_NAMES = {
+    EQUIDISTANT: ("k1", "k2", "k3", "k4"),
+    PLUMB_BOB: ("k1", "k2", "p1", "p2", "k3"),
+    RATIONAL_POLYNOMIAL: ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"),
+}
+#: What OpenCV and ROS call each model.
+_MODEL_TEXT = {
+    EQUIDISTANT: "OpenCV fisheye (cv2.fisheye) / ROS equidistant",
+    PLUMB_BOB: "OpenCV pinhole (cv2.projectPoints, 5 coefficients) / ROS plumb_bob",
+    RATIONAL_POLYNOMIAL: "OpenCV pinhole (cv2.projectPoints, 8 coefficients) / ROS rational_polynomial",
+}
+#: Pose columns: result key, header (unit), factor from the result's unit.
+_POSE_COLUMNS = (
     *((f"r{a}", f"r{a} (deg)", float(np.degrees(1.0))) for a in "xyz"),
     *((f"t{a}", f"t{a} (mm)", 1.0) for a in "xyz"),
 )
+#: The result's metrics in plain words: key -> (label, unit).
+_METRIC_TEXT = {
+    "wand_length_rms_mm": ("wand length error, RMS", "mm"),
+    "wand_length_mean_mm": ("wand length, mean", "mm"),
+    "wand_length_std_mm": ("wand length, standard deviation", "mm"),
+    "sigma_px": ("pixel noise estimated from the residuals", "px"),
+    "residuals": ("image coordinates fitted", ""),
+    "free_parameters": ("parameters estimated (cameras and wand placements)", ""),
+    "placements_used": ("wand placements used", ""),
+    "placements_rejected": ("wand placements rejected as outliers", ""),
+    "iterations": ("solver iterations", ""),
+}
+
+
+def _with_std(value: float, std: float | None, digits: str = ".5g") -> str:
+    return f"{value:{digits}}" + ("" if std is None else f" &plusmn; {std:.3g}")
 
 
 def _parameter_table(data: ReportData) -> str:
-    """Per camera every parameter with its standard deviation; rotations as rotation vectors in degrees
-    (the camera's rotation from the reference camera's frame), RMS per image coordinate of the points
-    the calibration used (the histograms show the 2D norm)."""
-    heads = ("camera", *(h for _, h, _ in _COLUMNS), "RMS per coordinate (px)", "views", "rejected views")
+    """Per camera its parameters in its own model as OpenCV and ROS name them (fx, fy, cx, cy and D), with
+    standard deviations; rotations as rotation vectors in degrees (the camera's rotation from the reference
+    camera's frame); RMS per image coordinate of the points the calibration used (the histograms show the
+    2D norm)."""
+    heads = (
+        "camera",
+        "model",
+        "fx (px)",
+        "fy (px)",
+        "cx (px)",
+        "cy (px)",
+        "distortion D",
+        *(h for _, h, _ in _POSE_COLUMNS),
+        "RMS per coordinate (px)",
+        "views",
+        "rejected views",
+    )
     head = "".join(f"<th>{h}</th>" for h in heads)
     rows = []
     for name, model, pose in zip(data.names, data.models, data.poses, strict=True):
         entry = data.document["cameras"][name]
         std = entry.get("std", {})
-        values = [*model.k, *model.principal_point, *pose.rotvec, *pose.translation]
-        cells = []
-        for (key, _, factor), value in zip(_COLUMNS, values, strict=True):
-            fixed = " (fixed)" if key.startswith("k") or entry.get("intrinsics") == "given" else ""
-            sigma = f" &plusmn; {factor * std[key]:.3g}" if key in std else fixed
-            cells.append(f"<td>{factor * value:.5g}{sigma}</td>")
+        opencv = to_opencv(model)
+        fx, fy = (float(v) for v in model.focal_px)
+        focal_std = [None if "k1" not in std else float(std["k1"] * m) for m in model.m]
+        names = _DISTORTION_NAMES.get(opencv.distortion_model, tuple(f"d{i}" for i in range(opencv.distortion.size)))
+        distortion = ", ".join(f"{n} {v:.4g}" for n, v in zip(names, opencv.distortion, strict=False))
+        source = {"given": "given, held", "given_start": "given as a start"}.get(str(entry.get("intrinsics")), "")
+        model_cell = f"{html.escape(opencv.distortion_model)}" + (f"<br>({source})" if source else "")
+        cells = [
+            f'<td style="text-align:left">{model_cell}</td>',
+            f"<td>{_with_std(fx, focal_std[0])}</td>",
+            f"<td>{_with_std(fy, focal_std[1])}</td>",
+            f"<td>{_with_std(float(model.principal_point[0]), std.get('u0'))}</td>",
+            f"<td>{_with_std(float(model.principal_point[1]), std.get('v0'))}</td>",
+            f'<td style="text-align:left">{html.escape(distortion)}</td>',
+        ]
+        for (key, _, factor), value in zip(_POSE_COLUMNS, [*pose.rotvec, *pose.translation], strict=True):
+            cells.append(f"<td>{_with_std(factor * value, None if key not in std else factor * std[key])}</td>")
         rows.append(
             f"<tr><td>{html.escape(name)}</td>{''.join(cells)}<td>{entry.get('rms_reprojection_px', float('nan')):.3f}"
             f"</td><td>{entry.get('n_views', '')}</td><td>{entry.get('rejected_views', '')}</td></tr>"
@@ -85,13 +135,23 @@ def _parameter_table(data: ReportData) -> str:
     return f"<table><tr>{head}</tr>{''.join(rows)}</table>"
 
 
+def _models_text(data: ReportData) -> str:
+    """What each camera's model is exactly, in OpenCV's and ROS's terms (only the models present)."""
+    groups: dict[str, list[str]] = {}
+    for name, model in zip(data.names, data.models, strict=True):
+        groups.setdefault(model.distortion_model, []).append(name)
+    parts = [f"{', '.join(names)}: exactly {_MODEL_TEXT.get(kind, kind)}" for kind, names in groups.items()]
+    return "Each camera in its own model; " + "; ".join(parts)
+
+
 def _metrics(data: ReportData) -> str:
     metrics = data.document.get("metrics", {})
-    items = "".join(
-        f"<li>{html.escape(str(k))}: {html.escape(f'{v:.4g}' if isinstance(v, float) else str(v))}</li>"
-        for k, v in metrics.items()
-    )
-    return f"<ul>{items}</ul>"
+    items = []
+    for key, value in metrics.items():
+        label, unit = _METRIC_TEXT.get(str(key), (str(key).replace("_", " "), ""))
+        shown = f"{value:.4g}" if isinstance(value, float) else str(value)
+        items.append(f"<li>{html.escape(label)}: {html.escape(shown)}{' ' + unit if unit else ''}</li>")
+    return f"<ul>{''.join(items)}</ul>"
 
 
 def _quality(data: ReportData) -> str:
@@ -229,7 +289,7 @@ def write_report(
 <h1>Calibration report</h1>
 <p>{len(data.names)} cameras, reference camera <b>{html.escape(data.reference)}</b>; result file
 {html.escape(str(result_path))}. {html.escape(conventions.get("frames", ""))}.
-{html.escape(conventions.get("equivalence", ""))}.</p>
+{html.escape(_models_text(data))}.</p>
 <h2>Warnings</h2>{warning_html}
 <h2>Parameters (&plusmn; one standard deviation)</h2>{_parameter_table(data)}
 <h2>Metrics</h2>{_metrics(data)}

@@ -10,6 +10,7 @@ from numpy.typing import NDArray
 
 from wand_calib_ros.core.adjust.bundle_adjustment import (
     CAMERA_PARAM_NAMES,
+    LENS,
     BundleProblem,
     BundleResult,
     BundleState,
@@ -39,6 +40,9 @@ COVERAGE_GRID = 8
 MIN_COVERAGE = 0.25
 #: Uncertainty of r(theta) at the widest observed angle (px) above which a camera gets a warning.
 WEAK_CURVE_PX = 0.5
+#: A camera whose principal point is uncertain by more than this (px, both axes together) gets a warning (the
+#: quality grade "acceptable" allows 5 px).
+WEAK_PRINCIPAL_PX = 5.0
 #: A camera whose observations stop below this fraction of the angle its image reaches gets a warning.
 COVERAGE_FRACTION = 0.8
 
@@ -75,6 +79,20 @@ def coverage_warnings(
         out.append(
             f"{spec.name}: the distortion curve is uncertain by {band:.1f} px at {np.degrees(max_theta):.0f} deg, "
             "the widest angle observed; add wand placements near the image border"
+        )
+    principal = float(np.sqrt(max(float(np.trace(result.camera_block(camera, slice(5, 7)))), 0.0)))
+    if principal > WEAK_PRINCIPAL_PX:
+        lens = slice(LENS.start, LENS.start + 2)  # t1, t2: estimated where their variance is
+        tangential = model.is_pinhole and float(np.trace(result.camera_block(camera, lens))) > 0
+        why = (
+            " (its tangential terms p1, p2 trade against it: give them with its intrinsics, fixed, if a board "
+            "calibration knows them)"
+            if tangential
+            else ""
+        )
+        out.append(
+            f"{spec.name}: its principal point is uncertain by +-{principal:.1f} px{why}; wave the wand across "
+            "more of its image and at more depths"
         )
     image_theta = float(angle_of_radius(model, np.array(max_image_radius_mm(model))))
     reach = min(spec.max_view_angle, image_theta if np.isfinite(image_theta) else spec.max_view_angle)
