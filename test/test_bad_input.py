@@ -499,6 +499,10 @@ CASES: dict[str, tuple[Spoil, str]] = {
         _camera_info(INFO.replace("image_height: 480", "image_height: [480")),
         "cam0-info.yaml: not valid YAML",
     ),
+    "camera_info with a K of 2 numbers": (
+        _camera_info(INFO.replace("[356, 0, 310, 0, 356, 250, 0, 0, 1]", "[356, 356]")),
+        "cam0-info.yaml: camera_matrix data must be a list of 9 numbers, got [356, 356]",
+    ),
     "camera_info with a short K": (
         _camera_info(INFO.replace("0, 0, 1]}", "0]}")),
         "cam0-info.yaml: camera_matrix data must be a list of 9 numbers",
