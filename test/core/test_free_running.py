@@ -82,3 +82,19 @@ def test_an_offset_beyond_a_frame_is_estimated_and_warned_about() -> None:
         assert abs(camera.time_offset - (latency[camera.name] - latency[result.reference_camera])) < 0.001
     warned = [w for w in result.warnings if "more than a frame" in w]
     assert warned and all(w.split(":")[0] in ("cam0", "cam1", "cam2") for w in warned)
+
+
+def test_a_readout_is_never_negative() -> None:
+    # Global shutters whose readout is estimated anyway: about half the unconstrained estimates would fall below
+    # zero by noise; the bound holds them at zero and reports them fixed, the others stay estimated.
+    below = 0
+    for seed in range(4):
+        scenario, observations, _ = timed_take("paper3", seed, NOISE, TakeOptions(duration_s=8.0, readout_s=0.0))
+        result = calibrate(scenario.rig, observations, CalibrationOptions(rolling_shutter="estimate"))
+        assert result.timing is not None
+        for camera in result.cameras:
+            assert camera.readout >= 0.0
+            held = result.timing.rolling_shutter[camera.name] == "fixed"
+            below += held
+            assert held == ("readout" not in camera.parameter_std) and (not held or camera.readout == 0.0)
+    assert below > 0  # the bound was met (12 cameras' estimates around a true zero)

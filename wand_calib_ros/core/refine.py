@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 from wand_calib_ros.core.adjust.assembly import assemble
 from wand_calib_ros.core.adjust.bundle_adjustment import (
     INTRINSICS,
+    READOUT,
     TIMING,
     BundleProblem,
     BundleResult,
@@ -172,8 +173,11 @@ def refine_calibration(
         # 4. The final adjustment of them all; with more than the coarse ones, the model order decided
         # again on all of them on its way.
         order = OrderOnAllPlacements(rig, fixed, reference, decided_on) if used.size > decided_on else None
-        result, clocks = _final_adjustment(rig, uv, uv_used, used, state, clocks, free, order)
+        result, clocks, free = _final_adjustment(rig, uv, uv_used, used, state, clocks, free, order)
         fixed = order.decision if order is not None else fixed
+        held = fixed.timing.copy()
+        held[:, 1] &= free[:, READOUT]  # (a readout the bound held at zero)
+        fixed = replace(fixed, timing=held)
     check_geometry(result.state.points(wand))
     check_camera_views(rig, uv, uv_used)
     check_uncertainty(rig, result)
@@ -309,11 +313,13 @@ def _final_adjustment(
     clocks: ClockModel,
     free: NDArray[np.bool_],
     order: OrderOnAllPlacements | None,
-) -> tuple[BundleResult, ClockModel]:
+) -> tuple[BundleResult, ClockModel, NDArray[np.bool_]]:
     """The final adjustment of the placements ``used`` from ``state``, the model order decided again on
     its first linearisation (``order``, if any); with timing, the wand's motion is refitted first to where the
     adjustments put them, and again while an adjustment moves a timing parameter by more than
-    MOTION_SETTLED of its standard deviation (at most MOTION_ROUNDS rounds)."""
+    MOTION_SETTLED of its standard deviation (at most MOTION_ROUNDS rounds). A readout time that comes out
+    negative is held at zero (its bound) and the adjustment repeated. Returns the result, the clocks and the
+    (C, 20) parameters it estimated."""
     choose = order  # on the first round's first linearisation; later rounds keep what it decided
     for _ in range(MOTION_ROUNDS if clocks.modelled else 1):
         if clocks.modelled:
@@ -329,6 +335,14 @@ def _final_adjustment(
         result = bundle_adjust(state, problem, free, choose=choose)
         if choose is not None:
             free, choose = free_mask(len(rig.cameras), choose.reference, choose.decision), None
+        negative = free[:, READOUT] & (result.state.camera_timing[:, 1] < 0)
+        if negative.any():  # a readout is never negative: held at its bound, the rest adjusted again
+            log.info("readout times %s are negative: held at zero", result.state.camera_timing[negative, 1])
+            free = free.copy()
+            free[negative, READOUT] = False
+            values = result.state.camera_timing.copy()
+            values[negative, 1] = 0.0
+            result = bundle_adjust(replace(result.state, timing=values), problem, free)
         if not clocks.modelled:
             break
         std = result.camera_std[:, TIMING]
@@ -337,7 +351,7 @@ def _final_adjustment(
         state = result.state
         if np.all(moved <= MOTION_SETTLED):
             break
-    return result, clocks
+    return result, clocks, free
 
 
 def _fitted_points(

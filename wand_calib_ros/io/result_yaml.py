@@ -16,8 +16,10 @@ The result contract::
         opencv: {distortion_model: equidistant, camera_matrix: 3x3, distortion: [D1..D4]}
         opencv_equidistant: {camera_matrix: 3x3, distortion: [D1..D4]}   # equidistant cameras only
         std: {k1: ..., u0: ..., rx: ..., tx: ..., time_offset_s: ...}
-        time_offset_s: ...               # exposure = stamp - time_offset_s (time_offset_frames without stamps)
-        rolling_shutter_readout_s: ...   # row v is exposed readout * v / H later (0: global shutter)
+        time_offset_s: ...               # exposure = stamp - time_offset_s (time_offset_frames without stamps);
+                                         # only where estimated (absent: 0)
+        rolling_shutter_readout_s: ...   # row v is exposed readout * v / H later; only where estimated or
+                                         # given (absent: 0, a global shutter)
         ...
     timing: {unit: s, time_offsets: estimated, rolling_shutter: {cam0: fixed}, frame_period_s: ...}
     metrics: {...}
@@ -132,8 +134,6 @@ def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
                 "n_views": int(camera.n_views),
                 "rejected_views": int(camera.rejected_views),
                 "std": {keys.get(k, k): float(v) for k, v in camera.parameter_std.items()},
-                keys["time_offset"]: float(camera.time_offset),
-                keys["readout"]: float(camera.readout),
                 "radial_covariance": _floats(camera.radial_covariance),
                 "max_observed_theta_deg": float(camera.max_observed_theta_deg),
                 "intrinsics": camera.intrinsics,
@@ -141,6 +141,11 @@ def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
                 "fixed_coefficients": list(camera.fixed_coefficients),
             }
         )
+        # Timing keys only for what was estimated (or set: a rig description's readout_ms); absent means 0.
+        if timing is not None and (timing.time_offsets == "estimated" or camera.time_offset != 0.0):
+            entry[keys["time_offset"]] = float(camera.time_offset)
+        if timing is not None and (timing.rolling_shutter.get(camera.name) == "estimated" or camera.readout != 0.0):
+            entry[keys["readout"]] = float(camera.readout)
         cameras[camera.name] = entry
     return {
         "reference_camera": result.reference_camera,

@@ -543,10 +543,12 @@ def refresh_motion(clocks: ClockModel, points: FloatArray, *, choose: bool = Fal
 def reduce_timing(clocks: ClockModel, result: BundleResult, free: NDArray[np.bool_]) -> NDArray[np.bool_]:
     """The timing parameters ``auto`` keeps after an adjustment that estimated them.
 
-    Nested like the distortion model, the finer term first: the readout times stay when they
-    differ from zero jointly (a rig's cameras are usually of one kind); once they are settled,
-    the time offsets stay when they differ from zero jointly, tested without the readout times
-    that went (the two correlate). Both are chi-square tests at SIGNIFICANCE_LEVEL.
+    A readout time that came out negative (in any mode) is held at zero first: the physical bound
+    (readout >= 0) is active there, and the others are adjusted again with it. Then, nested like the
+    distortion model, the finer term first: the readout times stay when they differ from zero jointly
+    (a rig's cameras are usually of one kind); once they are settled, the time offsets stay when they
+    differ from zero jointly, tested without the readout times that went (the two correlate). Both
+    are chi-square tests at SIGNIFICANCE_LEVEL.
 
     Args:
         clocks: the timing model (its modes).
@@ -558,6 +560,11 @@ def reduce_timing(clocks: ClockModel, result: BundleResult, free: NDArray[np.boo
     """
     kept = free.copy()
     values = result.state.camera_timing
+    negative = free[:, 1] & (values[:, 1] < 0)
+    if negative.any():  # a readout is never negative: the bound is active there, the readout held at zero
+        log.info("readout times %s are negative: held at zero", np.array2string(values[negative, 1], precision=4))
+        kept[negative, 1] = False
+        return kept
     for column, parameter, mode, what in (
         (1, READOUT, clocks.modes[1], "readout times"),
         (0, TIME_OFFSET, clocks.modes[0], "time offsets"),
