@@ -181,8 +181,8 @@ def refine_calibration(
     check_geometry(result.state.points(wand))
     check_camera_views(rig, uv, uv_used)
     check_uncertainty(rig, result)
-    check_given_intrinsics(rig, result, free_mask(n_cameras, reference, fixed))
-    warnings: list[str] = []
+    points = np.isfinite(uv_used[..., 0]).sum(axis=(0, 2))  # (C,) image points per camera
+    warnings = check_given_intrinsics(rig, result, free_mask(n_cameras, reference, fixed), points)
     for model, spec in zip(result.state.models, rig.cameras, strict=True):
         if turns_over_in_image(model, spec.max_view_angle):
             warnings.append(

@@ -118,3 +118,32 @@ def test_given_intrinsics_that_contradict_the_rig_description_are_named() -> Non
     rig = replace(scenario.rig, cameras=(scenario.rig.cameras[0], replace(scenario.rig.cameras[1], intrinsics=wrong)))
     with pytest.raises(PlausibilityError, match=r"camera 'cam1': its given intrinsics \(fx \d+ px\) mean a focal"):
         check_rig(rig)
+
+
+def _off(scenario: Scenario, camera: int, focal: float) -> RigSpec:
+    """The true intrinsics given, fixed, one camera's focal length scaled by ``focal`` (a camera profile off)."""
+    rig = _given(scenario)
+    spec = rig.cameras[camera]
+    assert spec.intrinsics is not None
+    vector = spec.intrinsics.intrinsic_vector() * np.r_[focal, np.ones(6)]
+    wrong = replace(spec, intrinsics=spec.intrinsics.with_intrinsic_vector(vector))
+    return replace(rig, cameras=tuple(wrong if c == camera else s for c, s in enumerate(rig.cameras)))
+
+
+def test_given_intrinsics_are_refused_on_strong_evidence_only_naming_the_camera_at_fault() -> None:
+    from wand_calib_ros.core.errors import PlausibilityError
+
+    # 3 % off on a good take: the views are sure (their focal to 0.3 %), and point at the camera at fault.
+    scenario, data, _ = scenario_data("paper3", 0, noise=1.0)
+    with pytest.raises(PlausibilityError, match=r"camera 'cam2': the views disagree with its given intrinsics"):
+        calibrate(_off(scenario, 2, 1.03), data.observations)
+    # Well within what the views can tell (0.3 % off): kept, without a word.
+    kept = calibrate(_off(scenario, 2, 1.003), data.observations)
+    assert not any("given intrinsics" in w for w in kept.warnings)
+    # A weak take (a fifth of the placements, the noise four times): its views cannot overrule 3 % off: kept.
+    weak = data.observations.select_frames(data.observations.frames < 60)
+    noisy = replace(weak, uv=weak.uv + np.random.default_rng(0).normal(0.0, 4.0, weak.uv.shape))
+    result = calibrate(_off(scenario, 2, 1.03), noisy)
+    assert result.camera("cam2").intrinsics == "given"
+    true = scenario.cameras[2].model.k[0]
+    assert result.camera("cam2").model.k[0] == pytest.approx(1.03 * true, rel=1e-12)  # held as given

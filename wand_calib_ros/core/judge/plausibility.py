@@ -46,12 +46,19 @@ RMS_FACTOR = 4.0
 MIN_BAD_RMS_PX = 1.0
 #: The wand's |AC| RMS error, as a fraction of its length, beyond which the scene is not rigid.
 WAND_ERROR_FRACTION = 0.05
-#: Given intrinsics held fixed contradict the views when freeing them would move the focal length by more
-#: than GIVEN_FOCAL_FRACTION of it, or the principal point by more than GIVEN_CENTRE_FRACTION of the image
-#: width, and by more than GIVEN_SIGMAS standard deviations.
+#: Given intrinsics held fixed are the user's knowledge. The views lean away from them when freeing the focal
+#: length and principal point lowers the camera's residuals significantly (chi-square, 3 degrees of freedom, at
+#: 0.1 %: GIVEN_CHI2) and moves them by more than GIVEN_FOCAL_FRACTION of the focal or GIVEN_CENTRE_FRACTION of
+#: the image width: a warning. They are refused only on strong evidence that they cannot fit: that move is also
+#: GIVEN_SIGMAS of the views' own standard deviations, and what the views say is a camera (its principal point
+#: inside the image, its focal within FOCAL_RANGE of the nominal one), not a weak problem's wandering.
+GIVEN_CHI2 = 16.27
 GIVEN_FOCAL_FRACTION = 0.02
 GIVEN_CENTRE_FRACTION = 0.02
 GIVEN_SIGMAS = 5.0
+#: Two cameras' freed intrinsics that remove within this fraction of each other's squared residuals explain the
+#: views alike: both are named.
+ALIKE = 0.8
 
 
 def image_radius_ratio(spec: CameraSpec) -> float:
@@ -183,54 +190,96 @@ def check_result(rig: RigSpec, result: CalibrationResult) -> None:
                 "description and which images its views come from)"
             )
     if result.wand_length_rms_mm > WAND_ERROR_FRACTION * rig.wand.L:
+        held = [spec.name for spec in rig.cameras if spec.holds_intrinsics]
+        given = (
+            f", or the intrinsics given fixed for {', '.join(held)} (give them as a start: fixed: false)"
+            if held
+            else ""
+        )
         raise PlausibilityError(
             f"wand: |AC| comes out {result.wand_length_rms_mm:.3g} mm RMS away from {rig.wand.L:g} mm "
             f"({100 * result.wand_length_rms_mm / rig.wand.L:.0f} %): the scene is not rigid; check L1, L2 "
-            "and that each camera's views are of the same wand at the same time"
+            f"and that each camera's views are of the same wand at the same time{given}"
         )
 
 
-def check_given_intrinsics(rig: RigSpec, result: BundleResult, free: NDArray[np.bool_]) -> None:
-    """Given intrinsics held fixed must not be contradicted by the views: for each such camera, the
-    linearised estimate with its focal length and principal point freed (the adjustment's own normal
-    equations, :meth:`~wand_calib_ros.core.adjust.bundle_adjustment.CameraSystem.step`) may move them by only
-    a little (GIVEN_FOCAL_FRACTION, GIVEN_CENTRE_FRACTION) or within GIVEN_SIGMAS of its standard deviations.
+def check_given_intrinsics(
+    rig: RigSpec, result: BundleResult, free: NDArray[np.bool_], points: NDArray[np.int64]
+) -> list[str]:
+    """Given intrinsics held fixed against the views: for each such camera, the linearised estimate with
+    its focal length and principal point freed (the adjustment's own normal equations,
+    :meth:`~wand_calib_ros.core.adjust.bundle_adjustment.CameraSystem.step`) and how much of its squared
+    residuals that would remove (see GIVEN_CHI2, GIVEN_SHARE).
 
     Args:
         result: the final adjustment, of the (C, 20) parameters ``free``.
+        points: (C,) image points of each camera in it.
+
+    Returns:
+        A warning per camera whose views lean away from its given intrinsics, weakly (they are kept).
 
     Raises:
-        PlausibilityError: naming the camera, its given values and what the views say.
+        PlausibilityError: a camera whose given intrinsics cannot fit its views, naming its given values and
+            what the views say.
     """
     system = result.system
     if system is None:
-        return
+        return []
     n_cameras = len(rig.cameras)
+    refusals: list[tuple[float, str]] = []  # (squared residuals freeing it removes, the refusal)
+    leaning: list[tuple[float, str]] = []  # (the same, the camera) of every camera the views lean away from
+    warnings = []
     for c, spec in enumerate(rig.cameras):
         if not spec.holds_intrinsics:
             continue
         released = free.copy()
         released[c, [0, 5, 6]] = True  # k1, u0, v0
-        step = system.step(released)[c]
+        delta = system.step(released)
+        removed = max(float(delta[:, system.columns].reshape(-1) @ system.rhs), 0.0)  # of the squared residuals
+        step = delta[c]
         std = np.sqrt(np.clip(np.diag(system.covariance(released, result.sigma)), 0, None))
         std = std.reshape(n_cameras, N_CAMERA_PARAMS)[c]
         model = result.state.models[c]
         focal = float(step[0] / model.k[0])
         centre = float(np.hypot(step[5], step[6]))
-        centre_std = float(np.hypot(std[5], std[6]))
-        if (abs(focal) > GIVEN_FOCAL_FRACTION and abs(step[0]) > GIVEN_SIGMAS * std[0]) or (
-            centre > GIVEN_CENTRE_FRACTION * spec.image_size[0] and centre > GIVEN_SIGMAS * centre_std
-        ):
-            fx = float(model.focal_px[0])
-            seen = model.principal_point + step[5:7]
-            raise PlausibilityError(
-                f"camera '{spec.name}': the views disagree with its given intrinsics: they put its focal length at "
-                f"fx {fx * (1 + focal):.0f} +- {fx * std[0] / model.k[0]:.0f} px against the given {fx:.0f} "
-                f"({100 * focal:+.0f} %) and its principal point at ({seen[0]:.0f}, {seen[1]:.0f}) against "
-                f"({model.principal_point[0]:.0f}, {model.principal_point[1]:.0f}): "
-                + (_tangential_hint(model) or "check that K is this camera's and for this image size")
-                + ", or give them as a start (fixed: false)"
+        moved = abs(focal) > GIVEN_FOCAL_FRACTION or centre > GIVEN_CENTRE_FRACTION * spec.image_size[0]
+        if not (moved and removed / result.sigma**2 > GIVEN_CHI2):
+            continue
+        fx = float(model.focal_px[0])
+        seen = model.principal_point + step[5:7]
+        figures = (
+            f"they put its focal length at fx {fx * (1 + focal):.0f} +- {fx * std[0] / model.k[0]:.0f} px against the "
+            f"given {fx:.0f} ({100 * focal:+.0f} %) and its principal point at ({seen[0]:.0f}, {seen[1]:.0f}) "
+            f"+- {np.hypot(std[5], std[6]):.0f} px against ({model.principal_point[0]:.0f}, "
+            f"{model.principal_point[1]:.0f})"
+        )
+        share = removed / max(float(points[c]) * 2 * result.sigma**2, 1e-12)
+        leaning.append((removed, spec.name))
+        strong = abs(step[0]) > GIVEN_SIGMAS * std[0] or centre > GIVEN_SIGMAS * float(np.hypot(std[5], std[6]))
+        inside = bool(np.all((seen >= 0) & (seen <= np.asarray(spec.image_size))))
+        camera_like = FOCAL_RANGE[0] <= (1 + focal) * float(model.k[0]) / spec.nominal_focal_mm <= FOCAL_RANGE[1]
+        if strong and inside and camera_like:
+            refusals.append(
+                (
+                    removed,
+                    f"camera '{spec.name}': the views disagree with its given intrinsics: {figures}: "
+                    + (_tangential_hint(model) or "check that K is this camera's and for this image size")
+                    + ", or give them as a start (fixed: false)",
+                )
             )
+        warnings.append(
+            f"{spec.name}: its views lean away from its given intrinsics ({figures}; freed they would fit "
+            f"{100 * min(share, 1.0):.0f} % of its squared residuals better) but not strongly enough to overrule "
+            "them: the given intrinsics are kept"
+        )
+    if refusals:  # the camera whose freed intrinsics explain the most (one wrong camera pulls the others too) ...
+        first, line = max(refusals)
+        named = line.split("'")[1]
+        alike = [name for removed, name in leaning if name != named and removed >= ALIKE * first]
+        if alike:  # ... or another that explains them alike (the views fix the cameras' focal ratio, say)
+            line += f" (or {' or '.join(alike)}'s: freeing either explains the views alike)"
+        raise PlausibilityError(line)
+    return warnings
 
 
 #: OpenCV tangential terms (p1, p2) of real lenses stay below this (a few thousandths); larger ones shift the image as
