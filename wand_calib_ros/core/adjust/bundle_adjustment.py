@@ -46,6 +46,7 @@ from wand_calib_ros.core.adjust.normal_equations import (
     damped,
     empty_normal_equations,
     reduced_system,
+    scaled_inverse,
     scaling,
     solve_free,
     undamped,
@@ -287,7 +288,7 @@ class CameraSystem:
         free_flat = free[:, self.columns].reshape(-1)
         carried = (np.arange(n_cameras)[:, None] * N_CAMERA_PARAMS + self.columns[None, :]).reshape(-1)[free_flat]
         covariance = np.zeros((n_cameras * N_CAMERA_PARAMS,) * 2)
-        covariance[np.ix_(carried, carried)] = np.linalg.pinv(self.matrix[np.ix_(free_flat, free_flat)], hermitian=True)
+        covariance[np.ix_(carried, carried)] = scaled_inverse(self.matrix[np.ix_(free_flat, free_flat)])
         return covariance * sigma**2
 
 

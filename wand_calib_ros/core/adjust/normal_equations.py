@@ -400,16 +400,37 @@ def undamped(normal: NormalEquations) -> NormalEquations:
     return normal._replace(v=damp(normal.v, 0.0))
 
 
+def jacobi_scale(s: FloatArray) -> FloatArray:
+    """(N,) 1 / sqrt(diag(s)) (1 where the diagonal is not positive): ``s`` scaled by it on both sides has a unit
+    diagonal. A camera's parameters span many orders of magnitude (a focal of 25,000 px beside rotations in
+    radians); solved or inverted unscaled, their small directions drown in the large ones' rounding. (Not
+    :func:`scaling`, the damping's diagonal: its floor, right for damping, would leave those directions
+    unscaled.)"""
+    diagonal = np.diag(s)
+    return np.asarray(np.where(diagonal > 0, 1.0 / np.sqrt(np.where(diagonal > 0, diagonal, 1.0)), 1.0))
+
+
 def solve_free(s: FloatArray, rhs: FloatArray, free: NDArray[np.bool_]) -> FloatArray:
-    """The solution of ``s x = rhs`` over the ``free`` unknowns (the others 0): Cholesky, else least squares."""
+    """The solution of ``s x = rhs`` over the ``free`` unknowns (the others 0), Jacobi-scaled (:func:`jacobi_scale`):
+    Cholesky, else least squares."""
     delta = np.zeros_like(rhs)
     if not free.any():
         return delta
     sub = s[np.ix_(free, free)]
+    scale = jacobi_scale(sub)
+    scaled = sub * scale[:, None] * scale[None, :]
     try:
         # numpy's LAPACK throughout: scipy's is a second BLAS thread pool, and the two contend
-        np.linalg.cholesky(sub)  # positive definite, else least squares
-        delta[free] = np.linalg.solve(sub, rhs[free])
+        np.linalg.cholesky(scaled)  # positive definite, else least squares
+        delta[free] = scale * np.linalg.solve(scaled, scale * rhs[free])
     except np.linalg.LinAlgError:
-        delta[free] = np.linalg.lstsq(sub, rhs[free], rcond=None)[0]
+        delta[free] = scale * np.linalg.lstsq(scaled, scale * rhs[free], rcond=None)[0]
     return delta
+
+
+def scaled_inverse(s: FloatArray) -> FloatArray:
+    """The (pseudo-)inverse of a symmetric positive semi-definite ``s``, Jacobi-scaled (:func:`jacobi_scale`):
+    directions the data leave undetermined get no variance rather than the rounding of others'."""
+    scale = jacobi_scale(s)
+    inverse = np.linalg.pinv(s * scale[:, None] * scale[None, :], hermitian=True)
+    return np.asarray(inverse * scale[:, None] * scale[None, :])

@@ -1,0 +1,44 @@
+"""The cameras' normal equations solved and inverted where their parameters span many orders of magnitude."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from wand_calib_ros.core.adjust.normal_equations import scaled_inverse, solve_free
+
+
+def _badly_scaled(seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """(S, D): S = D A D, A a well-conditioned random SPD matrix, D spanning 1e-5 .. 1e5 (a 25,000 px focal's
+    column beside a rotation's in radians and a principal point's in px)."""
+    rng = np.random.default_rng(seed)
+    n = 12
+    q, _ = np.linalg.qr(rng.normal(size=(n, n)))
+    a = q @ np.diag(rng.uniform(0.5, 2.0, n)) @ q.T  # condition 4
+    d = 10.0 ** rng.uniform(-5, 5, n)
+    return d[:, None] * a * d[None, :], d
+
+
+def test_badly_scaled_normal_equations_keep_every_standard_deviation() -> None:
+    for seed in range(6):
+        s, d = _badly_scaled(seed)
+        exact = np.linalg.inv(s / d[:, None] / d[None, :]) / d[:, None] / d[None, :]  # D^-1 A^-1 D^-1
+        assert np.allclose(
+            np.diag(scaled_inverse(s)), np.diag(exact), rtol=1e-10, atol=0.0
+        )  # A's condition 4: rounding
+        unscaled = np.diag(np.linalg.pinv(s, hermitian=True))  # what it was: off by rounding amplified
+        assert np.max(np.abs(unscaled / np.diag(exact) - 1)) > 1e3 * np.max(
+            np.abs(np.diag(scaled_inverse(s)) / np.diag(exact) - 1)
+        )
+
+
+def test_badly_scaled_steps_are_solved_exactly_over_the_free_unknowns() -> None:
+    for seed in range(6):
+        s, d = _badly_scaled(seed)
+        x = np.random.default_rng(seed + 10).normal(size=s.shape[0]) / d
+        free = np.ones(s.shape[0], dtype=bool)
+        free[3] = False
+        x[3] = 0.0
+        rhs = s @ x
+        rhs[3] = 0.0  # (its equation is not solved: its unknown is held)
+        solved = solve_free(s, rhs, free)
+        assert np.allclose(solved * d, x * d, rtol=0.0, atol=1e-9)
