@@ -74,6 +74,7 @@ class StreamFaults:
         self.topics = dict(topics)
         self.segments = StampSegments(cameras)
         self._state = {name: _Camera() for name in cameras}
+        self._first_ns: int | None = None  # the rig's first arrival
 
     def arrived(self, camera: str, stamp_ns: int, arrival_ns: int) -> tuple[int, list[Said]]:
         """An image (or detector points) of a camera arrived: its stamp continued across jumps
@@ -95,6 +96,7 @@ class StreamFaults:
             state.said.add(jump.kind)
             said.append(Said("warning", jump.describe()))
         state.arrived_ns = arrival_ns
+        self._first_ns = arrival_ns if self._first_ns is None else self._first_ns
         return continued, said
 
     def unusable(self, camera: str, reason: str, text: str | None, arrival_ns: int) -> list[Said]:
@@ -115,11 +117,12 @@ class StreamFaults:
         newest = max(heard) if heard else None
         others_send = newest is not None and now_ns - newest <= SILENT_S * 1e9
         for name, state in self._state.items():
-            if others_send and (state.arrived_ns is None or now_ns - state.arrived_ns > SILENT_S * 1e9):
+            last = state.arrived_ns if state.arrived_ns is not None else self._first_ns  # (never sent: since the rig)
+            if others_send and last is not None and now_ns - last > SILENT_S * 1e9:
                 line = self._silence(name, state, now_ns)
                 faults[name].append(line)
                 if state.silent_since_ns is None:
-                    state.silent_since_ns = state.arrived_ns if state.arrived_ns is not None else now_ns
+                    state.silent_since_ns = last
                     said.append(Said("warning", f"{name}: {line}"))
             state.problems = {
                 reason: (when, text)
