@@ -12,6 +12,7 @@ import yaml
 from wand_calib_ros.cli import main
 from wand_calib_ros.core.model.rig import WandSpec
 from wand_calib_ros.io.errors import FormatError
+from wand_calib_ros.io.imports.anipose import read_anipose
 from wand_calib_ros.io.imports.xypts import read_xypts
 from wand_calib_ros.io.observations_csv import read_observations
 from wand_calib_ros.io.rig_yaml import save_rig
@@ -106,3 +107,77 @@ def test_a_point_file_that_cannot_be_read_names_the_problem(tmp_path: Path, text
     path.write_text(text)
     with pytest.raises(FormatError, match=message.replace("(", r"\(").replace(")", r"\)")):
         read_xypts(path, scenario.rig)
+
+
+def test_anipose_calibration_as_aniposelib_writes_it_is_read_exactly(tmp_path: Path) -> None:
+    cameras = pytest.importorskip("aniposelib.cameras")
+    fisheye_k = np.array([[356.9, 0.0, 307.1], [0.0, 356.9, 249.6], [0.0, 0.0, 1.0]])
+    pinhole_k = np.array([[768.4, 0.0, 322.2], [0.0, 768.4, 251.3], [0.0, 0.0, 1.0]])
+    group = cameras.CameraGroup(
+        [
+            cameras.FisheyeCamera(fisheye_k, np.array([0.27, 0.06, 0.04, -0.04]), (640, 480), name="cam0"),
+            cameras.Camera(pinhole_k, np.array([-0.066, 0.01, -0.0018, 0.0022, 0.0]), (658, 492), name="cam1"),
+        ]
+    )
+    group.dump(str(tmp_path / "calibration.toml"))
+    fisheye, pinhole = read_anipose(tmp_path / "calibration.toml")
+    assert (fisheye.name, fisheye.distortion_model, fisheye.image_size) == ("cam0", "equidistant", (640, 480))
+    assert np.array_equal(fisheye.camera_matrix, fisheye_k) and fisheye.distortion == (0.27, 0.06, 0.04, -0.04)
+    assert (pinhole.name, pinhole.distortion_model, pinhole.image_size) == ("cam1", "plumb_bob", (658, 492))
+    assert np.array_equal(pinhole.camera_matrix, pinhole_k) and pinhole.distortion == (
+        -0.066,
+        0.01,
+        -0.0018,
+        0.0022,
+        0.0,
+    )
+
+
+def test_anipose_intrinsics_become_the_rigs_given_intrinsics_and_are_held(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    sim = tmp_path / "sim"
+    assert main(["-q", "simulate", "mixed", "--seed", "2", "--out", str(sim)]) == 0
+    argv = ["-q", "calibrate", "--cameras", str(sim / "cameras.yaml"), "--observations", str(sim / "observations.csv")]
+    assert main([*argv, "--output", str(tmp_path / "first.yaml")]) == 0
+    # anipose's file as this package exports it (aniposelib reads it: test_export), then back as given intrinsics
+    assert (
+        main(
+            [
+                "-q",
+                "export",
+                "--result",
+                str(tmp_path / "first.yaml"),
+                "--format",
+                "anipose",
+                "--out",
+                str(tmp_path / "ani"),
+            ]
+        )
+        == 0
+    )
+    toml = tmp_path / "ani" / "calibration.toml"
+    imported = tmp_path / "given.yaml"
+    base = ["import", "--format", "anipose", "--points", str(toml), "--cameras", str(sim / "cameras.yaml")]
+    assert main([*base, "--out", str(imported)]) == 0
+    assert (
+        "imported the intrinsics of 2 cameras by name, held fixed: cam0 -> cam0 (equidistant)"
+        in capsys.readouterr().out
+    )
+    given = ["-q", "calibrate", "--cameras", str(imported), "--observations", str(sim / "observations.csv")]
+    assert main([*given, "--output", str(tmp_path / "second.yaml")]) == 0
+    first = yaml.safe_load((tmp_path / "first.yaml").read_text())["cameras"]
+    second = yaml.safe_load((tmp_path / "second.yaml").read_text())["cameras"]
+    for name in ("cam0", "cam1"):
+        assert second[name]["intrinsics"] == "given"
+        assert np.allclose(second[name]["opencv"]["camera_matrix"], first[name]["opencv"]["camera_matrix"], rtol=1e-12)
+    # a file for other image sizes, or without a key, is one line naming the camera or the table
+    text = toml.read_text()
+    (tmp_path / "sized.toml").write_text(text.replace("size = [658, 492]", "size = [1316, 984]", 1))
+    assert (
+        main([*base[:3], "--points", str(tmp_path / "sized.toml"), *base[5:], "--out", str(tmp_path / "x.yaml")]) == 2
+    )
+    assert "camera 'cam0' is 1316x984, the rig's 'cam0' 658x492" in capsys.readouterr().err  # (both are 658x492)
+    (tmp_path / "broken.toml").write_text(text.replace("matrix = ", "matrix_ = ", 1))
+    assert (
+        main([*base[:3], "--points", str(tmp_path / "broken.toml"), *base[5:], "--out", str(tmp_path / "x.yaml")]) == 2
+    )
+    assert "broken.toml: [cam_00] lacks matrix" in capsys.readouterr().err
