@@ -43,7 +43,9 @@ def test_rays_beyond_ninety_degrees_are_handled() -> None:
     b1 = in1 / np.linalg.norm(in1, axis=-1, keepdims=True)
     assert (b0[..., 2] < 0).sum() > 10 and (b1[..., 2] < 0).sum() > 10
     result = relative_pose(b0, b1, 600.0, threshold_rad=1e-4, rng=np.random.default_rng(1))
-    assert rotation_error_deg(truth.rotation, result.pose.rotation) < 1e-7
+    # the rotation's angle from its rotation vector: E_r's arccos cannot resolve below ~1e-6 deg, and which side
+    # of that a noise-free result falls depends on the CPU's rounding (1.2e-6 with numpy's SSE kernels)
+    assert np.degrees(np.linalg.norm(rotvec_from_rotation(truth.rotation.T @ result.pose.rotation))) < 1e-8
     assert translation_error(truth.translation, result.pose.translation) < 1e-9
 
 

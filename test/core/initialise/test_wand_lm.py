@@ -31,7 +31,8 @@ def test_noise_free_data_converge_to_the_truth() -> None:
         m.with_intrinsic_vector(np.r_[m.k[:2], c.model.k[2:], m.principal_point])
         for m, c in zip(models, scenario.cameras, strict=True)
     )
-    fit = optimise_wand_lengths(models, pose, uv[:, 0], uv[:, 1], scenario.wand)
+    tolerance = 1e-8  # the solver's relative tolerance on the cost and the parameters (MINPACK's ftol, xtol)
+    fit = optimise_wand_lengths(models, pose, uv[:, 0], uv[:, 1], scenario.wand, tolerance=tolerance)
     problem = _WandProblem(models, uv[:, 0], uv[:, 1], scenario.wand)
 
     def vector(fitted, fitted_pose):  # type: ignore[no-untyped-def]
@@ -40,16 +41,17 @@ def test_noise_free_data_converge_to_the_truth() -> None:
 
     truth = vector(tuple(c.model for c in scenario.cameras), scenario.cameras[1].pose)
     found = vector(fit.models, fit.pose)
-    # Noise-free data: the solver stops where the cost reaches the rounding of the residuals' evaluation
-    # (the truth's own residuals, ~1e-12 mm, are that rounding). Rounding of that size moves the solution by
-    # the standard deviations it implies through the Jacobian (the problem's condition, ~1e8, makes the
-    # rotation's about 1e-6 deg); the solution must be within 5 of them of the truth, on any machine.
+    # Noise-free data: the cost goes down to the rounding of the residuals' evaluation (the truth's own
+    # residuals), and the solver stops once a step moves the parameters by less than its tolerance relative to
+    # them, in its own scaling (the Jacobian's column norms: mm, rad and px weigh alike), or gains less than
+    # that of the cost. The solution is then within about that tolerance of the truth in the same scaled norm
+    # (measured 0.3-0.8 of it with different CPUs' kernels); 10x covers the last step's size. No fixed number
+    # of degrees: which rounding a CPU's kernels make moves it by 1e-6 deg (the problem's condition, ~1e8).
     rounding = problem.residuals(truth)
     sigma = max(float(np.sqrt(np.mean(rounding**2))), np.finfo(float).eps * scenario.wand.L)
-    jac = problem.jacobian(found)
-    std = sigma * np.sqrt(np.diag(np.linalg.inv(jac.T @ jac)))
     assert fit.rms_mm < 100 * sigma  # the cost went down to the rounding floor
-    assert np.all(np.abs(found - truth) <= 5 * std + 1e-15 * np.abs(truth)), (found - truth) / std
+    scale = np.linalg.norm(problem.jacobian(found), axis=0)
+    assert np.linalg.norm(scale * (found - truth)) <= 10 * tolerance * np.linalg.norm(scale * truth)
     assert rotation_error_deg(scenario.cameras[1].pose.rotation, fit.pose.rotation) < 1e-4  # and that is tiny
 
 
