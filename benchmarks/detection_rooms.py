@@ -24,30 +24,17 @@ import time
 
 import numpy as np
 
-from wand_calib_ros.core.judge.metrics import camera_errors, rereference
-from wand_calib_ros.core.model.result import CalibrationResult
 from wand_calib_ros.core.pipeline import calibrate
-from wand_calib_ros.sim.detection_score import DetectionScore, detect_room_recording, right_and_labelled, score
+from wand_calib_ros.sim.detection_score import (
+    ERROR_CLASSES,
+    DetectionScore,
+    calibration_errors,
+    detect_room_recording,
+    right_and_labelled,
+    score,
+)
 from wand_calib_ros.sim.room import ROOM_SCENES, room_take
-from wand_calib_ros.sim.scenarios import Scenario, mixed_pair_scenario, paper_three_camera_scenario
-
-CLASSES = ("focal", "pp", "E_r", "E_t", "curve")
-
-
-def errors(scenario: Scenario, result: CalibrationResult) -> dict[str, list[float]]:
-    """Per error class the errors of a calibration against the scenario's truth."""
-    names = [c.spec.name for c in scenario.cameras]
-    poses = rereference({n: result.camera(n).pose for n in names}, names[0])
-    out: dict[str, list[float]] = {k: [] for k in CLASSES}
-    for c, camera in enumerate(scenario.cameras):
-        e = camera_errors(result.camera(camera.spec.name).model, poses[camera.spec.name], camera.model, camera.pose)
-        out["focal"].append(e.focal_px)
-        out["pp"].append(e.principal_point_px)
-        out["curve"].append(e.curve_px)
-        if c:
-            out["E_r"].append(e.rotation_deg)
-            out["E_t"].append(e.translation)
-    return out
+from wand_calib_ros.sim.scenarios import mixed_pair_scenario, paper_three_camera_scenario
 
 
 def main() -> None:
@@ -58,13 +45,13 @@ def main() -> None:
     args = parser.parse_args()
     print(
         f"{'scene':18s} {'rig':7s} {'clear':>6s} {'recall':>7s} {'false':>7s} {'centre px':>10s} {'(2D)':>6s} "
-        f"{'labels':>7s}  calibration / floor: " + " ".join(f"{k:>6s}" for k in CLASSES) + "   s/seed"
+        f"{'labels':>7s}  calibration / floor: " + " ".join(f"{k:>6s}" for k in ERROR_CLASSES) + "   s/seed"
     )
     for scene in args.scenes:
         scenario = mixed_pair_scenario() if scene == "colour_jpeg" else paper_three_camera_scenario()
         total: DetectionScore | None = None
-        found: dict[str, list[float]] = {k: [] for k in CLASSES}
-        floor: dict[str, list[float]] = {k: [] for k in CLASSES}
+        found: dict[str, list[float]] = {k: [] for k in ERROR_CLASSES}
+        floor: dict[str, list[float]] = {k: [] for k in ERROR_CLASSES}
         started = time.perf_counter()
         for seed in range(args.seeds):
             rng = np.random.default_rng(seed)
@@ -75,10 +62,10 @@ def main() -> None:
             right = right_and_labelled(observations, recording.truth)
             alone = observations.with_uv(np.where(right[..., None, None], observations.uv, np.nan))
             for kind, views in ((found, observations), (floor, alone)):
-                for key, values in errors(scenario, calibrate(scenario.rig, views)).items():
+                for key, values in calibration_errors(scenario, calibrate(scenario.rig, views)).items():
                     kind[key] += values
         assert total is not None
-        ratios = [np.sqrt(np.mean(np.square(found[k]))) / np.sqrt(np.mean(np.square(floor[k]))) for k in CLASSES]
+        ratios = [np.sqrt(np.mean(np.square(found[k]))) / np.sqrt(np.mean(np.square(floor[k]))) for k in ERROR_CLASSES]
         rig = "mixed" if scene == "colour_jpeg" else "paper3"
         print(
             f"{scene:18s} {rig:7s} {total.clearly_visible:6d} {100 * total.recall:6.1f}% "

@@ -14,11 +14,15 @@ from functools import cache
 import numpy as np
 import pytest
 
-from wand_calib_ros.core.judge.metrics import camera_errors, rereference
-from wand_calib_ros.core.model.result import CalibrationResult
 from wand_calib_ros.core.model.rig import WandObservations
 from wand_calib_ros.core.pipeline import calibrate
-from wand_calib_ros.sim.detection_score import DetectionScore, detect_room_recording, right_and_labelled, score
+from wand_calib_ros.sim.detection_score import (
+    DetectionScore,
+    calibration_errors,
+    detect_room_recording,
+    right_and_labelled,
+    score,
+)
 from wand_calib_ros.sim.room import ROOM_SCENES, RoomRecording, room_take
 from wand_calib_ros.sim.scenarios import Scenario, mixed_pair_scenario, paper_three_camera_scenario
 
@@ -53,21 +57,6 @@ def test_views_are_found_right_and_labelled_in_a_room(scene: str) -> None:
     assert total.labels_right >= 0.99, total
 
 
-def _errors(scenario: Scenario, result: CalibrationResult) -> dict[str, list[float]]:
-    names = [c.spec.name for c in scenario.cameras]
-    poses = rereference({n: result.camera(n).pose for n in names}, names[0])
-    out: dict[str, list[float]] = {"focal": [], "pp": [], "E_r": [], "E_t": [], "curve": []}
-    for c, camera in enumerate(scenario.cameras):
-        e = camera_errors(result.camera(camera.spec.name).model, poses[camera.spec.name], camera.model, camera.pose)
-        out["focal"].append(e.focal_px)
-        out["pp"].append(e.principal_point_px)
-        out["curve"].append(e.curve_px)
-        if c:
-            out["E_r"].append(e.rotation_deg)
-            out["E_t"].append(e.translation)
-    return out
-
-
 @pytest.mark.parametrize("scene", ["lamps_window", "hard"])
 def test_the_calibration_from_the_detections_is_at_the_floor_of_the_right_views(scene: str) -> None:
     found: dict[str, list[float]] = {}
@@ -77,7 +66,7 @@ def test_the_calibration_from_the_detections_is_at_the_floor_of_the_right_views(
         right = right_and_labelled(observations, recording.truth)
         alone = observations.with_uv(np.where(right[..., None, None], observations.uv, np.nan))
         for kind, views in ((found, observations), (floor, alone)):
-            for key, values in _errors(scenario, calibrate(scenario.rig, views)).items():
+            for key, values in calibration_errors(scenario, calibrate(scenario.rig, views)).items():
                 kind.setdefault(key, []).extend(values)
     for key in found:
         ratio = np.sqrt(np.mean(np.square(found[key]))) / np.sqrt(np.mean(np.square(floor[key])))

@@ -65,12 +65,17 @@ def _matrix(path: Path, where: str, value: Any, size: int) -> list[float]:
     return [_number(path, where, v, positive=False) for v in flat]
 
 
+def _beside(path: Path, name: str) -> Path:
+    """A file the rig file names: absolute (``~`` expanded) or relative to the rig file's folder."""
+    file = Path(name).expanduser()
+    return file if file.is_absolute() else path.parent / file
+
+
 def _camera_info_intrinsics(path: Path, label: str, file: Any) -> dict[str, Any]:
     """K, D, distortion model and image size of a ROS camera_info YAML named relative to ``path``."""
     if not isinstance(file, str) or not file:
         raise FormatError(path, f"{label} intrinsics camera_info must be a file name, got {file!r}")
-    info_path = Path(file).expanduser()
-    info_path = info_path if info_path.is_absolute() else path.parent / info_path
+    info_path = _beside(path, file)
     if not info_path.is_file():
         raise FormatError(path, f"{label} intrinsics: no such camera_info file {info_path}")
     info = read_yaml(info_path)
@@ -419,8 +424,7 @@ def _mask(path: Path, name: str, value: Any) -> MaskSpec:
     if file is not None:
         if not isinstance(file, str) or not file:
             raise FormatError(path, f"{where} file must be a PNG file name, got {file!r}")
-        file = Path(file).expanduser()
-        file = file if file.is_absolute() else path.parent / file
+        file = _beside(path, file)
         if not file.is_file():
             raise FormatError(path, f"{where}: no such file {file}")
     return MaskSpec(tuple(circles), tuple(rectangles), file)  # type: ignore[arg-type]

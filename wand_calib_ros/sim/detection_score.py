@@ -7,15 +7,20 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from wand_calib_ros.core.judge.metrics import camera_errors, rereference
+from wand_calib_ros.core.model.result import CalibrationResult
 from wand_calib_ros.core.model.rig import RigSpec, WandObservations
 from wand_calib_ros.detection.consistency import settle_labels
 from wand_calib_ros.detection.recording import Detections, detect_recording
 from wand_calib_ros.io.bags import ImageFrame
 from wand_calib_ros.io.images import decode_compressed
 from wand_calib_ros.sim.room import CameraTruth, RoomRecording, clearly_visible
+from wand_calib_ros.sim.scenarios import Scenario
 
 FloatArray = NDArray[np.float64]
 
+#: The error classes a calibration from detections is judged in (against the floor of the right views alone).
+ERROR_CLASSES = ("focal", "pp", "E_r", "E_t", "curve")
 #: A returned view is right when each of its points is within this distance of its LED's truth (px).
 RIGHT_PX = 3.0
 #: A returned view belongs to the image whose stamp is within this of its own (s).
@@ -158,3 +163,20 @@ def detect_room_recording(recording: RoomRecording, rig: RigSpec) -> tuple[WandO
     detections = detect_recording(frames, rig)
     observations, _ = settle_labels(rig, detections)
     return observations, detections
+
+
+def calibration_errors(scenario: Scenario, result: CalibrationResult) -> dict[str, list[float]]:
+    """Per :data:`ERROR_CLASSES` the errors of a calibration against the scenario's truth: focal, principal
+    point and curve (px) of every camera, E_r (deg) and E_t of every camera but the reference."""
+    names = [c.spec.name for c in scenario.cameras]
+    poses = rereference({n: result.camera(n).pose for n in names}, names[0])
+    out: dict[str, list[float]] = {k: [] for k in ERROR_CLASSES}
+    for c, camera in enumerate(scenario.cameras):
+        e = camera_errors(result.camera(camera.spec.name).model, poses[camera.spec.name], camera.model, camera.pose)
+        out["focal"].append(e.focal_px)
+        out["pp"].append(e.principal_point_px)
+        out["curve"].append(e.curve_px)
+        if c:
+            out["E_r"].append(e.rotation_deg)
+            out["E_t"].append(e.translation)
+    return out
