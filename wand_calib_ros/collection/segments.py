@@ -43,13 +43,11 @@ class StampJump:
         camera: its name.
         kind: "back", "ahead" (its stamps against their arrivals) or "unstamped" (stamps of 0).
         jump_s: how far the stamps moved against the time between arrivals, s (0 for "unstamped").
-        shift_s: what is now added to its stamps, s.
     """
 
     camera: str
     kind: str
     jump_s: float
-    shift_s: float
 
     def describe(self) -> str:
         """One line for the log."""
@@ -98,7 +96,7 @@ class StampSegments:
         if stamp_ns <= 0:
             if not state.unstamped:
                 state.unstamped = True
-                jump = StampJump(camera, "unstamped", 0.0, 0.0)
+                jump = StampJump(camera, "unstamped", 0.0)
             stamp_ns = self._rig_time(camera, arrival_ns) - state.shift_ns
         elif state.stamp_ns is not None and state.continuous_ns is not None:
             expected = state.continuous_ns + (arrival_ns - state.arrival_ns)
@@ -110,7 +108,7 @@ class StampSegments:
                 shift = self._shared_shift(expected - stamp_ns, arrival_ns)
                 state.shift_ns, state.segments = shift, state.segments + 1
                 state.recent.clear()
-                jump = StampJump(camera, "back" if off < 0 else "ahead", off / 1e9, shift / 1e9)
+                jump = StampJump(camera, "back" if off < 0 else "ahead", off / 1e9)
         continuous = stamp_ns + state.shift_ns
         self._count_drops(state, continuous)
         state.stamp_ns, state.continuous_ns, state.arrival_ns = stamp_ns, continuous, arrival_ns

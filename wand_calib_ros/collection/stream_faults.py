@@ -62,7 +62,6 @@ class _Camera:
     arrived_ns: int | None = None
     silent_since_ns: int | None = None  # when it was said silent (its last arrival), until it sends again
     problems: dict[str, tuple[int, str]] = field(default_factory=dict)  # reason -> (last arrival, text)
-    said: set[str] = field(default_factory=set)
     drops_said: bool = False
 
 
@@ -92,8 +91,7 @@ class StreamFaults:
             said.append(Said("info", f"{camera}: images again after {gone:.1f} s without"))
             state.silent_since_ns = None
         continued, jump = self.segments.continuous(camera, stamp_ns, arrival_ns)
-        if jump is not None and (jump.kind != "unstamped" or "unstamped" not in state.said):
-            state.said.add(jump.kind)
+        if jump is not None:  # (each jump once: the segments say an unstamped camera once)
             said.append(Said("warning", jump.describe()))
         state.arrived_ns = arrival_ns
         self._first_ns = arrival_ns if self._first_ns is None else self._first_ns

@@ -99,10 +99,7 @@ def run(args: argparse.Namespace) -> int:
         raise WandCalibError("--sync-tolerance-ms must be 0 or more and --debug-every at least 1")
     cv2.setNumThreads(1)  # per-image work is small: OpenCV's thread pool only adds overhead here
     rig = load_rig(args.cameras)
-    masks = {
-        name: mask_of(spec, rig.cameras[rig.camera_names.index(name)].image_size)
-        for name, spec in load_camera_masks(args.cameras).items()
-    }
+    masks = {name: mask_of(spec, rig.camera(name).image_size) for name, spec in load_camera_masks(args.cameras).items()}
     check_writable([args.output])  # before reading the bag
     topics = camera_topics(args, rig)
     started = time.perf_counter()

@@ -268,7 +268,7 @@ class CollectorNode(Node):
     def _given_masks(self, cameras_file: Path) -> dict[str, Mask]:
         """Per camera the rig file's mask and the ones /take_mask took for this collection (kept beside it)."""
         masks = {
-            name: mask_of(spec, self.rig.cameras[self.rig.camera_names.index(name)].image_size)
+            name: mask_of(spec, self.rig.camera(name).image_size)
             for name, spec in load_camera_masks(cameras_file).items()
         }
         for spec in self.rig.cameras:
@@ -289,7 +289,7 @@ class CollectorNode(Node):
             taking = stream.taking_mask
             blobs, detection, reason = stream.detect(pixels, encoding, stamp_ns)
             if reason is not None:
-                size = self.rig.cameras[self.rig.camera_names.index(camera)].image_size
+                size = self.rig.camera(camera).image_size
                 problem = image_problem(reason, None if pixels is None else pixels.shape, encoding, size)
                 said += self.faults.unusable(camera, reason, problem, arrival)
             self.received[camera] += 1

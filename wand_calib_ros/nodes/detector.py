@@ -76,7 +76,7 @@ class DetectorNode(Node):
         if name not in rig.camera_names:
             raise SettingsError(f"parameter camera: {name!r} is not in {cameras_file} ({', '.join(rig.camera_names)})")
         endpoint = load_camera_endpoints(cameras_file)[name]
-        spec = rig.cameras[rig.camera_names.index(name)]
+        spec = rig.camera(name)
         masks = load_camera_masks(cameras_file)
         mask = mask_of(masks[name], spec.image_size) if name in masks else None
         hold = int(values["label_hold_ms"] * 1e6)
