@@ -8,6 +8,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from wand_calib_ros.core.adjust.narrow_field import narrow_cameras
 from wand_calib_ros.core.adjust.timing import align_views, offset_warnings, rate_warnings, timing_input
 from wand_calib_ros.core.after.world_frame import floor_of
 from wand_calib_ros.core.errors import CalibrationFailedError, CoreError, InsufficientDataError
@@ -124,7 +125,7 @@ def calibrate(
         init = replace(init, models=model_starts(rig, init.models))
         views, start_uv = uv, aligned
         if rig.wand.n_points == 2:  # one label per marker in every view and over time, from the started cameras
-            views = consistent_labels(init.models, init.poses, uv)
+            views = consistent_labels(init.models, init.poses, uv, narrow_cameras(rig))
             start_uv = align_views(views, line)
         result = refine_calibration(
             rig,
@@ -137,8 +138,7 @@ def calibrate(
             timing=replace(timing, line=line),
             start_uv=start_uv,
         )
-        check_result(rig, result)
-        return result, views
+        return replace(result, warnings=(*result.warnings, *check_result(rig, result))), views
 
     if options.start is not None:
         result, uv = solve(_warm(rig, reference, options.start))

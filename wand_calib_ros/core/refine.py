@@ -44,12 +44,24 @@ from wand_calib_ros.core.adjust.gating import (
     subset_state,
 )
 from wand_calib_ros.core.adjust.model_order import (
+    FixedParameters,
     OrderOnAllPlacements,
+    Pinned,
     adjust_with_model_selection,
     free_mask,
     held_intrinsics,
     low_order,
     low_order_mask,
+)
+from wand_calib_ros.core.adjust.narrow_field import (
+    MOUNTING_TOLERANCE_MM,
+    PRINCIPAL_POINT,
+    determined_by_views,
+    field_of_view_deg,
+    narrow_cameras,
+    narrow_pins,
+    pinhole_at_centre,
+    views_std,
 )
 from wand_calib_ros.core.adjust.placements import fit_placements, triangulate_placements, unprojectable
 from wand_calib_ros.core.adjust.timing import (
@@ -115,8 +127,13 @@ def refine_calibration(
     """
     wand = rig.wand
     n_cameras = len(rig.cameras)
+    narrow = narrow_cameras(rig)  # pinholes, their principal point held at the centre (at a prior)
+    pinned = narrow_pins(rig, narrow) if narrow.any() else None
+    models = tuple(pinhole_at_centre(m) if narrow[c] else m for c, m in enumerate(models))
     full = default_free_mask(n_cameras, reference, models)
     full[np.ix_(held_intrinsics(rig), INTRINSICS)] = False
+    if pinned is not None:
+        full &= ~pinned.mask
     models = tuple(  # given intrinsics start as given; estimated ones from the low-order model
         m if spec.intrinsics is not None else low
         for m, low, spec in zip(models, low_order(models), rig.cameras, strict=True)
@@ -149,7 +166,7 @@ def refine_calibration(
         clocks = refresh_motion(clocks, placed, choose=True)
 
     # 2. Least squares on the clean data, dropping the distortion terms (and the timing) the data do not support.
-    result, fixed = adjust_with_model_selection(rig, uv_used, state, reference, clocks, used)
+    result, fixed = adjust_with_model_selection(rig, uv_used, state, reference, clocks, used, pinned)
     # ... in plumb_bob instead for the conventional cameras whose model the rig leaves open, where the data say so
     result, fixed = choose_models(rig, uv_used, result, fixed, reference, clocks, used)
     free = free_mask(n_cameras, reference, fixed)
@@ -178,11 +195,15 @@ def refine_calibration(
         held = fixed.timing.copy()
         held[:, 1] &= free[:, READOUT]  # (a readout the bound held at zero)
         fixed = replace(fixed, timing=held)
+    problem = BundleProblem.from_dense(wand, uv_used, clocks.placements(used))
+    narrow_notes: list[str] = []
+    if fixed.pinned is not None:
+        result, fixed, narrow_notes = _narrow_principal_points(rig, problem, result, fixed, reference)
     check_geometry(result.state.points(wand))
     check_camera_views(rig, uv, uv_used)
     check_uncertainty(rig, result)
     points = np.isfinite(uv_used[..., 0]).sum(axis=(0, 2))  # (C,) image points per camera
-    warnings = check_given_intrinsics(rig, result, free_mask(n_cameras, reference, fixed), points)
+    warnings = narrow_notes + check_given_intrinsics(rig, result, free_mask(n_cameras, reference, fixed), points)
     for model, spec in zip(result.state.models, rig.cameras, strict=True):
         if turns_over_in_image(model, spec.max_view_angle):
             warnings.append(
@@ -191,7 +212,6 @@ def refine_calibration(
             )
     seen = np.any(np.isfinite(uv[used]), axis=(2, 3))
     rejected_views = (seen & ~np.any(np.isfinite(uv_used), axis=(2, 3))).sum(axis=0)
-    problem = BundleProblem.from_dense(wand, uv_used, clocks.placements(used))
     return assemble(
         rig,
         uv_used,
@@ -206,6 +226,47 @@ def refine_calibration(
         warnings,
         clocks,
     )
+
+
+def _narrow_principal_points(
+    rig: RigSpec, problem: BundleProblem, result: BundleResult, fixed: FixedParameters, reference: int
+) -> tuple[BundleResult, FixedParameters, list[str]]:
+    """The narrow cameras' principal points: estimated where the views determine them better than the
+    mounting tolerance (the adjustment repeated with them free), else held at the image centre with the
+    tolerance as a prior in the covariance. Returns the result, its fixed parameters and what each narrow
+    camera held, in words."""
+    assert fixed.pinned is not None and result.system is not None  # narrow cameras have estimated intrinsics
+    n_cameras = len(rig.cameras)
+    pinned = fixed.pinned
+    views = views_std(result.system, free_mask(n_cameras, reference, fixed), result.sigma, pinned)
+    freed = determined_by_views(views, pinned)
+    if freed.any():
+        mask, std = pinned.mask.copy(), pinned.std.copy()
+        mask[np.ix_(freed, PRINCIPAL_POINT)] = False
+        std[np.ix_(freed, PRINCIPAL_POINT)] = 0.0
+        pinned = Pinned(mask, std)
+        fixed = replace(fixed, pinned=pinned)
+        result = bundle_adjust(result.state, problem, free_mask(n_cameras, reference, fixed))
+    assert result.system is not None
+    covariance = result.system.covariance(free_mask(n_cameras, reference, fixed), result.sigma, pinned.std)
+    std = np.sqrt(np.clip(np.diag(covariance), 0.0, None)).reshape(n_cameras, -1)
+    result = replace(result, camera_covariance=covariance, camera_std=std)
+    notes = []
+    for c in np.flatnonzero(pinned.cameras()):
+        spec, model = rig.cameras[c], result.state.models[c]
+        across = field_of_view_deg(replace(spec, nominal_focal_mm=float(model.k[0])))  # as calibrated
+        field = f"{spec.name}: a narrow field of view ({across:.1f} deg across)"
+        if freed[c]:
+            notes.append(f"{field}: calibrated as a pinhole, its distortion held at zero (the field shows none)")
+            continue
+        notes.append(
+            f"{field}: calibrated as a pinhole, its distortion held at zero and its principal point at the image "
+            f"centre +-{pinned.std[c, PRINCIPAL_POINT[0]]:.0f} px (a lens mount's tolerance of "
+            f"{MOUNTING_TOLERANCE_MM:g} mm; the views alone fix it only to +-{float(np.max(views[c])):.0f} px, "
+            "and the standard deviations of its pose include that): give its intrinsics (a board calibration) "
+            "for a measured one"
+        )
+    return result, fixed, notes
 
 
 def coarse_subset(keep: NDArray[np.int64], n_placements: int) -> NDArray[np.int64]:

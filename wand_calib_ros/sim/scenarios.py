@@ -401,6 +401,68 @@ def sparse_scenario(*, n_placements: int = 100) -> Scenario:
     )
 
 
+def narrow_scenario(
+    *, n_placements: int = 600, true_focal_mm: float = 250.0, nominal_focal_mm: float = 100.0
+) -> Scenario:
+    """Four long-lens cameras about 3 degrees across (1280x800, 10 um pixels, 250 mm lenses: fx 25,000 px), as
+    particle-tracking rigs have, 1.5 m from a 50 x 30 x 50 mm volume on a 60-degree arc, with a two-ball wand
+    of 20 mm; the rig description's nominal focal (``nominal_focal_mm``, default 100 mm) 2.5x below the truth.
+
+    The lenses are distortion-free pinholes with principal points 10-25 px off the image centre: at 3 degrees
+    the views determine the principal points only weakly (a shift trades with the camera's rotation).
+    """
+    target = np.zeros(3)
+    world_poses, cameras = [], []
+    for azimuth, elevation in ((-30.0, 12.0), (-10.0, -8.0), (10.0, 10.0), (30.0, -12.0)):
+        a, e = np.radians(azimuth), np.radians(elevation)
+        centre = 1500.0 * np.array([np.sin(a) * np.cos(e), -np.sin(e), -np.cos(a) * np.cos(e)])
+        world_poses.append(_look_at(centre, target, np.array([0.0, 1.0, 0.0])))
+    poses = _relative_to_first(world_poses)
+    offsets = ((18.0, -12.0), (-22.0, 9.0), (11.0, 20.0), (-15.0, -16.0))
+    for i, pose in enumerate(poses):
+        view_deg = float(np.degrees(np.arctan(np.hypot(6.4, 4.0) / nominal_focal_mm)))
+        spec = CameraSpec(
+            f"cam{i}", (1280, 800), (10.0, 10.0), nominal_focal_mm, round(view_deg, 2), lens="conventional"
+        )
+        focal_mm = true_focal_mm * (1.0 + 0.004 * (i - 1.5))
+        focal = focal_mm * spec.m[0]
+        camera_matrix = np.array([[focal, 0.0, 639.5 + offsets[i][0]], [0.0, focal, 399.5 + offsets[i][1]], [0, 0, 1]])
+        model = from_opencv_pinhole(camera_matrix, np.zeros(5), spec.m, spec.image_size, PLUMB_BOB)
+        cameras.append(TrueCamera(spec, model, pose, np.radians(2.0)))
+    corners = np.array([[x, y, z] for x in (-25.0, 25.0) for y in (-15.0, 15.0) for z in (-25.0, 25.0)])
+    in_first = world_poses[0].apply(corners)
+    volume = np.stack([in_first.min(axis=0), in_first.max(axis=0)])
+    return Scenario("narrow4", WandSpec((0.0, 20.0)), tuple(cameras), volume, n_placements)
+
+
+#: The action cameras' lenses as their user's camera profile gives them: OpenCV (k1, k2, p1, p2, k3).
+_ACTION_LENSES = ((-0.24, 0.07, 4e-4, -3e-4, -0.008), (-0.23, 0.06, -2e-4, 5e-4, -0.006))
+
+
+def action_pair_scenario(*, n_placements: int = 322) -> Scenario:
+    """Two action cameras (2704x1520, 1.55 um pixels, fx about 2,320 px, plumb_bob) filming a 300 mm
+    two-marker wand far away, as field recordings of animal flight have it: 6-13 m from the first camera
+    (the wand 20-130 px long there, shorter when it points at the camera), 17-23 m from the second (25-45
+    px). Their intrinsics are known from the user's camera profile (give them: ``_given`` in the tests).
+    """
+    target = np.array([0.0, 0.0, 9000.0])
+    world_poses = [
+        _look_at(np.zeros(3), target, np.array([0.0, 1.0, 0.0])),
+        _look_at(np.array([12000.0, -800.0, -5000.0]), target, np.array([0.0, 1.0, 0.0])),
+    ]
+    poses = _relative_to_first(world_poses)
+    cameras = []
+    for i, (pose, lens) in enumerate(zip(poses, _ACTION_LENSES, strict=True)):
+        spec = CameraSpec(f"cam{i}", (2704, 1520), (1.55, 1.55), 3.6, 45.0, lens="conventional")
+        focal = 2323.0 + 14.0 * i
+        centre = (1351.5 + 11.0 - 20.0 * i, 759.5 - 7.0 + 12.0 * i)
+        camera_matrix = np.array([[focal, 0.0, centre[0]], [0.0, focal, centre[1]], [0.0, 0.0, 1.0]])
+        model = from_opencv_pinhole(camera_matrix, np.array(lens), spec.m, spec.image_size, PLUMB_BOB)
+        cameras.append(TrueCamera(spec, model, pose, np.radians(42.0)))
+    volume = np.array([[-2500.0, -1200.0, 5000.0], [2500.0, 1200.0, 11000.0]])
+    return Scenario("action2", WandSpec((0.0, 300.0)), tuple(cameras), volume, n_placements)
+
+
 SCENARIOS: dict[str, Callable[..., Scenario]] = {
     "paper": paper_fisheye_scenario,
     "paper3": paper_three_camera_scenario,
@@ -411,6 +473,8 @@ SCENARIOS: dict[str, Callable[..., Scenario]] = {
     "mocap16": mocap_scenario,
     "stage64": stage_scenario,
     "sparse4": sparse_scenario,
+    "narrow4": narrow_scenario,
+    "action2": action_pair_scenario,
 }
 
 

@@ -42,3 +42,28 @@ def test_badly_scaled_steps_are_solved_exactly_over_the_free_unknowns() -> None:
         rhs[3] = 0.0  # (its equation is not solved: its unknown is held)
         solved = solve_free(s, rhs, free)
         assert np.allclose(solved * d, x * d, rtol=0.0, atol=1e-9)
+
+
+def test_a_prior_adds_its_information_to_the_parameters_it_holds() -> None:
+    """CameraSystem.covariance with a prior: sigma^2 (S + sigma^2 / prior^2)^-1 over the free parameters and
+    those held at a prior; a parameter the data do not see at all gets the prior's own variance."""
+    from wand_calib_ros.core.adjust.bundle_adjustment import N_CAMERA_PARAMS, CameraSystem
+
+    rng = np.random.default_rng(5)
+    columns = np.arange(13)  # the geometric parameters of one camera
+    jacobian = rng.normal(size=(40, 13))
+    jacobian[:, 6] = 0.0  # v0 unseen by the data
+    matrix = jacobian.T @ jacobian
+    system = CameraSystem(columns, matrix, np.zeros(13))
+    free = np.zeros((1, N_CAMERA_PARAMS), dtype=bool)
+    free[0, [0, 7, 8, 9]] = True  # k1 and the rotation
+    prior = np.zeros((1, N_CAMERA_PARAMS))
+    prior[0, [5, 6]] = 15.0  # u0, v0 held at a prior of 15 px
+    sigma = 0.5
+    covariance = system.covariance(free, sigma, prior)
+    index = [0, 5, 6, 7, 8, 9]
+    expected = sigma**2 * np.linalg.inv(matrix[np.ix_(index, index)] + np.diag([0, 1, 1, 0, 0, 0]) * sigma**2 / 225.0)
+    rounding = 1e-12 * float(np.max(np.abs(expected)))  # the inverse's rounding (condition number ~1e3 here)
+    assert np.allclose(covariance[np.ix_(index, index)], expected, rtol=1e-9, atol=rounding)
+    assert np.isclose(np.sqrt(covariance[6, 6]), 15.0, rtol=1e-12)  # only the prior knows v0
+    assert np.all(covariance[np.ix_([1, 2, 3], [1, 2, 3])] == 0.0)  # neither free nor at a prior

@@ -28,5 +28,5 @@ def test_a_narrow_camera_is_told_to_give_its_focal_and_a_wide_one_to_wave_more()
     with pytest.raises(DegenerateDataError, match=r"camera 'cam0': .* wave the wand through more of its view"):
         _undetermined(wide)
     narrow = replace(wide, nominal_focal_mm=43.0, max_view_angle_deg=1.5)
-    with pytest.raises(DegenerateDataError, match=r"field of view is narrow \(3\.0 deg across\): give its focal"):
+    with pytest.raises(DegenerateDataError, match=r"field of view is narrow \(6\.0 deg across\): give its focal"):
         _undetermined(narrow)

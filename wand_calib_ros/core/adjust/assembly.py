@@ -54,12 +54,20 @@ def radial_std_px(model: CameraModel, covariance: FloatArray, theta: float) -> f
 
 
 def coverage_warnings(
-    spec: CameraSpec, model: CameraModel, max_theta: float, result: BundleResult, camera: int, uv: FloatArray
+    spec: CameraSpec,
+    model: CameraModel,
+    max_theta: float,
+    result: BundleResult,
+    camera: int,
+    uv: FloatArray,
+    pinned: bool = False,
 ) -> list[str]:
     """Plain-language warnings about what one camera's data leave weak.
 
     Args:
         uv: (P, 3, 2) the camera's points in the adjustment (NaN where not seen).
+        pinned: a narrow camera, its distortion and principal point held (said with them): no warnings
+            about its curve and principal point.
     """
     out = []
     points = uv.reshape(-1, 2)
@@ -72,7 +80,7 @@ def coverage_warnings(
             f"{spec.name}: the wand covered only {100 * covered:.0f} % of the image ({COVERAGE_GRID}x{COVERAGE_GRID} "
             "cells); wave it through the rest of the view"
         )
-    if spec.holds_intrinsics:  # given and held: nothing about its lens is extrapolated from these views
+    if spec.holds_intrinsics or pinned:  # given and held: nothing about its lens is extrapolated from these views
         return out
     band = radial_std_px(model, result.camera_block(camera, slice(0, 5)), max_theta)
     if band > WEAK_CURVE_PX:
@@ -135,6 +143,7 @@ def assemble(
     state = result.state
     max_theta = max_off_axis(result, problem)
     free = free_mask(problem.n_cameras, reference, fixed)
+    reported = free if fixed.pinned is None else free | (fixed.pinned.std > 0)  # (and those held at a prior)
     n_cameras = problem.n_cameras
     counts = np.bincount(problem.camera, minlength=n_cameras)
     squares = np.bincount(problem.camera, np.sum(result.residuals**2, axis=1), minlength=n_cameras)
@@ -144,8 +153,9 @@ def assemble(
     view_counts = np.bincount(blocks % n_cameras, minlength=n_cameras)
     cameras = []
     for c, spec in enumerate(rig.cameras):
-        std = {name: float(result.camera_std[c, i]) for i, name in enumerate(CAMERA_PARAM_NAMES) if free[c, i]}
-        warnings.extend(coverage_warnings(spec, state.models[c], max_theta[c], result, c, uv[:, c]))
+        std = {name: float(result.camera_std[c, i]) for i, name in enumerate(CAMERA_PARAM_NAMES) if reported[c, i]}
+        pinned = fixed.pinned is not None and bool(fixed.pinned.cameras()[c])
+        warnings.extend(coverage_warnings(spec, state.models[c], max_theta[c], result, c, uv[:, c], pinned))
         views = int(view_counts[c])
         if rejected_views[c]:
             warnings.append(

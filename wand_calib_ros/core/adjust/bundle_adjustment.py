@@ -282,13 +282,24 @@ class CameraSystem:
         delta[:, self.columns] = step.reshape(n_cameras, self.columns.size)
         return delta
 
-    def covariance(self, free: NDArray[np.bool_], sigma: float) -> FloatArray:
-        """(C*20, C*20) sigma^2 S^-1 over the ``free`` (C, 20) camera parameters (0 rows and columns elsewhere)."""
+    def covariance(self, free: NDArray[np.bool_], sigma: float, prior_std: FloatArray | None = None) -> FloatArray:
+        """(C*20, C*20) sigma^2 S^-1 over the ``free`` (C, 20) camera parameters (0 rows and columns elsewhere).
+
+        With ``prior_std`` (C, 20), the parameters with a positive one are estimated too, each with a
+        Gaussian prior of that standard deviation (in its own unit) around its value: sigma^2 (S + sigma^2
+        diag(1 / prior_std^2))^-1 over the free and those.
+        """
         n_cameras = free.shape[0]
-        free_flat = free[:, self.columns].reshape(-1)
+        with_prior = free if prior_std is None else free | (prior_std > 0)
+        free_flat = with_prior[:, self.columns].reshape(-1)
         carried = (np.arange(n_cameras)[:, None] * N_CAMERA_PARAMS + self.columns[None, :]).reshape(-1)[free_flat]
+        matrix = self.matrix[np.ix_(free_flat, free_flat)]
+        if prior_std is not None:
+            std = prior_std[:, self.columns].reshape(-1)[free_flat]
+            information = np.where(std > 0, sigma**2 / np.where(std > 0, std, 1.0) ** 2, 0.0)
+            matrix = matrix + np.diag(information)
         covariance = np.zeros((n_cameras * N_CAMERA_PARAMS,) * 2)
-        covariance[np.ix_(carried, carried)] = scaled_inverse(self.matrix[np.ix_(free_flat, free_flat)])
+        covariance[np.ix_(carried, carried)] = scaled_inverse(matrix)
         return covariance * sigma**2
 
 

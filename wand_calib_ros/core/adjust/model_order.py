@@ -9,7 +9,7 @@ The pinhole models' tangential terms t1, t2 are not tested: they are what those 
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -96,6 +96,25 @@ def low_order_mask(models: tuple[CameraModel, ...], free: NDArray[np.bool_]) -> 
 
 
 @dataclass(frozen=True, eq=False)
+class Pinned:
+    """Camera parameters held at their start whatever the model order decides (a narrow field's principal
+    point and distortion, :mod:`~wand_calib_ros.core.adjust.narrow_field`).
+
+    Attributes:
+        mask: (C, 20) the parameters held.
+        std: (C, 20) the standard deviation of the prior they are held at (0: held exactly); the
+            reported covariance includes it.
+    """
+
+    mask: NDArray[np.bool_]
+    std: FloatArray
+
+    def cameras(self) -> NDArray[np.bool_]:
+        """(C,) the cameras with a parameter held."""
+        return np.asarray(self.mask.any(axis=1))
+
+
+@dataclass(frozen=True, eq=False)
 class FixedParameters:
     """Distortion terms held at zero per camera (indices into the camera parameter vector: k1..k5 are
     0..4, the lens terms from :data:`~wand_calib_ros.core.adjust.bundle_adjustment.LENS` on), and the timing
@@ -106,12 +125,18 @@ class FixedParameters:
         timing: (C, 2) whether each camera's time offset and readout time are estimated.
         held: (C,) cameras whose given intrinsics are held fixed (all of them).
         exists: (C, 20) the parameters each camera's model has (None: the fisheye model's, every camera).
+        pinned: parameters held at their start whatever the order (None: none).
     """
 
     per_camera: tuple[tuple[int, ...], ...]
     timing: NDArray[np.bool_]
     held: NDArray[np.bool_]
     exists: NDArray[np.bool_] | None = None
+    pinned: Pinned | None = None
+
+    def ordered(self) -> NDArray[np.bool_]:
+        """(C,) the cameras whose model order is decided (neither given and held nor pinned)."""
+        return ~self.held if self.pinned is None else ~self.held & ~self.pinned.cameras()
 
 
 def held_intrinsics(rig: RigSpec) -> NDArray[np.bool_]:
@@ -126,6 +151,8 @@ def free_mask(n_cameras: int, reference: int, fixed: FixedParameters) -> NDArray
         free[camera, list(indices)] = False
     free[np.ix_(fixed.held, INTRINSICS)] = False
     free[:, TIMING] = fixed.timing
+    if fixed.pinned is not None:
+        free &= ~fixed.pinned.mask
     if fixed.exists is None:
         free[:, LENS] = False
         return free
@@ -144,7 +171,13 @@ def zeroed(model: CameraModel, indices: tuple[int, ...] | list[int]) -> CameraMo
 
 
 def adjust_with_model_selection(
-    rig: RigSpec, uv: FloatArray, initial: BundleState, reference: int, clocks: ClockModel, used: NDArray[np.int64]
+    rig: RigSpec,
+    uv: FloatArray,
+    initial: BundleState,
+    reference: int,
+    clocks: ClockModel,
+    used: NDArray[np.int64],
+    pinned: Pinned | None = None,
 ) -> tuple[BundleResult, FixedParameters]:
     """Bundle-adjust with every k3..k5 (and the timing) free, then drop what the data do not support and re-adjust.
 
@@ -162,10 +195,11 @@ def adjust_with_model_selection(
 
     Args:
         uv: (P, C, 3, 2) the placements to adjust, ``used`` (P,) their indices in the timeline.
+        pinned: parameters held at their start (no order decided for their cameras).
     """
     problem = BundleProblem.from_dense(rig.wand, uv, clocks.placements(used))
     exists = parameter_mask(initial.models)
-    fixed = FixedParameters(tuple(() for _ in rig.cameras), clocks.free.copy(), held_intrinsics(rig), exists)
+    fixed = FixedParameters(tuple(() for _ in rig.cameras), clocks.free.copy(), held_intrinsics(rig), exists, pinned)
     start = initial
     choose: OrderOnAllPlacements | None = OrderOnAllPlacements(rig, fixed, reference, len(uv))
     while True:
@@ -176,7 +210,7 @@ def adjust_with_model_selection(
         per_camera = list(fixed.per_camera)
         models = list(result.state.models)
         for c, spec in enumerate(rig.cameras):
-            if not fixed.held[c]:  # given intrinsics held fixed have no model order to decide
+            if fixed.ordered()[c]:  # given intrinsics held fixed, or pinned, have no model order to decide
                 covariance = intrinsic_covariance(result.camera_covariance, c)
                 per_camera[c], models[c] = reduce_radial(spec, models[c], covariance, per_camera[c])
         timing = reduce_timing(clocks, result, fixed.timing)
@@ -186,7 +220,7 @@ def adjust_with_model_selection(
         state = result.state
         values = state.camera_timing.copy()
         values[fixed.timing & ~timing] = clocks.start[fixed.timing & ~timing]
-        fixed = FixedParameters(tuple(per_camera), timing, fixed.held, fixed.exists)
+        fixed = replace(fixed, per_camera=tuple(per_camera), timing=timing)
         start = BundleState(zero_fixed(tuple(models), fixed), state.poses, state.wand_a, state.wand_direction, values)
 
 
@@ -236,15 +270,16 @@ class OrderOnAllPlacements:
         fixed, n_cameras, n_placements = self.fixed, len(self.rig.cameras), state.wand_a.shape[0]
         significance = SIGNIFICANCE * np.sqrt(max(n_placements / self.coarse_placements, 1.0))
         release = free_mask(n_cameras, self.reference, fixed)
+        ordered = fixed.ordered()
         for c, model in enumerate(state.models):  # k3..k5 (the pinhole models' k3, k4 and rational terms)
-            if not fixed.held[c]:
+            if ordered[c]:
                 release[c, list(ORDER_TERMS[model.distortion_model])] = True
         delta = system.step(release)
         covariance = system.covariance(release, sigma)
         values = np.array([intrinsics_of(model) for model in state.models])  # (C, 12)
         per_camera = list(fixed.per_camera)
         for c, spec in enumerate(self.rig.cameras):
-            if fixed.held[c]:
+            if not ordered[c]:
                 continue
             try:
                 released = with_intrinsics(state.models[c], values[c] + delta[c, INTRINSICS])
@@ -255,7 +290,7 @@ class OrderOnAllPlacements:
                 per_camera[c] = decided
         if per_camera == list(fixed.per_camera):
             return None
-        self.decision = FixedParameters(tuple(per_camera), fixed.timing, fixed.held, fixed.exists)
+        self.decision = replace(fixed, per_camera=tuple(per_camera))
         log.info(
             "model order chosen on all %d placements at the adjustment's start: %s",
             n_placements,
@@ -265,7 +300,7 @@ class OrderOnAllPlacements:
         for c, model in enumerate(state.models):
             terms = list(ORDER_TERMS[model.distortion_model])
             moves[c, terms] = -values[c, [_position(i) for i in terms]]
-        moves[fixed.held] = 0.0
+        moves[~ordered] = 0.0
         return free_mask(n_cameras, self.reference, self.decision), moves
 
 
@@ -273,8 +308,8 @@ def _orders_text(rig: RigSpec, fixed: FixedParameters) -> str:
     """The radial terms fixed at zero, cameras grouped (``radial terms fixed at 0: k4, k5 (14 cameras); k5
     (cam01, cam04)``)."""
     groups: dict[tuple[int, ...], list[str]] = {}
-    for spec, order, held in zip(rig.cameras, fixed.per_camera, fixed.held, strict=True):
-        if not held:
+    for spec, order, decided in zip(rig.cameras, fixed.per_camera, fixed.ordered(), strict=True):
+        if decided:
             groups.setdefault(tuple(sorted(order)), []).append(spec.name)
     parts = []
     for order, names in sorted(groups.items(), key=lambda item: -len(item[1])):
@@ -284,7 +319,7 @@ def _orders_text(rig: RigSpec, fixed: FixedParameters) -> str:
     return (
         "radial terms fixed at 0: " + "; ".join(parts)
         if parts
-        else "no order to decide (every camera's intrinsics given)"
+        else "no order to decide (every camera's intrinsics given or held)"
     )
 
 

@@ -131,7 +131,7 @@ def choose_models(
     for c in chosen:
         chosen_models[c] = tested.state.models[c]
     start = replace(tested.state, models=tuple(chosen_models))  # the model order of the chosen decided in plumb_bob
-    return adjust_with_model_selection(rig, uv, start, reference, clocks, used)
+    return adjust_with_model_selection(rig, uv, start, reference, clocks, used, fixed.pinned)
 
 
 def tangential_px(model: CameraModel) -> float:

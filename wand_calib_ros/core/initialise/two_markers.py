@@ -48,6 +48,31 @@ def _pairing_errors(essential: FloatArray, b0: FloatArray, b1: FloatArray) -> tu
     return straight, crossed
 
 
+def affine_epipolar(x0: FloatArray, x1: FloatArray) -> FloatArray:
+    """(5,) the affine epipolar constraint ``a . (u1, v1, u0, v0, 1) = 0`` of two narrow cameras, fitted by
+    total least squares to the (N, 2) pixels ``x0``, ``x1`` of the same points (at a few degrees across a
+    camera is affine to a fraction of a pixel: its epipolar lines are parallel). Scaled so that
+    ``hypot(a0, a1) = 1``: the constraint is then camera 1's pixel distance from the epipolar line."""
+    design = np.concatenate([x1, x0], axis=1)
+    design = design[np.all(np.isfinite(design), axis=1)]
+    centre = design.mean(axis=0)
+    normal = np.linalg.svd(design - centre, full_matrices=False)[2][-1]
+    line = np.r_[normal, -normal @ centre]
+    return np.asarray(line / np.hypot(line[0], line[1]), dtype=np.float64)
+
+
+def _affine_pairing_errors(line: FloatArray, p0: FloatArray, p1: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """(N,) summed distances (px) from the affine epipolar lines of (N, 2, 2) pixels paired as labelled and
+    crosswise."""
+
+    def distance(a: FloatArray, b: FloatArray) -> FloatArray:
+        return np.asarray(np.abs(b @ line[:2] + a @ line[2:4] + line[4]), dtype=np.float64)
+
+    straight = distance(p0[:, 0], p1[:, 0]) + distance(p0[:, 1], p1[:, 1])
+    crossed = distance(p0[:, 0], p1[:, 1]) + distance(p0[:, 1], p1[:, 0])
+    return straight, crossed
+
+
 def continuous_in_image(uv: FloatArray) -> FloatArray:
     """(F, C, 2, 2) views relabelled so that, per camera, each marker moves the shorter way from one
     whole view to the camera's next (frames in time order; harmless for independent placements):
@@ -102,26 +127,39 @@ def match_pair(
     return swapped(uv1, crossed < straight)
 
 
-def consistent_labels(models: tuple[CameraModel, ...], poses: tuple[Pose, ...], uv: FloatArray) -> FloatArray:
+def consistent_labels(
+    models: tuple[CameraModel, ...],
+    poses: tuple[Pose, ...],
+    uv: FloatArray,
+    narrow: NDArray[np.bool_] | None = None,
+) -> FloatArray:
     """(P, C, 2, 2) views relabelled so that a marker has one label in every view of a placement and
     from one placement to the next.
 
     Args:
         models, poses: the cameras' starts (poses X_cam = R X_ref + T).
         uv: (P, C, 2, 2) pixels, each view labelled as its camera liked; NaN where not seen.
+        narrow: (C,) cameras with a narrow field of view: a pair of them is paired by the affine epipolar
+            geometry of its pixels (:func:`affine_epipolar`), which a start's poses hardly fix there.
     """
     out = uv.copy()
     complete = np.all(np.isfinite(uv), axis=(2, 3))  # (P, C)
     reference = np.argmax(complete, axis=1)  # per placement the first camera with a whole view
     bearings = [unproject(models[c], uv[:, c]) for c in range(len(models))]
+    affine = np.zeros(len(models), dtype=bool) if narrow is None else narrow
     for r in range(len(models)):
         for c in range(len(models)):
             rows = np.flatnonzero((reference == r) & complete[:, c] & complete[:, r])
             if c == r or rows.size == 0:
                 continue
-            relative = poses[c].compose(poses[r].inverse())  # camera r's frame to camera c's
-            essential = skew(relative.translation) @ relative.rotation
-            straight, crossed = _pairing_errors(essential, bearings[r][rows], bearings[c][rows])
+            if affine[r] and affine[c]:
+                both = np.flatnonzero(complete[:, c] & complete[:, r])
+                line = affine_epipolar(uv[both, r].mean(axis=1), uv[both, c].mean(axis=1))
+                straight, crossed = _affine_pairing_errors(line, uv[rows, r], uv[rows, c])
+            else:
+                relative = poses[c].compose(poses[r].inverse())  # camera r's frame to camera c's
+                essential = skew(relative.translation) @ relative.rotation
+                straight, crossed = _pairing_errors(essential, bearings[r][rows], bearings[c][rows])
             out[rows, c] = swapped(uv[rows, c], crossed < straight)
     points = triangulate_placements(models, poses, np.where(complete[..., None, None], out, np.nan))  # (P, 2, 3)
     _label_single_markers(models, poses, out, points)

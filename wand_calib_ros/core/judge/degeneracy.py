@@ -10,6 +10,7 @@ from wand_calib_ros.core.adjust.bundle_adjustment import (
     BundleResult,
 )
 from wand_calib_ros.core.adjust.gating import MIN_CAMERA_VIEWS
+from wand_calib_ros.core.adjust.narrow_field import NARROW_FIELD_DEG, field_of_view_deg
 from wand_calib_ros.core.errors import DegenerateDataError, InsufficientDataError
 from wand_calib_ros.core.model.rig import RigSpec
 
@@ -76,11 +77,6 @@ def check_camera_views(rig: RigSpec, uv_seen: FloatArray, uv_used: FloatArray) -
             )
 
 
-#: A camera seeing less than this far off its axis (deg) has a narrow field of view: a wand's views hardly fix its
-#: focal length (long lenses, particle-tracking rigs).
-NARROW_FIELD_DEG = 10.0
-
-
 def check_uncertainty(rig: RigSpec, result: BundleResult) -> None:
     """Refuse a solution whose focal lengths or principal points the data do not determine.
 
@@ -91,12 +87,13 @@ def check_uncertainty(rig: RigSpec, result: BundleResult) -> None:
         focal = result.camera_std[c, 0] / model.k[0]
         centre = float(np.max(result.camera_std[c, 5:7]))
         if not (focal <= MAX_FOCAL_STD and centre <= MAX_CENTRE_STD * spec.image_size[0]):  # NaN: undetermined
-            narrow = spec.max_view_angle_deg < NARROW_FIELD_DEG
+            field = field_of_view_deg(spec)  # a wand's views hardly fix a long lens's focal
+            narrow = field < NARROW_FIELD_DEG
             raise DegenerateDataError(
                 f"camera '{spec.name}': the data do not determine its intrinsics (focal length +-{100 * focal:.0f} %, "
                 f"principal point +-{centre:.0f} px); "
                 + (
-                    f"its field of view is narrow ({2 * spec.max_view_angle_deg:.1f} deg across): give its focal "
+                    f"its field of view is narrow ({field:.1f} deg across): give its focal "
                     f"(intrinsics: K, as a start with fixed: false, or check nominal_focal_mm "
                     f"{spec.nominal_focal_mm:g}), a wand alone hardly fixes it there"
                     if narrow

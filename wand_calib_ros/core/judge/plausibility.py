@@ -15,7 +15,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wand_calib_ros.core.adjust.bundle_adjustment import N_CAMERA_PARAMS, BundleResult
+from wand_calib_ros.core.adjust.narrow_field import NARROW_FIELD_DEG, field_of_view_deg
 from wand_calib_ros.core.errors import PlausibilityError
+from wand_calib_ros.core.judge.degeneracy import MAX_FOCAL_STD
 from wand_calib_ros.core.model.camera_model import CameraModel, to_opencv
 from wand_calib_ros.core.model.result import CalibrationResult
 from wand_calib_ros.core.model.rig import CameraSpec, RigSpec, WandObservations, WandSpec
@@ -34,9 +36,9 @@ WAND_RATIO_VIEWS = 30
 #: Views whose B falls in the same cell of this size (px) count once (a wand held still).
 VIEW_CELL_PX = 20.0
 #: The wand's median distance from a camera, in nominal focal lengths, below which no lens can
-#: have imaged it (the lengths are in another unit), and the distance (mm) beyond which no wand
-#: calibration happens.
-MIN_DISTANCE_FOCALS = 20.0
+#: have imaged it (the lengths are in another unit): twice the focal is life size, and a long lens's nominal
+#: focal may be 3x below its true one; and the distance (mm) beyond which no wand calibration happens.
+MIN_DISTANCE_FOCALS = 2.0
 MAX_DISTANCE_MM = 1e6
 #: Estimated focal over the nominal one: outside these factors the nominal focal or the solution is wrong.
 FOCAL_RANGE = (0.5, 2.0)
@@ -165,18 +167,34 @@ def _distinct_views(uv: FloatArray, measured: NDArray[np.bool_]) -> int:
     return int(np.unique(keys).size)
 
 
-def check_result(rig: RigSpec, result: CalibrationResult) -> None:
+def check_result(rig: RigSpec, result: CalibrationResult) -> list[str]:
     """A calibration's focal lengths, image errors and wand lengths must be those of a real rig.
+
+    A narrow camera's focal (a field under NARROW_FIELD_DEG) beyond FOCAL_RANGE of its nominal one is
+    said, not refused, where the views determine it (to MAX_FOCAL_STD): long lenses are often used with
+    extenders and zooms their data sheet does not name.
+
+    Returns:
+        Warnings (a narrow camera's focal far from its nominal one).
 
     Raises:
         PlausibilityError: naming the camera (or the wand) and the likely cause.
     """
+    warnings = []
     rms = {camera.name: camera.rms_reprojection_px for camera in result.cameras}
     for spec in rig.cameras:
         camera = result.camera(spec.name)
         focal = float(camera.model.k[0])
         estimated = not spec.holds_intrinsics  # given intrinsics were checked with the rig
         if estimated and not FOCAL_RANGE[0] <= focal / spec.nominal_focal_mm <= FOCAL_RANGE[1]:
+            std = camera.parameter_std.get("k1", np.inf) / focal
+            if field_of_view_deg(spec) < NARROW_FIELD_DEG and std <= MAX_FOCAL_STD:
+                warnings.append(
+                    f"{spec.name}: its focal comes out {focal:.4g} mm (fx {focal * float(camera.model.m[0]):.0f} px "
+                    f"+-{100 * std:.2g} %), {focal / spec.nominal_focal_mm:.2g}x the nominal {spec.nominal_focal_mm:g} "
+                    "mm: check nominal_focal_mm and pixel_size_um (an extender or a zoom?)"
+                )
+                continue
             raise PlausibilityError(
                 f"camera '{spec.name}': the calibration puts its focal at {focal:.3g} mm "
                 f"(fx {focal * float(camera.model.m[0]):.0f} px) against the nominal {spec.nominal_focal_mm:g} mm: "
@@ -201,6 +219,7 @@ def check_result(rig: RigSpec, result: CalibrationResult) -> None:
             f"({100 * result.wand_length_rms_mm / rig.wand.L:.0f} %): the scene is not rigid; check L1, L2 "
             f"and that each camera's views are of the same wand at the same time{given}"
         )
+    return warnings
 
 
 def check_given_intrinsics(
