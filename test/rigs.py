@@ -291,3 +291,30 @@ def floor_errors(name: str, *, tool: bool, seeds: range) -> dict[str, float]:
         )
         rows.append(world_errors(scenario, floor.world, floor.models, floor.poses, truth))
     return {key: rms([row[key] for row in rows]) for key in rows[0]}
+
+
+def z_scores(result: CalibrationResult, scenario: Scenario) -> dict[str, list[float]]:
+    """Errors over reported standard deviations, pooled by kind: ``focal`` (k1), ``principal point`` (u0, v0;
+    of the cameras whose intrinsics were estimated), ``rotation`` (the adjustment's left-multiplied update,
+    rx ry rz) and ``translation`` (tx ty tz) of every camera but the reference, in its frame."""
+    from wand_calib_ros.core.model.geometry import rotvec_from_rotation
+
+    reference = result.reference_camera
+    truth = rereference({c.spec.name: c.pose for c in scenario.cameras}, reference)
+    out: dict[str, list[float]] = {"focal": [], "principal point": [], "rotation": [], "translation": []}
+    for camera in scenario.cameras:
+        mine = result.camera(camera.spec.name)
+        std = mine.parameter_std
+        if "k1" in std:
+            out["focal"].append((mine.model.k[0] - camera.model.k[0]) / std["k1"])
+            out["principal point"].extend(
+                (mine.model.principal_point - camera.model.principal_point) / np.array([std["u0"], std["v0"]])
+            )
+        if camera.spec.name != reference:
+            true = truth[camera.spec.name]
+            error = rotvec_from_rotation(mine.pose.rotation @ true.rotation.T)
+            out["rotation"].extend(error / np.array([std["rx"], std["ry"], std["rz"]]))
+            out["translation"].extend(
+                (mine.pose.translation - true.translation) / np.array([std["tx"], std["ty"], std["tz"]])
+            )
+    return out

@@ -8,7 +8,7 @@ from dataclasses import replace
 from functools import cache
 
 import numpy as np
-from rigs import errors_against_truth, in_truth_frame, rms, scenario_data
+from rigs import errors_against_truth, in_truth_frame, rms, scenario_data, z_scores
 
 from wand_calib_ros.core.adjust.bundle_adjustment import (
     BundleProblem,
@@ -24,7 +24,6 @@ from wand_calib_ros.core.adjust.narrow_field import (
     narrow_cameras,
     pinhole_at_centre,
 )
-from wand_calib_ros.core.model.geometry import rotvec_from_rotation
 from wand_calib_ros.core.pipeline import calibrate
 
 SEEDS = range(8)
@@ -49,20 +48,7 @@ def _run(seed: int) -> tuple[dict[str, float], dict[str, float], dict[str, list[
     state = BundleState(starts, tuple(c.pose for c in scenario.cameras), data.wand_a, data.wand_direction)
     floor = bundle_adjust(state, BundleProblem.from_dense(scenario.wand, data.observations.uv), free)
     floors = errors_against_truth(scenario, held, floor.state.models, floor.state.poses)
-    z: dict[str, list[float]] = {"focal": [], "principal point": [], "rotation": [], "translation": []}
-    for c, camera in enumerate(scenario.cameras):
-        mine = result.camera(camera.spec.name)
-        std = mine.parameter_std
-        z["focal"].append((mine.model.k[0] - camera.model.k[0]) / std["k1"])
-        z["principal point"].extend(
-            (mine.model.principal_point - camera.model.principal_point) / np.array([std["u0"], std["v0"]])
-        )
-        if c > 0:  # the rotation error as the adjustment's update (left-multiplied), the translation in mm
-            error = rotvec_from_rotation(poses[c].rotation @ camera.pose.rotation.T)
-            z["rotation"].extend(error / np.array([std["rx"], std["ry"], std["rz"]]))
-            z["translation"].extend(
-                (poses[c].translation - camera.pose.translation) / np.array([std["tx"], std["ty"], std["tz"]])
-            )
+    z = z_scores(result, scenario)
     return ours, floors, z, result.warnings
 
 
