@@ -45,6 +45,32 @@ WEAK_CURVE_PX = 0.5
 WEAK_PRINCIPAL_PX = 5.0
 #: A camera whose observations stop below this fraction of the angle its image reaches gets a warning.
 COVERAGE_FRACTION = 0.8
+#: A focal length uncertain by more than this (fraction), or an orientation by more than WEAK_ROTATION_DEG
+#: (any axis), is said to be weakly determined: another solution that far off fits the views as well.
+WEAK_FOCAL = 0.01
+WEAK_ROTATION_DEG = 1.0
+
+
+def weak_parameters(name: str, focal_mm: float, std: dict[str, float]) -> list[str]:
+    """The warning naming a camera's focal length and orientation where its views fix them weakly (none
+    otherwise).
+
+    Args:
+        name: the camera; ``focal_mm`` its focal (k1); ``std`` its parameters' standard deviations
+            (:data:`CAMERA_PARAM_NAMES`; only the estimated ones).
+    """
+    parts = []
+    if "k1" in std and std["k1"] > WEAK_FOCAL * focal_mm:
+        parts.append(f"focal length (+-{100 * std['k1'] / focal_mm:.1f} %)")
+    rotation = max((np.degrees(std[axis]) for axis in ("rx", "ry", "rz") if axis in std), default=0.0)
+    if rotation > WEAK_ROTATION_DEG:
+        parts.append(f"orientation (+-{rotation:.1f} deg)")
+    if not parts:
+        return []
+    return [
+        f"{name}: the views fix its {' and '.join(parts)} only weakly: a calibration that far off fits them as "
+        "well; wave the wand through more depth and nearer the image borders, or give its intrinsics"
+    ]
 
 
 def radial_std_px(model: CameraModel, covariance: FloatArray, theta: float) -> float:
@@ -156,6 +182,7 @@ def assemble(
         std = {name: float(result.camera_std[c, i]) for i, name in enumerate(CAMERA_PARAM_NAMES) if reported[c, i]}
         pinned = fixed.pinned is not None and bool(fixed.pinned.cameras()[c])
         warnings.extend(coverage_warnings(spec, state.models[c], max_theta[c], result, c, uv[:, c], pinned))
+        warnings.extend(weak_parameters(spec.name, float(state.models[c].k[0]), std))
         views = int(view_counts[c])
         if rejected_views[c]:
             warnings.append(
