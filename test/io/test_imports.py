@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from dataclasses import replace
 from pathlib import Path
 
@@ -181,3 +182,207 @@ def test_anipose_intrinsics_become_the_rigs_given_intrinsics_and_are_held(tmp_pa
         main([*base[:3], "--points", str(tmp_path / "broken.toml"), *base[5:], "--out", str(tmp_path / "x.yaml")]) == 2
     )
     assert "broken.toml: [cam_00] lacks matrix" in capsys.readouterr().err
+
+
+# --- the other tools' files, written as each tool writes them --------------------------------------------------
+
+
+def _given_rig(scenario):  # type: ignore[no-untyped-def]
+    """The scenario's rig with its true intrinsics given (held)."""
+    cameras = tuple(replace(s, intrinsics=c.model) for s, c in zip(scenario.rig.cameras, scenario.cameras, strict=True))
+    return replace(scenario.rig, cameras=cameras)
+
+
+def _write_argus_profile(path: Path, scenario) -> None:  # type: ignore[no-untyped-def]
+    """A camera profile as Argus writes its ``-clicker-profile.txt`` (pandas, spaces, no header): camera
+    number, f, width and height as twice the principal point, cx, cy, aspect ratio, r2, r4, t1, t2, r6."""
+    from wand_calib_ros.core.model.camera_model import to_opencv
+
+    lines = []
+    for number, camera in enumerate(scenario.cameras, start=1):
+        opencv = to_opencv(camera.model)
+        (fx, _, cx), (_, fy, cy), _ = opencv.camera_matrix
+        values = [fx, 2 * cx, 2 * cy, cx, cy, fy / fx, *opencv.distortion]
+        lines.append(" ".join([str(number), *(repr(float(v)) for v in values)]))
+    path.write_text("\n".join(lines) + "\n")
+
+
+def test_an_argus_camera_profile_and_its_points_in_one_command_calibrate_as_the_truths_intrinsics(
+    tmp_path: Path, capsys
+) -> None:  # type: ignore[no-untyped-def]
+    from wand_calib_ros.core.model.camera_model import project
+    from wand_calib_ros.core.pipeline import calibrate
+    from wand_calib_ros.io.result_yaml import read_result
+    from wand_calib_ros.io.rig_yaml import load_rig
+
+    scenario = SCENARIOS["action2"]()
+    data = simulate(scenario, 1.0, np.random.default_rng(11))
+    save_rig(scenario.rig, tmp_path / "cameras.yaml")
+    _write_argus_profile(tmp_path / "profile.txt", scenario)
+    _write_xypts(tmp_path / "wand-xypts.csv", data.observations.uv, [s.image_size[1] for s in scenario.rig.cameras])
+    argv = ["import", "--format", "xypts", "--points", str(tmp_path / "wand-xypts.csv"), "--cameras",
+            str(tmp_path / "cameras.yaml"), "--out", str(tmp_path / "obs.csv"), "--intrinsics",
+            str(tmp_path / "profile.txt"), "--rig-out", str(tmp_path / "given.yaml")]  # fmt: skip
+    assert main(argv) == 0
+    assert "cam1 -> cam0 (plumb_bob), cam2 -> cam1 (plumb_bob)" in capsys.readouterr().out  # in order
+    given = load_rig(tmp_path / "given.yaml")
+    points = np.random.default_rng(0).uniform([-2000, -1000, 5000], [2000, 1000, 11000], (50, 3))
+    for spec, camera in zip(given.cameras, scenario.cameras, strict=True):
+        assert spec.intrinsics is not None and spec.intrinsics_fixed
+        in_camera = camera.pose.apply(points)
+        assert np.allclose(project(spec.intrinsics, in_camera), project(camera.model, in_camera), atol=1e-9)
+    assert main(["-q", "calibrate", "--cameras", str(tmp_path / "given.yaml"), "--observations",
+                 str(tmp_path / "obs.csv"), "--output", str(tmp_path / "result.yaml")]) == 0  # fmt: skip
+    imported = read_result(tmp_path / "result.yaml")[1]["cam1"].pose
+    direct = calibrate(_given_rig(scenario), data.observations).camera("cam1").pose
+    assert np.allclose(imported.rotation, direct.rotation, atol=1e-6)  # the import loses nothing
+    assert np.allclose(imported.translation, direct.translation, atol=1e-3)
+
+
+@pytest.mark.parametrize(
+    ("line", "message"),
+    [
+        ("1 900 1920 1080 959.5 539.5 1 -0.25 0.06 0 0", "profile.txt, row 1: 11 values; a camera profile row has 12"),
+        ("1 4 1920 1440 0.99 -0.01 0.01 718.4 977.1 -847.7 0 0.0003 0 0 2.3", "omnidirectional (CMei / ocam)"),
+        ("0 900 1920 1080 959.5 539.5 1 -0.25 0.06 0 0 0", "row 1: the camera number is '0'; cameras count from 1"),
+        ("1 900 1920 1080 959.5 539.5 1 -0.25 x 0 0 0", "row 1: 'x' is not a number"),
+    ],
+)
+def test_a_camera_profile_that_cannot_be_read_names_the_row(line: str, message: str, tmp_path: Path) -> None:
+    from wand_calib_ros.io.imports.camera_profile import read_camera_profile
+
+    (tmp_path / "profile.txt").write_text(line + "\n")
+    with pytest.raises(FormatError, match=re.escape(message)):
+        read_camera_profile(tmp_path / "profile.txt")
+
+
+def _wand_points_table(uv: np.ndarray) -> np.ndarray:
+    """(F, 4C) easyWand's wand points: the first marker's x, y in every camera, then the second's."""
+    return uv.transpose(0, 2, 1, 3).reshape(len(uv), -1)
+
+
+def test_easywand5_and_easywand6_data_files_import_exactly(tmp_path: Path) -> None:
+    import h5py
+    from scipy.io import savemat
+
+    from wand_calib_ros.io.imports.easywand import read_easywand
+
+    scenario = replace(paper_three_camera_scenario(), wand=TWO)
+    data = simulate(scenario, 0.5, np.random.default_rng(6))
+    uv = data.observations.uv
+    heights = np.array([s.image_size[1] for s in scenario.rig.cameras], dtype=float)
+    widths = np.array([s.image_size[0] for s in scenario.rig.cameras], dtype=float)
+    # easyWand 5: a MATLAB 5.0 struct, DLTdv's bottom-left pixels
+    lower_left = uv.copy()
+    lower_left[..., 1] = heights[None, :, None] - uv[..., 1]
+    fields = {"wandPts": _wand_points_table(lower_left), "imageWidth": widths, "imageHeight": heights, "nCams": 3.0}
+    savemat(tmp_path / "take_easyWandData.mat", {"easyWandData": fields})
+    five = read_easywand(tmp_path / "take_easyWandData.mat", scenario.rig)
+    seen = np.any(np.isfinite(uv), axis=(1, 2, 3))
+    assert np.array_equal(five.frames, np.flatnonzero(seen))
+    assert np.allclose(five.uv, uv[seen], atol=1e-9, equal_nan=True)
+    # easyWand 6: MATLAB 7.3 (HDF5, arrays column-major), rows of the points file in ID, top-left pixels
+    rows = np.flatnonzero(seen)
+    path = tmp_path / "take_easyWand6Data.mat"
+    with h5py.File(path, "w", userblock_size=512) as mat:
+        wand = mat.create_group("ew6Save/data/wandPts")
+        for group in (mat["ew6Save"], mat["ew6Save/data"], wand):
+            group.attrs["MATLAB_class"] = np.bytes_("struct")
+        wand.create_dataset("data", data=_wand_points_table(uv[seen]).T).attrs["MATLAB_class"] = np.bytes_("double")
+        wand.create_dataset("ID", data=(rows + 1.0)[None, :]).attrs["MATLAB_class"] = np.bytes_("double")
+        flag = mat["ew6Save/data"].create_dataset("imageOriginLowerLeft", data=np.zeros((1, 1)))
+        flag.attrs["MATLAB_class"] = np.bytes_("double")
+    with path.open("r+b") as stream:  # MATLAB's text header in the user block
+        stream.write(b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: Fri Dec  4 12:00:00 2026 HDF5 schema 1.00 .")
+    six = read_easywand(path, scenario.rig)
+    assert np.array_equal(six.frames, rows)
+    assert np.allclose(six.uv, uv[seen], atol=1e-9, equal_nan=True)
+    # a file for other cameras is one line naming what differs
+    savemat(tmp_path / "four.mat", {"easyWandData": {**fields, "wandPts": np.zeros((3, 16))}})
+    with pytest.raises(FormatError, match="its wand points have 16 columns; 2 markers in 3 cameras take 12"):
+        read_easywand(tmp_path / "four.mat", scenario.rig)
+
+
+def _camera_array_toml(scenario) -> str:  # type: ignore[no-untyped-def]
+    """caliscope's camera_array.toml as its CameraArray.to_toml writes it ([cameras.N], Rodrigues rotations)."""
+    import cv2
+
+    from wand_calib_ros.core.model.camera_model import to_opencv
+
+    def row(values) -> str:  # type: ignore[no-untyped-def]
+        return "[" + ", ".join(repr(float(v)) for v in values) + "]"
+
+    parts = []
+    for cam_id, camera in enumerate(scenario.cameras):
+        opencv = to_opencv(camera.model)
+        matrix = "[" + ", ".join(row(r) for r in opencv.camera_matrix) + "]"
+        rotation = row(cv2.Rodrigues(camera.pose.rotation)[0][:, 0])
+        parts.append(
+            f"[cameras.{cam_id}]\ncam_id = {cam_id}\nsize = [{', '.join(map(str, camera.spec.image_size))}]\n"
+            f"rotation_count = 0\nerror = 0.31\nmatrix = {matrix}\ndistortions = {row(opencv.distortion)}\n"
+            f"translation = {row(camera.pose.translation / 1000.0)}\nrotation = {rotation}\nexposure = -6\n"
+            "grid_count = 30\nfisheye = false\n"
+        )
+    return "\n".join(parts)
+
+
+def _caliscope_points(uv: np.ndarray, camera: str = "cam_id", point: str = "keypoint_id") -> str:
+    """caliscope's point table (pandas to_csv, index=False): a row per seen point, obj_loc left empty."""
+    lines = [f"sync_index,{camera},object_id,{point},img_loc_x,img_loc_y,obj_loc_x,obj_loc_y,obj_loc_z"]
+    for f, c, p in zip(*np.nonzero(np.isfinite(uv[..., 0])), strict=True):
+        lines.append(f"{f},{c},0,{p},{float(uv[f, c, p, 0])!r},{float(uv[f, c, p, 1])!r},,,")
+    return "\n".join(lines) + "\n"
+
+
+def test_a_caliscope_session_imports_in_one_command_and_calibrates_with_its_intrinsics(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    from wand_calib_ros.io.imports.caliscope import read_caliscope_points
+    from wand_calib_ros.io.rig_yaml import load_rig
+
+    scenario = SCENARIOS["conventional"](pinhole=True)  # plumb_bob lenses, the three-LED wand (keypoints 0, 1, 2)
+    data = simulate(scenario, 0.5, np.random.default_rng(8))
+    uv = data.observations.uv
+    save_rig(scenario.rig, tmp_path / "cameras.yaml")
+    (tmp_path / "camera_array.toml").write_text(_camera_array_toml(scenario))
+    (tmp_path / "xy_WAND.csv").write_text(_caliscope_points(uv))
+    argv = ["import", "--format", "caliscope", "--points", str(tmp_path / "xy_WAND.csv"), "--cameras",
+            str(tmp_path / "cameras.yaml"), "--out", str(tmp_path / "obs.csv"), "--intrinsics",
+            str(tmp_path / "camera_array.toml"), "--rig-out", str(tmp_path / "given.yaml"), "--as-start"]  # fmt: skip
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "(camera ids 0 -> cam0, 1 -> cam1)" in out and "as a start: cam_0 -> cam0 (plumb_bob)" in out
+    read = read_observations(tmp_path / "obs.csv", scenario.rig.camera_names, labels=scenario.wand.labels)
+    seen = np.any(np.isfinite(uv), axis=(1, 2, 3))
+    assert np.allclose(read.uv, uv[seen], atol=2e-6, equal_nan=True)
+    given = load_rig(tmp_path / "given.yaml")
+    for spec, camera in zip(given.cameras, scenario.cameras, strict=True):
+        assert spec.intrinsics is not None and not spec.intrinsics_fixed
+        assert np.allclose(spec.intrinsics.principal_point, camera.model.principal_point, atol=1e-9)
+        assert np.isclose(spec.intrinsics.k[0], camera.model.k[0], rtol=1e-12)
+    assert main(["-q", "calibrate", "--cameras", str(tmp_path / "given.yaml"), "--observations",
+                 str(tmp_path / "obs.csv"), "--output", str(tmp_path / "result.yaml")]) == 0  # fmt: skip
+    # caliscope's older column names
+    (tmp_path / "old.csv").write_text(_caliscope_points(uv, camera="port", point="point_id"))
+    old = read_caliscope_points(tmp_path / "old.csv", scenario.rig).observations
+    assert np.allclose(old.uv, uv[seen], atol=1e-12, equal_nan=True)
+
+
+def test_pyopenlpt_wand_points_import_without_the_rows_its_filter_set_aside(tmp_path: Path) -> None:
+    from wand_calib_ros.io.imports.openlpt import read_openlpt_points
+
+    scenario = replace(paper_three_camera_scenario(), wand=WandSpec((0.0, 10.0)))
+    data = simulate(scenario, 0.3, np.random.default_rng(9))
+    uv = data.observations.uv
+    lines = ["frame,cam_id,pt_idx,x,y,radius,status"]
+    for f, c, p in zip(*np.nonzero(np.isfinite(uv[..., 0])), strict=True):
+        lines.append(f"{f},{c},{p},{uv[f, c, p, 0]:.4f},{uv[f, c, p, 1]:.4f},14.9,Raw")
+        if (f + c) % 7 == 0:  # a blob its filter judged too small, somewhere else in the image
+            lines.append(f"{f},{c},{p},{(uv[f, c, p, 0] + 97.0) % 640:.4f},{uv[f, c, p, 1]:.4f},2.1,Filtered_Small")
+    (tmp_path / "wand_points.csv").write_text("\n".join(lines) + "\n")
+    table = read_openlpt_points(tmp_path / "wand_points.csv", scenario.rig)
+    seen = np.any(np.isfinite(uv), axis=(1, 2, 3))
+    assert table.skipped == sum(1 for line in lines if line.endswith("Filtered_Small"))
+    assert np.array_equal(table.observations.frames, np.flatnonzero(seen))
+    assert np.allclose(table.observations.uv, uv[seen], atol=5e-5, equal_nan=True)  # its 4 decimals
+    (tmp_path / "three.csv").write_text("\n".join(lines[:1] + [line for line in lines[1:] if ",2," not in line[:8]]))
+    with pytest.raises(FormatError, match=r"three.csv: 2 cameras \(0, 1\) in the table, 3 in the rig description"):
+        read_openlpt_points(tmp_path / "three.csv", scenario.rig)

@@ -10,48 +10,24 @@ own calibration of the poses: a wand calibration estimates them again, so they a
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from wand_calib_ros.io.errors import FormatError
+from wand_calib_ros.io.imports.given import GivenIntrinsics
 
 
-@dataclass(frozen=True)
-class GivenIntrinsics:
-    """One camera's intrinsics from another tool's file.
-
-    Attributes:
-        name: the camera's name there.
-        image_size: (width, height) px.
-        camera_matrix: 3x3 K (OpenCV pixel convention), rows.
-        distortion: D in ``distortion_model``'s order.
-        distortion_model: ``equidistant``, ``plumb_bob`` or ``rational_polynomial``.
-    """
-
-    name: str
-    image_size: tuple[int, int]
-    camera_matrix: tuple[tuple[float, float, float], ...]
-    distortion: tuple[float, ...]
-    distortion_model: str
-
-
-def read_anipose(path: str | Path) -> list[GivenIntrinsics]:
+def read_anipose(path: str | Path, document: dict[str, Any] | None = None) -> list[GivenIntrinsics]:
     """The cameras of a ``calibration.toml``, in its tables' order (``cam_0``, ``cam_1``, ... by number).
+
+    Args:
+        document: the file already read (:func:`read_toml`), else it is read here.
 
     Raises:
         FormatError: naming the file, the table and the key at fault.
     """
     path = Path(path)
-    toml = _toml_reader(path)
-    try:
-        document = toml.loads(path.read_text(encoding="utf-8"))
-    except OSError as error:
-        raise FormatError(path, f"cannot read: {error.strerror}") from None
-    except UnicodeDecodeError:
-        raise FormatError(path, "not UTF-8 text (an aniposelib calibration.toml?)") from None
-    except toml.TOMLDecodeError as error:
-        raise FormatError(path, f"not valid TOML: {error}") from None
+    document = read_toml(path) if document is None else document
     tables = sorted(
         (key for key, value in document.items() if key.startswith("cam_") and isinstance(value, dict)),
         key=lambda key: (len(key), key),
@@ -59,6 +35,23 @@ def read_anipose(path: str | Path) -> list[GivenIntrinsics]:
     if not tables:
         raise FormatError(path, "no camera tables ([cam_0], [cam_1], ...): not an aniposelib calibration.toml")
     return [_camera(path, key, document[key]) for key in tables]
+
+
+def read_toml(path: Path) -> dict[str, Any]:
+    """A TOML file's document.
+
+    Raises:
+        FormatError: unreadable, not UTF-8 or not TOML.
+    """
+    toml = _toml_reader(path)
+    try:
+        return dict(toml.loads(path.read_text(encoding="utf-8")))
+    except OSError as error:
+        raise FormatError(path, f"cannot read: {error.strerror}") from None
+    except UnicodeDecodeError:
+        raise FormatError(path, "not UTF-8 text (a TOML file?)") from None
+    except toml.TOMLDecodeError as error:
+        raise FormatError(path, f"not valid TOML: {error}") from None
 
 
 def _toml_reader(path: Path) -> Any:
@@ -77,7 +70,19 @@ def _toml_reader(path: Path) -> Any:
 
 
 def _camera(path: Path, key: str, table: dict[str, Any]) -> GivenIntrinsics:
-    for needed in ("name", "size", "matrix", "distortions"):
+    if "name" not in table:
+        raise FormatError(path, f"[{key}] lacks name")
+    return opencv_camera(path, key, table, str(table["name"]))
+
+
+def opencv_camera(path: Path, key: str, table: dict[str, Any], name: str) -> GivenIntrinsics:
+    """A camera table's OpenCV intrinsics: ``size``, ``matrix``, ``distortions`` and ``fisheye`` (aniposelib's
+    and caliscope's tables alike).
+
+    Raises:
+        FormatError: naming the file, the table ``[key]`` and the key at fault.
+    """
+    for needed in ("size", "matrix", "distortions"):
         if needed not in table:
             raise FormatError(path, f"[{key}] lacks {needed}")
     size = table["size"]
@@ -101,7 +106,7 @@ def _camera(path: Path, key: str, table: dict[str, Any]) -> GivenIntrinsics:
     model = "equidistant" if fisheye else "rational_polynomial" if count == 8 else "plumb_bob"
     values = tuple(float(v) for v in distortion) + ((0.0,) if model == "plumb_bob" and count == 4 else ())
     return GivenIntrinsics(
-        str(table["name"]),
+        name,
         (int(size[0]), int(size[1])),
         tuple((float(r[0]), float(r[1]), float(r[2])) for r in rows),
         values,

@@ -16,6 +16,7 @@ import re
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import NDArray
 
 from wand_calib_ros.core.model.rig import RigSpec, WandObservations
 from wand_calib_ros.io.errors import FormatError
@@ -74,8 +75,7 @@ def read_xypts(path: str | Path, rig: RigSpec, *, origin: str = "bottom-left") -
         for cell, (p, c, is_y) in zip(row, columns, strict=True):
             uv[number - 2, c, p, int(is_y)] = _value(path, number, cell)
     if origin == "bottom-left":
-        heights = np.array([spec.image_size[1] for spec in rig.cameras], dtype=np.float64)
-        uv[..., 1] = heights[None, :, None] - uv[..., 1]
+        uv = from_bottom_left(uv, rig)
     seen_partly = np.isfinite(uv[..., 0]) != np.isfinite(uv[..., 1])
     if seen_partly.any():
         f, c, p = (int(i[0]) for i in np.nonzero(seen_partly))
@@ -84,6 +84,15 @@ def read_xypts(path: str | Path, rig: RigSpec, *, origin: str = "bottom-left") -
     if not seen.any():
         raise FormatError(path, "no marker is seen in any frame")
     return WandObservations(np.flatnonzero(seen), rig.camera_names, uv[seen])
+
+
+def from_bottom_left(uv: NDArray[np.float64], rig: RigSpec) -> NDArray[np.float64]:
+    """(F, C, K, 2) pixels with the origin at the bottom left, y up, in OpenCV's convention: v = height - y
+    (each camera's height, the rig's camera order)."""
+    heights = np.array([spec.image_size[1] for spec in rig.cameras], dtype=np.float64)
+    out = np.array(uv, dtype=np.float64)
+    out[..., 1] = heights[None, :, None] - out[..., 1]
+    return out
 
 
 def _value(path: Path, row: int, cell: str) -> float:
