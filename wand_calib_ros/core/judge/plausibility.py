@@ -48,6 +48,8 @@ RMS_FACTOR = 4.0
 MIN_BAD_RMS_PX = 1.0
 #: The wand's |AC| RMS error, as a fraction of its length, beyond which the scene is not rigid.
 WAND_ERROR_FRACTION = 0.05
+#: A calibration from fewer placements than this that fails the wand check may have started badly (said).
+SHORT_TAKE = 100
 #: Given intrinsics held fixed are the user's knowledge. The views lean away from them when freeing the focal
 #: length and principal point lowers the camera's residuals significantly (chi-square, 3 degrees of freedom, at
 #: 0.1 %: GIVEN_CHI2) and moves them by more than GIVEN_FOCAL_FRACTION of the focal or GIVEN_CENTRE_FRACTION of
@@ -214,10 +216,15 @@ def check_result(rig: RigSpec, result: CalibrationResult) -> list[str]:
             if held
             else ""
         )
+        short = (
+            f"; or the take is too short to hold a start ({result.placements_used} placements used): wave longer"
+            if result.placements_used < SHORT_TAKE
+            else ""
+        )
         raise PlausibilityError(
             f"wand: |AC| comes out {result.wand_length_rms_mm:.3g} mm RMS away from {rig.wand.L:g} mm "
             f"({100 * result.wand_length_rms_mm / rig.wand.L:.0f} %): the scene is not rigid; check L1, L2 "
-            f"and that each camera's views are of the same wand at the same time{given}"
+            f"and that each camera's views are of the same wand at the same time{given}{short}"
         )
     return warnings
 
