@@ -8,7 +8,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.adjust.narrow_field import narrow_cameras
+from wand_calib_ros.core.adjust.narrow_field import narrow_fields
 from wand_calib_ros.core.adjust.timing import align_views, offset_warnings, rate_warnings, timing_input
 from wand_calib_ros.core.after.world_frame import floor_of
 from wand_calib_ros.core.errors import CalibrationFailedError, CoreError, InsufficientDataError
@@ -125,7 +125,7 @@ def calibrate(
         init = replace(init, models=model_starts(rig, init.models))
         views, start_uv = uv, aligned
         if rig.wand.n_points == 2:  # one label per marker in every view and over time, from the started cameras
-            views = consistent_labels(init.models, init.poses, uv, narrow_cameras(rig))
+            views = consistent_labels(init.models, init.poses, uv, narrow_fields(rig))
             start_uv = align_views(views, line)
         result = refine_calibration(
             rig,
@@ -142,7 +142,8 @@ def calibrate(
 
     if options.start is not None:
         result, uv = solve(_warm(rig, reference, options.start))
-    elif all(given):  # a pair needs only its relative pose
+    elif all(given) and not narrow_fields(rig).all():  # a pair needs only its relative pose (an essential matrix
+        # hardly fixes it at a few degrees across: narrow rigs start from the paper's pairs and their wand fits)
         known = tuple(spec.intrinsics for spec in rig.cameras if spec.intrinsics is not None)
         result, uv = solve(_placed(rig, aligned, reference, options.pair, known))
     else:

@@ -60,7 +60,7 @@ from wand_calib_ros.core.adjust.narrow_field import (
     field_of_view_deg,
     narrow_cameras,
     narrow_pins,
-    pinhole_at_centre,
+    narrow_start,
     views_std,
 )
 from wand_calib_ros.core.adjust.placements import fit_placements, triangulate_placements, unprojectable
@@ -129,7 +129,7 @@ def refine_calibration(
     n_cameras = len(rig.cameras)
     narrow = narrow_cameras(rig)  # pinholes, their principal point held at the centre (at a prior)
     pinned = narrow_pins(rig, narrow) if narrow.any() else None
-    models = tuple(pinhole_at_centre(m) if narrow[c] else m for c, m in enumerate(models))
+    models = tuple(narrow_start(m, rig.cameras[c]) if narrow[c] else m for c, m in enumerate(models))
     full = default_free_mask(n_cameras, reference, models)
     full[np.ix_(held_intrinsics(rig), INTRINSICS)] = False
     if pinned is not None:
@@ -254,17 +254,20 @@ def _narrow_principal_points(
     notes = []
     for c in np.flatnonzero(pinned.cameras()):
         spec, model = rig.cameras[c], result.state.models[c]
-        across = field_of_view_deg(replace(spec, nominal_focal_mm=float(model.k[0])))  # as calibrated
+        across = field_of_view_deg(spec, float(model.k[0]))  # as calibrated
         field = f"{spec.name}: a narrow field of view ({across:.1f} deg across)"
+        given = spec.intrinsics is not None  # given as a start: its lens and principal point are the ones held
+        lens = "its distortion held as given" if given else "calibrated as a pinhole, its distortion held at zero"
         if freed[c]:
-            notes.append(f"{field}: calibrated as a pinhole, its distortion held at zero (the field shows none)")
+            notes.append(f"{field}: {lens} (the field shows none)")
             continue
+        u, v = model.principal_point
+        where = f"as given ({u:.1f}, {v:.1f})" if given else "at the image centre"
         notes.append(
-            f"{field}: calibrated as a pinhole, its distortion held at zero and its principal point at the image "
-            f"centre +-{pinned.std[c, PRINCIPAL_POINT[0]]:.0f} px (a lens mount's tolerance of "
-            f"{MOUNTING_TOLERANCE_MM:g} mm; the views alone fix it only to +-{float(np.max(views[c])):.0f} px, "
-            "and the standard deviations of its pose include that): give its intrinsics (a board calibration) "
-            "for a measured one"
+            f"{field}: {lens} and its principal point {where} +-{pinned.std[c, PRINCIPAL_POINT[0]]:.0f} px (a lens "
+            f"mount's tolerance of {MOUNTING_TOLERANCE_MM:g} mm; the views alone fix it only to "
+            f"+-{float(np.max(views[c])):.0f} px, and the standard deviations of its pose include that)"
+            + ("" if given else ": give its intrinsics (a board calibration) for a measured one")
         )
     return result, fixed, notes
 

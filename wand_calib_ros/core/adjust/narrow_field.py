@@ -34,17 +34,31 @@ PRINCIPAL_POINT = np.array([N_RADIAL, N_RADIAL + 1])
 DISTORTION = np.r_[1:N_RADIAL, LENS.start : LENS.stop]
 
 
-def field_of_view_deg(spec: CameraSpec) -> float:
-    """The declared diagonal field of view (degrees): the image diagonal over the nominal focal (a pinhole)."""
+def field_of_view_deg(spec: CameraSpec, focal_mm: float | None = None) -> float:
+    """The diagonal field of view (degrees) of a pinhole of ``focal_mm`` (default: the given intrinsics' focal,
+    else the nominal one) over the camera's image."""
+    if focal_mm is None:
+        focal_mm = float(spec.intrinsics.k[0]) if spec.intrinsics is not None else spec.nominal_focal_mm
     half_diagonal_mm = 0.5 * float(np.hypot(*(np.asarray(spec.image_size) / spec.m)))
-    return float(np.degrees(2.0 * np.arctan(half_diagonal_mm / spec.nominal_focal_mm)))
+    return float(np.degrees(2.0 * np.arctan(half_diagonal_mm / focal_mm)))
+
+
+def narrow_fields(rig: RigSpec) -> NDArray[np.bool_]:
+    """(C,) the cameras whose field (:func:`field_of_view_deg`) is under NARROW_FIELD_DEG."""
+    return np.array([field_of_view_deg(spec) < NARROW_FIELD_DEG for spec in rig.cameras], dtype=bool)
 
 
 def narrow_cameras(rig: RigSpec) -> NDArray[np.bool_]:
-    """(C,) the cameras whose intrinsics are estimated and whose declared field is under NARROW_FIELD_DEG."""
-    return np.array(
-        [spec.intrinsics is None and field_of_view_deg(spec) < NARROW_FIELD_DEG for spec in rig.cameras], dtype=bool
-    )
+    """(C,) the narrow cameras (:func:`narrow_fields`) whose intrinsics are estimated or given as a start: what
+    their views cannot fix is held (:func:`narrow_pins`)."""
+    held = np.array([spec.holds_intrinsics for spec in rig.cameras], dtype=bool)
+    return narrow_fields(rig) & ~held
+
+
+def narrow_start(model: CameraModel, spec: CameraSpec) -> CameraModel:
+    """A narrow camera's start: intrinsics given as a start as given (their principal point and distortion
+    are then the ones held), else :func:`pinhole_at_centre`."""
+    return model if spec.intrinsics is not None else pinhole_at_centre(model)
 
 
 def pinhole_at_centre(model: CameraModel) -> CameraModel:

@@ -88,7 +88,9 @@ def check_rig(rig: RigSpec) -> None:
                 f"(for this view angle and pixel size, a focal near {fitting:.3g} mm)"
             )
         given = spec.intrinsics
-        if given is not None and not FOCAL_RANGE[0] <= float(given.k[0]) / spec.nominal_focal_mm <= FOCAL_RANGE[1]:
+        narrow = field_of_view_deg(spec, spec.nominal_focal_mm) < NARROW_FIELD_DEG  # a long lens: said later
+        far = given is not None and not FOCAL_RANGE[0] <= float(given.k[0]) / spec.nominal_focal_mm <= FOCAL_RANGE[1]
+        if given is not None and far and not narrow:
             raise PlausibilityError(
                 f"camera '{spec.name}': its given intrinsics (fx {float(given.focal_px[0]):.0f} px) mean a focal of "
                 f"{float(given.k[0]):.3g} mm with pixel_size_um {spec.pixel_size_um[0]:g}, against the nominal "
@@ -187,14 +189,18 @@ def check_result(rig: RigSpec, result: CalibrationResult) -> list[str]:
     for spec in rig.cameras:
         camera = result.camera(spec.name)
         focal = float(camera.model.k[0])
-        estimated = not spec.holds_intrinsics  # given intrinsics were checked with the rig
-        if estimated and not FOCAL_RANGE[0] <= focal / spec.nominal_focal_mm <= FOCAL_RANGE[1]:
-            std = camera.parameter_std.get("k1", np.inf) / focal
-            if field_of_view_deg(spec) < NARROW_FIELD_DEG and std <= MAX_FOCAL_STD:
+        narrow = field_of_view_deg(spec, spec.nominal_focal_mm) < NARROW_FIELD_DEG
+        if (narrow or not spec.holds_intrinsics) and not FOCAL_RANGE[0] <= focal / spec.nominal_focal_mm <= FOCAL_RANGE[
+            1
+        ]:
+            # (given intrinsics held fixed were checked with the rig, a narrow camera's are said here)
+            std = 0.0 if spec.holds_intrinsics else camera.parameter_std.get("k1", np.inf) / focal
+            if narrow and std <= MAX_FOCAL_STD:
+                how = "as given" if spec.holds_intrinsics else f"+-{100 * std:.2g} %"
                 warnings.append(
-                    f"{spec.name}: its focal comes out {focal:.4g} mm (fx {focal * float(camera.model.m[0]):.0f} px "
-                    f"+-{100 * std:.2g} %), {focal / spec.nominal_focal_mm:.2g}x the nominal {spec.nominal_focal_mm:g} "
-                    "mm: check nominal_focal_mm and pixel_size_um (an extender or a zoom?)"
+                    f"{spec.name}: its focal is {focal:.4g} mm (fx {focal * float(camera.model.m[0]):.0f} px {how}), "
+                    f"{focal / spec.nominal_focal_mm:.2g}x the nominal {spec.nominal_focal_mm:g} mm: check "
+                    "nominal_focal_mm and pixel_size_um (an extender or a zoom?)"
                 )
                 continue
             raise PlausibilityError(
