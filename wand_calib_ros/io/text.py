@@ -1,13 +1,48 @@
-"""Reading the YAML documents of the formats: one way to turn unreadable files into a FormatError."""
+"""Reading the formats' text: one way to turn unreadable files, and cells that are not numbers, into a FormatError."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any
 
 import yaml
 
 from wand_calib_ros.io.errors import FormatError
+
+
+def read_text(path: str | Path, kind: str) -> str:
+    """The UTF-8 text at ``path`` (a byte-order mark allowed), ``kind`` naming what it should be ("a point file").
+
+    Raises:
+        FormatError: the file cannot be read or is not UTF-8 text (a binary file).
+    """
+    path = Path(path)
+    try:
+        return path.read_text(encoding="utf-8-sig")
+    except OSError as error:
+        raise FormatError(path, f"cannot read: {error.strerror}") from None
+    except UnicodeDecodeError as error:
+        byte = error.object[error.start]
+        raise FormatError(path, f"not UTF-8 text (it holds the byte 0x{byte:02x}): not {kind}?") from None
+
+
+def finite_number(path: Path, row: int, cell: str, meaning: str, column: str | None = None, hint: str = "") -> float:
+    """A table cell's finite number: ``meaning`` says what it is ("a pixel coordinate"), ``column`` names its
+    column, if the table has names, ``hint`` ends the message of a cell that is no number.
+
+    Raises:
+        FormatError: naming the file, the row, the column and the cell.
+    """
+    text = cell.strip()
+    name = f"{column} {text!r}" if column else repr(text)
+    try:
+        value = float(text)
+    except ValueError:
+        raise FormatError(path, f"{name} is not a number{hint}", row=row) from None
+    if not math.isfinite(value):
+        raise FormatError(path, f"{name} is not {meaning}", row=row)
+    return value
 
 
 def read_yaml(path: str | Path) -> Any:
@@ -17,13 +52,7 @@ def read_yaml(path: str | Path) -> Any:
         FormatError: the file cannot be read, is not UTF-8 text (a binary file) or not YAML.
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except OSError as error:
-        raise FormatError(path, f"cannot read: {error.strerror}") from None
-    except UnicodeDecodeError as error:
-        byte = error.object[error.start]
-        raise FormatError(path, f"not UTF-8 text (it holds the byte 0x{byte:02x}): not a YAML file?") from None
+    text = read_text(path, "a YAML file")
     if text.startswith("%YAML:1.0"):  # cv2.FileStorage's header, which PyYAML refuses
         raise FormatError(path, "an OpenCV FileStorage file, not a wand_calib_ros result or ROS YAML file")
     try:

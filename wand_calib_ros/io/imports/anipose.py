@@ -15,6 +15,7 @@ from typing import Any
 
 from wand_calib_ros.io.errors import FormatError
 from wand_calib_ros.io.imports.given import GivenIntrinsics
+from wand_calib_ros.io.text import read_text
 
 
 def read_anipose(path: str | Path, document: dict[str, Any] | None = None) -> list[GivenIntrinsics]:
@@ -44,12 +45,9 @@ def read_toml(path: Path) -> dict[str, Any]:
         FormatError: unreadable, not UTF-8 or not TOML.
     """
     toml = _toml_reader(path)
+    text = read_text(path, "a TOML file")
     try:
-        return dict(toml.loads(path.read_text(encoding="utf-8")))
-    except OSError as error:
-        raise FormatError(path, f"cannot read: {error.strerror}") from None
-    except UnicodeDecodeError:
-        raise FormatError(path, "not UTF-8 text (a TOML file?)") from None
+        return dict(toml.loads(text))
     except toml.TOMLDecodeError as error:
         raise FormatError(path, f"not valid TOML: {error}") from None
 

@@ -9,12 +9,12 @@ Argus's omnidirectional (CMei / ocam) rows, of other lengths, are not read.
 
 from __future__ import annotations
 
-import math
 import re
 from pathlib import Path
 
 from wand_calib_ros.io.errors import FormatError
 from wand_calib_ros.io.imports.given import GivenIntrinsics
+from wand_calib_ros.io.text import finite_number, read_text
 
 #: How far a profile's image size may be from the rig's (Argus writes twice the principal point).
 SIZE_TOLERANCE = 0.05
@@ -29,12 +29,7 @@ def read_camera_profile(path: str | Path) -> list[GivenIntrinsics]:
         FormatError: naming the file, the row and the problem.
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except OSError as error:
-        raise FormatError(path, f"cannot read: {error.strerror}") from None
-    except UnicodeDecodeError:
-        raise FormatError(path, "not UTF-8 text: not a camera profile?") from None
+    text = read_text(path, "a camera profile")
     cameras: dict[int, GivenIntrinsics] = {}
     for number, line in enumerate(text.splitlines(), start=1):
         cells = [cell for cell in _SEPARATORS.split(line.strip()) if cell]
@@ -47,7 +42,7 @@ def read_camera_profile(path: str | Path) -> list[GivenIntrinsics]:
                 "profiles are not supported",
                 row=number,
             )
-        values = [_number(path, number, cell) for cell in cells]
+        values = [finite_number(path, number, cell, "a number a profile holds") for cell in cells]
         camera, focal, width, height, cx, cy, aspect = values[:7]
         if camera != int(camera) or camera < 1:
             raise FormatError(path, f"the camera number is {cells[0]!r}; cameras count from 1", row=number)
@@ -66,13 +61,3 @@ def read_camera_profile(path: str | Path) -> list[GivenIntrinsics]:
     if not cameras:
         raise FormatError(path, f"no camera rows ({_COLUMNS})")
     return [cameras[key] for key in sorted(cameras)]
-
-
-def _number(path: Path, row: int, cell: str) -> float:
-    try:
-        value = float(cell)
-    except ValueError:
-        raise FormatError(path, f"{cell!r} is not a number", row=row) from None
-    if not math.isfinite(value):
-        raise FormatError(path, f"{cell!r} is not a number a profile holds", row=row)
-    return value

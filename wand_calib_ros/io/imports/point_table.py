@@ -7,7 +7,6 @@ wand's markers; frames are the table's frame ids. Pixels are taken as written (O
 from __future__ import annotations
 
 import csv
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -16,6 +15,7 @@ import numpy as np
 
 from wand_calib_ros.core.model.rig import RigSpec, WandObservations
 from wand_calib_ros.io.errors import FormatError
+from wand_calib_ros.io.text import finite_number, read_text
 
 
 @dataclass(frozen=True)
@@ -56,12 +56,7 @@ def read_point_table(
     Raises:
         FormatError: naming the file, the row or column and the problem.
     """
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except OSError as error:
-        raise FormatError(path, f"cannot read: {error.strerror}") from None
-    except UnicodeDecodeError:
-        raise FormatError(path, "not UTF-8 text: not a point table?") from None
+    text = read_text(path, "a point table")
     rows = [row for row in csv.reader(text.splitlines()) if row]
     if not rows:
         raise FormatError(path, f"empty file; expected a header with {_names(columns)}")
@@ -76,7 +71,7 @@ def read_point_table(
             skipped += 1
             continue
         ids.append([_integer(path, number, header[i], row[i]) for i in index])
-        pixels.append([_pixel(path, number, header[i], row[i]) for i in xy])
+        pixels.append([finite_number(path, number, row[i], "a pixel coordinate", header[i]) for i in xy])
     if not ids:
         raise FormatError(path, "no image points to use")
     table = np.array(ids, dtype=np.int64)
@@ -123,13 +118,3 @@ def _integer(path: Path, row: int, column: str, cell: str) -> int:
         return int(cell.strip())
     except ValueError:
         raise FormatError(path, f"{column} is {cell!r}, not a whole number", row=row) from None
-
-
-def _pixel(path: Path, row: int, column: str, cell: str) -> float:
-    try:
-        value = float(cell.strip())
-    except ValueError:
-        raise FormatError(path, f"{column} is {cell!r}, not a number", row=row) from None
-    if not math.isfinite(value):
-        raise FormatError(path, f"{column} is {cell!r}, not a pixel coordinate", row=row)
-    return value

@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 
 from wand_calib_ros.core.model.rig import RigSpec, WandObservations
 from wand_calib_ros.io.errors import FormatError
+from wand_calib_ros.io.text import finite_number, read_text
 
 _COLUMN = re.compile(r"^pt(\d+)_cam(\d+)_([xy])$", re.IGNORECASE)
 #: Pixel origins the files may use.
@@ -35,12 +36,7 @@ def read_xypts(path: str | Path, rig: RigSpec, *, origin: str = "bottom-left") -
     path = Path(path)
     if origin not in ORIGINS:
         raise ValueError(f"origin must be one of {ORIGINS}")
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except OSError as error:
-        raise FormatError(path, f"cannot read: {error.strerror}") from None
-    except UnicodeDecodeError:
-        raise FormatError(path, "not UTF-8 text: not a point file?") from None
+    text = read_text(path, "a point file")
     # a row of empty cells is a frame in which nothing was seen (it keeps the later frames' ids); only
     # blank lines are not rows
     rows = [row for row in csv.reader(text.splitlines()) if row]
@@ -96,13 +92,6 @@ def from_bottom_left(uv: NDArray[np.float64], rig: RigSpec) -> NDArray[np.float6
 
 
 def _value(path: Path, row: int, cell: str) -> float:
-    text = cell.strip()
-    if text == "" or text.lower() == "nan":
+    if cell.strip() == "" or cell.strip().lower() == "nan":
         return math.nan
-    try:
-        value = float(text)
-    except ValueError:
-        raise FormatError(path, f"{text!r} is not a number (write NaN where a marker was not seen)", row=row) from None
-    if not math.isfinite(value):
-        raise FormatError(path, f"{text!r} is not a pixel coordinate", row=row)
-    return value
+    return finite_number(path, row, cell, "a pixel coordinate", hint=" (write NaN where a marker was not seen)")
