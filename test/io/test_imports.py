@@ -386,3 +386,27 @@ def test_pyopenlpt_wand_points_import_without_the_rows_its_filter_set_aside(tmp_
     (tmp_path / "three.csv").write_text("\n".join(lines[:1] + [line for line in lines[1:] if ",2," not in line[:8]]))
     with pytest.raises(FormatError, match=r"three.csv: 2 cameras \(0, 1\) in the table, 3 in the rig description"):
         read_openlpt_points(tmp_path / "three.csv", scenario.rig)
+
+
+def test_import_options_and_tables_that_cannot_be_used_are_one_line(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    scenario = SCENARIOS["conventional"](pinhole=True)
+    save_rig(scenario.rig, tmp_path / "cameras.yaml")
+    uv = simulate(scenario, 0.5, np.random.default_rng(2), n=20).observations.uv
+    (tmp_path / "xy.csv").write_text(_caliscope_points(uv))
+    base = ["import", "--format", "caliscope", "--points", str(tmp_path / "xy.csv"), "--cameras",
+            str(tmp_path / "cameras.yaml"), "--out", str(tmp_path / "obs.csv")]  # fmt: skip
+    assert main([*base, "--intrinsics", str(tmp_path / "camera_array.toml")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.endswith("--intrinsics and --rig-out go together: the rig file is written with those intrinsics")
+    assert "\n" not in err and not (tmp_path / "obs.csv").exists()
+    (tmp_path / "xy.csv").write_text(_caliscope_points(uv).replace("img_loc_x", "x_loc"))
+    assert main(base) == 2
+    assert "xy.csv, row 1: no column img_loc_x in the header (sync_index, cam_id" in capsys.readouterr().err
+    (tmp_path / "camera_array.toml").write_text(_camera_array_toml(scenario).replace("matrix = ", "# matrix = ", 1))
+    (tmp_path / "xy.csv").write_text(_caliscope_points(uv))
+    argv = [*base, "--intrinsics", str(tmp_path / "camera_array.toml"), "--rig-out", str(tmp_path / "given.yaml")]
+    assert main(argv) == 2
+    assert "camera_array.toml: [cameras.0] has no matrix: caliscope has not calibrated its intrinsics" in (
+        capsys.readouterr().err
+    )
+    assert not (tmp_path / "obs.csv").exists() and not (tmp_path / "given.yaml").exists()  # all read before writing

@@ -59,20 +59,28 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from wand_calib_ros.errors import WandCalibError
+    from wand_calib_ros.io.outputs import write_together
 
     if args.format in INTRINSICS_FORMATS:
-        return _intrinsics(args.points, args.cameras, args.out, as_start=args.as_start)
+        text, summary = _given_rig(args.points, args.cameras, args.out, as_start=args.as_start)
+        check_writable([args.out])
+        write_together({args.out: text})
+        print(f"{summary} -> {args.out}")
+        return 0
     if (args.intrinsics is None) != (args.rig_out is None):
         raise WandCalibError("--intrinsics and --rig-out go together: the rig file is written with those intrinsics")
     rig = load_rig(args.cameras)
     observations, note = _points(args, rig)
-    outputs = [args.out] + ([args.rig_out] if args.rig_out is not None else [])
-    check_writable(outputs)
+    given = None
+    if args.intrinsics is not None:
+        given = _given_rig(args.intrinsics, args.cameras, args.rig_out, as_start=args.as_start)
+    check_writable([args.out] + ([args.rig_out] if given is not None else []))  # everything read first
     write_observations(observations, args.out)
     views = int(np.any(np.isfinite(observations.uv), axis=(2, 3)).sum())
     print(f"imported {observations.uv.shape[0]} frames, {views} camera views{note} -> {args.out}")
-    if args.intrinsics is not None:
-        _intrinsics(args.intrinsics, args.cameras, args.rig_out, as_start=args.as_start)
+    if given is not None:
+        write_together({args.rig_out: given[0]})
+        print(f"{given[1]} -> {args.rig_out}")
     return 0
 
 
@@ -101,21 +109,20 @@ def _points(args: argparse.Namespace, rig: RigSpec) -> tuple[WandObservations, s
     return observations, f" (camera ids {ids}{skipped})"
 
 
-def _intrinsics(source: Path, cameras: Path, out: Path, *, as_start: bool) -> int:
-    """The rig file ``cameras`` written to ``out`` with each camera's intrinsics from ``source`` (matched by name,
-    else by order)."""
+def _given_rig(source: Path, cameras: Path, out: Path, *, as_start: bool) -> tuple[str, str]:
+    """The rig file ``cameras`` with each camera's intrinsics from ``source`` (matched by name, else by order) as
+    text, checked to read as a rig file at ``out``, and what was matched, in words."""
+    import yaml
+
     from wand_calib_ros.io.imports.given import matched, read_given, with_given
-    from wand_calib_ros.io.outputs import write_together
     from wand_calib_ros.io.result_yaml import yaml_text
+    from wand_calib_ros.io.rig_yaml import parse_rig
     from wand_calib_ros.io.text import read_yaml
 
     rig = load_rig(cameras)
     chosen, how = matched(source, rig, read_given(source))
-    document = with_given(read_yaml(cameras), chosen, fixed=not as_start)
-    check_writable([out])
-    write_together({out: yaml_text(document)})
-    load_rig(out)  # what was written is a rig file this package reads
+    text = yaml_text(with_given(read_yaml(cameras), chosen, fixed=not as_start))
+    parse_rig(yaml.safe_load(text), out)  # what is written is a rig file this package reads where it is written
     pairs = ", ".join(f"{c.name} -> {s.name} ({c.distortion_model})" for c, s in zip(chosen, rig.cameras, strict=True))
     kind = "as a start" if as_start else "held fixed"
-    print(f"imported the intrinsics of {len(chosen)} cameras {how}, {kind}: {pairs} -> {out}")
-    return 0
+    return text, f"imported the intrinsics of {len(chosen)} cameras {how}, {kind}: {pairs}"
