@@ -225,6 +225,10 @@ def test_an_argus_camera_profile_and_its_points_in_one_command_calibrate_as_the_
             str(tmp_path / "profile.txt"), "--rig-out", str(tmp_path / "given.yaml")]  # fmt: skip
     assert main(argv) == 0
     assert "cam1 -> cam0 (plumb_bob), cam2 -> cam1 (plumb_bob)" in capsys.readouterr().out  # in order
+    alone = ["import", "--format", "argus-profile", "--points", str(tmp_path / "profile.txt"), "--cameras",
+             str(tmp_path / "cameras.yaml"), "--out", str(tmp_path / "alone.yaml")]  # fmt: skip
+    assert main(alone) == 0  # the intrinsics alone: the same rig file
+    assert (tmp_path / "alone.yaml").read_text() == (tmp_path / "given.yaml").read_text()
     given = load_rig(tmp_path / "given.yaml")
     points = np.random.default_rng(0).uniform([-2000, -1000, 5000], [2000, 1000, 11000], (50, 3))
     for spec, camera in zip(given.cameras, scenario.cameras, strict=True):
