@@ -259,7 +259,7 @@ def _narrow_principal_points(
         given = spec.intrinsics is not None  # given as a start: its lens and principal point are the ones held
         lens = "its distortion held as given" if given else "calibrated as a pinhole, its distortion held at zero"
         if freed[c]:
-            notes.append(f"{field}: {lens} (the field shows none)")
+            notes.append(f"{field}: {lens}" + ("" if given else " (the field shows none)"))
             continue
         u, v = model.principal_point
         where = f"as given ({u:.1f}, {v:.1f})" if given else "at the image centre"
