@@ -114,7 +114,8 @@ def _given_rig(source: Path, cameras: Path, out: Path, *, as_start: bool) -> tup
     text, checked to read as a rig file at ``out``, and what was matched, in words."""
     import yaml
 
-    from wand_calib_ros.io.imports.given import matched, read_given, with_given
+    from wand_calib_ros.io.imports.given import matched, with_given
+    from wand_calib_ros.io.imports.intrinsics import read_given
     from wand_calib_ros.io.result_yaml import yaml_text
     from wand_calib_ros.io.rig_yaml import parse_rig
     from wand_calib_ros.io.text import read_yaml

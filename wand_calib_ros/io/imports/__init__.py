@@ -1,4 +1,7 @@
-"""Wand observations written by other tools, read into this package's observations.
+"""Wand observations and intrinsics written by other tools, read into this package's observations and rig file.
 
-Formats: ``xypts`` (easyWand / Argus / DLTdv point files, :mod:`wand_calib_ros.io.imports.xypts`).
+Points: ``xypts`` (easyWand / Argus / DLTdv point files), ``easywand`` (easyWand's data file), ``caliscope`` and
+``openlpt`` (point tables, :mod:`~wand_calib_ros.io.imports.point_table`). Intrinsics
+(:mod:`~wand_calib_ros.io.imports.intrinsics`): aniposelib's and caliscope's TOML files, the Argus / easyWand camera
+profile.
 """

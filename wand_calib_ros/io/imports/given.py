@@ -1,9 +1,5 @@
-"""Intrinsics other tools calibrated, given to the rig: one record for every tool's file, which file it is,
-and the rig file that holds them.
-
-Readers: aniposelib's ``calibration.toml`` (:mod:`~wand_calib_ros.io.imports.anipose`), caliscope's
-``camera_array.toml`` (:mod:`~wand_calib_ros.io.imports.caliscope`) and the camera profile of Argus and
-easyWand (:mod:`~wand_calib_ros.io.imports.camera_profile`).
+"""Intrinsics other tools calibrated, given to the rig: one record for every tool's file, matched to the rig's
+cameras, and the rig file that holds them (the files are read by :mod:`~wand_calib_ros.io.imports.intrinsics`).
 """
 
 from __future__ import annotations
@@ -37,25 +33,6 @@ class GivenIntrinsics:
     distortion: tuple[float, ...]
     distortion_model: str
     size_tolerance: float = 0.0
-
-
-def read_given(path: str | Path) -> list[GivenIntrinsics]:
-    """The cameras of an intrinsics file, whichever tool wrote it: a TOML file with ``[cameras.N]`` tables is
-    caliscope's camera array, one with ``[cam_N]`` tables aniposelib's calibration, any other file a camera
-    profile (Argus, easyWand).
-
-    Raises:
-        FormatError: naming the file and what in it is not as its tool writes it.
-    """
-    from wand_calib_ros.io.imports.anipose import read_anipose, read_toml
-    from wand_calib_ros.io.imports.caliscope import read_camera_array
-    from wand_calib_ros.io.imports.camera_profile import read_camera_profile
-
-    path = Path(path)
-    if path.suffix.lower() != ".toml":
-        return read_camera_profile(path)
-    document = read_toml(path)
-    return read_camera_array(path, document) if "cameras" in document else read_anipose(path, document)
 
 
 def matched(path: Path, rig: RigSpec, given: Sequence[GivenIntrinsics]) -> tuple[list[GivenIntrinsics], str]:
