@@ -230,12 +230,8 @@ def timed_calibration(
     readout = {n: clock.readout_s for n, clock in zip(scenario.rig.camera_names, clocks, strict=True)}
     for key in ("offset", "offset z", "readout", "readout z", "intrinsics z"):
         out[key] = []
-    for camera in scenario.cameras:
-        mine = result.camera(camera.spec.name)
-        true = np.r_[camera.model.k[0], camera.model.principal_point]
-        value = np.r_[mine.model.k[0], mine.model.principal_point]
-        std = np.array([mine.parameter_std[k] for k in ("k1", "u0", "v0")])
-        out["intrinsics z"].extend((value - true) / std)
+    z = z_scores(result, scenario)
+    out["intrinsics z"] = z["focal"] + z["principal point"]
     for camera in result.cameras:
         std = camera.parameter_std
         if camera.name != result.reference_camera:

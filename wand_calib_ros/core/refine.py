@@ -29,6 +29,7 @@ from wand_calib_ros.core.adjust.bundle_adjustment import (
     BundleResult,
     BundleState,
     bundle_adjust,
+    camera_std,
     default_free_mask,
 )
 from wand_calib_ros.core.adjust.gating import (
@@ -249,8 +250,7 @@ def _narrow_principal_points(
         result = bundle_adjust(result.state, problem, free_mask(n_cameras, reference, fixed))
     assert result.system is not None
     covariance = result.system.covariance(free_mask(n_cameras, reference, fixed), result.sigma, pinned.std)
-    std = np.sqrt(np.clip(np.diag(covariance), 0.0, None)).reshape(n_cameras, -1)
-    result = replace(result, camera_covariance=covariance, camera_std=std)
+    result = replace(result, camera_covariance=covariance, camera_std=camera_std(covariance))
     notes = []
     for c in np.flatnonzero(pinned.cameras()):
         spec, model = rig.cameras[c], result.state.models[c]

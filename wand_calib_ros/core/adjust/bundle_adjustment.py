@@ -303,6 +303,11 @@ class CameraSystem:
         return covariance * sigma**2
 
 
+def camera_std(covariance: FloatArray) -> FloatArray:
+    """(C, 20) the standard deviations on the diagonal of a (C*20, C*20) camera covariance (0 for fixed ones)."""
+    return np.sqrt(np.clip(np.diag(covariance), 0.0, None)).reshape(-1, N_CAMERA_PARAMS)
+
+
 #: A choice of the parameters to estimate made on the normal equations at an adjustment's start (see
 #: :func:`bundle_adjust`): called with the start, its cameras' system and its noise estimate (px), it
 #: returns the (C, 20) parameters to estimate and the (C, 20) steps of those it fixes, or None.
@@ -870,8 +875,7 @@ def bundle_adjust(
         s, rhs, _ = reduced_system(undamped(normal), layout)
         final = CameraSystem(columns, s, rhs)
     covariance = final.covariance(free, sigma) if final is not None else np.zeros((n_cameras * N_CAMERA_PARAMS,) * 2)
-    camera_std = np.sqrt(np.clip(np.diag(covariance), 0.0, None)).reshape(n_cameras, N_CAMERA_PARAMS)
-    return BundleResult(state, res, iterations, converged, camera_std, covariance, sigma, (m, p), final)
+    return BundleResult(state, res, iterations, converged, camera_std(covariance), covariance, sigma, (m, p), final)
 
 
 def _sigma(res: FloatArray, loss_scale: float | None, dof: int) -> float:

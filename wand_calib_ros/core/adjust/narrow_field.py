@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.adjust.bundle_adjustment import LENS, N_CAMERA_PARAMS, CameraSystem
+from wand_calib_ros.core.adjust.bundle_adjustment import LENS, N_CAMERA_PARAMS, CameraSystem, camera_std
 from wand_calib_ros.core.adjust.model_order import Pinned
 from wand_calib_ros.core.model.camera_model import N_RADIAL, PLUMB_BOB, CameraModel
 from wand_calib_ros.core.model.rig import CameraSpec, RigSpec
@@ -84,9 +84,7 @@ def views_std(system: CameraSystem, free: NDArray[np.bool_], sigma: float, pinne
     """(C, 20) standard deviations of the parameters held at a prior as the views alone determine them
     (released with the other free parameters, without the prior), 0 elsewhere."""
     at_prior = pinned.std > 0
-    covariance = system.covariance(free | at_prior, sigma)
-    std = np.sqrt(np.clip(np.diag(covariance), 0.0, None)).reshape(free.shape)
-    return np.where(at_prior, std, 0.0)
+    return np.where(at_prior, camera_std(system.covariance(free | at_prior, sigma)), 0.0)
 
 
 def determined_by_views(views: FloatArray, pinned: Pinned) -> NDArray[np.bool_]:

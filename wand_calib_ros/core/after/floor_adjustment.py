@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.adjust.bundle_adjustment import N_CAMERA_PARAMS, TIMING, moved_camera
+from wand_calib_ros.core.adjust.bundle_adjustment import N_CAMERA_PARAMS, TIMING, camera_std, moved_camera
 from wand_calib_ros.core.errors import DegenerateDataError
 from wand_calib_ros.core.model.camera_model import CameraModel, project
 from wand_calib_ros.core.model.geometry import Pose, rotation_from_rotvec
@@ -116,7 +116,7 @@ def adjust_floor(
         n_lays = len(lay_starts)
     else:
         n_lays = 0
-    std = np.sqrt(np.clip(np.diag(covariance), 0.0, None)).reshape(n_cameras, N_CAMERA_PARAMS)
+    std = camera_std(covariance)
     free_mask = np.zeros((n_cameras, N_CAMERA_PARAMS), dtype=bool)
     free_mask[:, STILL_PARAMETERS] = std[:, STILL_PARAMETERS] > 0
     free = np.flatnonzero(free_mask.reshape(-1))
