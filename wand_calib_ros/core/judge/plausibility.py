@@ -190,9 +190,8 @@ def check_result(rig: RigSpec, result: CalibrationResult) -> list[str]:
         camera = result.camera(spec.name)
         focal = float(camera.model.k[0])
         narrow = field_of_view_deg(spec, spec.nominal_focal_mm) < NARROW_FIELD_DEG
-        if (narrow or not spec.holds_intrinsics) and not FOCAL_RANGE[0] <= focal / spec.nominal_focal_mm <= FOCAL_RANGE[
-            1
-        ]:
+        off = not FOCAL_RANGE[0] <= focal / spec.nominal_focal_mm <= FOCAL_RANGE[1]
+        if off and (narrow or not spec.holds_intrinsics):
             # (given intrinsics held fixed were checked with the rig, a narrow camera's are said here)
             std = 0.0 if spec.holds_intrinsics else camera.parameter_std.get("k1", np.inf) / focal
             if narrow and std <= MAX_FOCAL_STD:
@@ -258,7 +257,7 @@ def check_given_intrinsics(
     if system is None:
         return []
     n_cameras = len(rig.cameras)
-    refusals: list[tuple[float, str]] = []  # (squared residuals freeing it removes, the refusal)
+    refusals: list[tuple[float, str, str]] = []  # (squared residuals freeing it removes, the camera, the refusal)
     leaning: list[tuple[float, str]] = []  # (the same, the camera) of every camera the views lean away from
     warnings = []
     for c, spec in enumerate(rig.cameras):
@@ -294,6 +293,7 @@ def check_given_intrinsics(
             refusals.append(
                 (
                     removed,
+                    spec.name,
                     f"camera '{spec.name}': the views disagree with its given intrinsics: {figures}: "
                     + (_tangential_hint(model) or "check that K is this camera's and for this image size")
                     + ", or give them as a start (fixed: false)",
@@ -305,8 +305,7 @@ def check_given_intrinsics(
             "them: the given intrinsics are kept"
         )
     if refusals:  # the camera whose freed intrinsics explain the most (one wrong camera pulls the others too) ...
-        first, line = max(refusals)
-        named = line.split("'")[1]
+        first, named, line = max(refusals)
         alike = [name for removed, name in leaning if name != named and removed >= ALIKE * first]
         if alike:  # ... or another that explains them alike (the views fix the cameras' focal ratio, say)
             line += f" (or {' or '.join(alike)}'s: freeing either explains the views alike)"
