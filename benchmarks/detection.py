@@ -17,7 +17,8 @@ from wand_calib_ros.core.model.rig import CameraSpec
 from wand_calib_ros.detection.recording import CameraStream
 from wand_calib_ros.detection.wand import WandOptions
 from wand_calib_ros.sim.render import RenderOptions, render_image
-from wand_calib_ros.sim.room import CameraRoom, Lamp, Window, render_camera
+from wand_calib_ros.sim.room import CameraRoom, Lamp, Window
+from wand_calib_ros.sim.room_images import render_camera
 
 IMAGES = 150
 REPEATS = 4

@@ -33,7 +33,8 @@ from wand_calib_ros.sim.detection_score import (
     right_and_labelled,
     score,
 )
-from wand_calib_ros.sim.room import ROOM_SCENES, room_take
+from wand_calib_ros.sim.room_layout import ROOM_SCENES
+from wand_calib_ros.sim.room_take import room_take
 from wand_calib_ros.sim.scenarios import mixed_pair_scenario, paper_three_camera_scenario
 
 

@@ -8,7 +8,8 @@ import pytest
 
 from wand_calib_ros.detection.background import estimate_background
 from wand_calib_ros.detection.blobs import BlobOptions, find_blobs
-from wand_calib_ros.sim.room import CameraRoom, Lamp, Sensor, Window, render_camera
+from wand_calib_ros.sim.room import CameraRoom, Lamp, Sensor, Window
+from wand_calib_ros.sim.room_images import render_camera
 
 SIZE = (640, 480)
 

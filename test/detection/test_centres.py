@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from wand_calib_ros.detection.centres import spot_centre
-from wand_calib_ros.sim.room import CameraRoom, Sensor, render_camera
+from wand_calib_ros.sim.room import CameraRoom, Sensor
+from wand_calib_ros.sim.room_images import render_camera
 
 SIZE = (64, 48)
 QUIET = Sensor(read_noise=0.0, levels_per_electron=0.0, black_level=0.0)

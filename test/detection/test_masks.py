@@ -25,7 +25,8 @@ from wand_calib_ros.detection.recording import CameraStream
 from wand_calib_ros.detection.wand import WandOptions
 from wand_calib_ros.io.errors import FormatError
 from wand_calib_ros.io.rig_yaml import load_camera_masks
-from wand_calib_ros.sim.room import CameraRoom, Lamp, Sensor, render_camera
+from wand_calib_ros.sim.room import CameraRoom, Lamp, Sensor
+from wand_calib_ros.sim.room_images import render_camera
 
 SIZE = (320, 240)
 FRAME_NS = 33_333_333

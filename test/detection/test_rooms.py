@@ -23,7 +23,9 @@ from wand_calib_ros.sim.detection_score import (
     right_and_labelled,
     score,
 )
-from wand_calib_ros.sim.room import ROOM_SCENES, RoomRecording, room_take
+from wand_calib_ros.sim.room import RoomRecording
+from wand_calib_ros.sim.room_layout import ROOM_SCENES
+from wand_calib_ros.sim.room_take import room_take
 from wand_calib_ros.sim.scenarios import Scenario, mixed_pair_scenario, paper_three_camera_scenario
 
 SEEDS = range(4)

@@ -16,7 +16,8 @@ from wand_calib_ros.detection.recording import detect_recording
 from wand_calib_ros.io.bags import ImageFrame
 from wand_calib_ros.io.images import decode_compressed
 from wand_calib_ros.io.rig_yaml import save_rig
-from wand_calib_ros.sim.room import ROOM_SCENES, room_take
+from wand_calib_ros.sim.room_layout import ROOM_SCENES
+from wand_calib_ros.sim.room_take import room_take
 from wand_calib_ros.sim.scenarios import mixed_pair_scenario
 
 rclpy = pytest.importorskip("rclpy")

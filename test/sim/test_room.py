@@ -19,8 +19,8 @@ from wand_calib_ros.sim.room import (
     Sensor,
     Window,
     clearly_visible,
-    render_camera,
 )
+from wand_calib_ros.sim.room_images import render_camera
 
 SIZE = (160, 120)
 

@@ -17,7 +17,7 @@ from wand_calib_ros.io.result_yaml import (
 )
 from wand_calib_ros.io.rig_yaml import save_rig
 from wand_calib_ros.sim.clocks import film, take_trajectory, truth_timing
-from wand_calib_ros.sim.room import ROOM_SCENES
+from wand_calib_ros.sim.room_layout import ROOM_SCENES
 from wand_calib_ros.sim.scenarios import SCENARIOS
 
 HELP = "render a scenario's waved wand into a rosbag2 of images"
@@ -70,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
     if args.room is not None:
         if args.independent or args.reflections or args.occlusions:
             raise WandCalibError("--room renders a waved wand in a room: leave out --independent and the spot options")
-        from wand_calib_ros.sim.room import drawn_observations, room_take
+        from wand_calib_ros.sim.room_take import drawn_observations, room_take
 
         take = take_options(args, args.frames / min(args.fps))
         clocks = take.clocks(len(names), rng)
