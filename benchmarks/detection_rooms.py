@@ -28,14 +28,14 @@ from wand_calib_ros.core.pipeline import calibrate
 from wand_calib_ros.sim.detection_score import (
     ERROR_CLASSES,
     DetectionScore,
+    brightness_classes,
     calibration_errors,
     detect_room_recording,
     right_and_labelled,
     score,
 )
-from wand_calib_ros.sim.room_layout import ROOM_SCENES
+from wand_calib_ros.sim.room_layout import ROOM_SCENES, scene_scenario
 from wand_calib_ros.sim.room_take import room_take
-from wand_calib_ros.sim.scenarios import mixed_pair_scenario, paper_three_camera_scenario
 
 
 def main() -> None:
@@ -49,8 +49,9 @@ def main() -> None:
         f"{'labels':>7s}  calibration / floor: " + " ".join(f"{k:>6s}" for k in ERROR_CLASSES) + "   s/seed"
     )
     for scene in args.scenes:
-        scenario = mixed_pair_scenario() if scene == "colour_jpeg" else paper_three_camera_scenario()
+        scenario = scene_scenario(scene)
         total: DetectionScore | None = None
+        by_class: dict[str, DetectionScore] = {}
         found: dict[str, list[float]] = {k: [] for k in ERROR_CLASSES}
         floor: dict[str, list[float]] = {k: [] for k in ERROR_CLASSES}
         started = time.perf_counter()
@@ -60,6 +61,9 @@ def main() -> None:
             observations, _ = detect_room_recording(recording, scenario.rig)
             measured = score(observations, recording.truth)
             total = measured if total is None else total + measured
+            for name, chosen in brightness_classes().items():
+                part = score(observations, recording.truth, chosen)
+                by_class[name] = by_class[name] + part if name in by_class else part
             right = right_and_labelled(observations, recording.truth)
             alone = observations.with_uv(np.where(right[..., None, None], observations.uv, np.nan))
             for kind, views in ((found, observations), (floor, alone)):
@@ -67,7 +71,7 @@ def main() -> None:
                     kind[key] += values
         assert total is not None
         ratios = [np.sqrt(np.mean(np.square(found[k]))) / np.sqrt(np.mean(np.square(floor[k]))) for k in ERROR_CLASSES]
-        rig = "mixed" if scene == "colour_jpeg" else "paper3"
+        rig = scenario.name
         print(
             f"{scene:18s} {rig:7s} {total.clearly_visible:6d} {100 * total.recall:6.1f}% "
             f"{100 * total.false_rate:6.2f}% {total.centre_rms_px / np.sqrt(2):10.3f} {total.centre_rms_px:6.3f} "
@@ -76,6 +80,13 @@ def main() -> None:
             + " ".join(f"{r:6.2f}" for r in ratios)
             + f"   {(time.perf_counter() - started) / args.seeds:5.1f}"
         )
+        for name, part in by_class.items():
+            if part.clearly_visible and set(by_class) != {name}:
+                print(
+                    f"  brightest LED {name:7s} {'':7s} {part.clearly_visible:6d} {100 * part.recall:6.1f}% "
+                    f"{100 * part.false_rate:6.2f}% {part.centre_rms_px / np.sqrt(2):10.3f} {part.centre_rms_px:6.3f} "
+                    f"{100 * part.labels_right:6.1f}%"
+                )
 
 
 if __name__ == "__main__":

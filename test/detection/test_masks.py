@@ -78,7 +78,7 @@ def test_an_led_passing_close_to_a_lamp_is_found_once_its_halo_is_learned(seed: 
         blobs, _, _ = stream.detect(np.asarray(image), "mono8", k * FRAME_NS)
         assert blobs is not None
         if k * FRAME_NS >= 5e9 and np.linalg.norm(led - lamp.centre) < 25.0:  # close to the lamp, its halo learned
-            assert stream.sources.patches and stream.sources.patches[0].known
+            assert stream.structure.structure() is not None
             found = np.linalg.norm(blobs.centres - led, axis=1) if blobs.centres.size else np.array([np.inf])
             errors.append(float(found.min()))
     errors_px = np.array(errors)

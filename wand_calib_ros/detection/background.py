@@ -69,8 +69,14 @@ class Background:
             stream's background is used for several images; :func:`~wand_calib_ros.detection.blobs.find_blobs`
             takes them instead of summing again), else None.
         unit: the unit of min_contrast in the image it was estimated from.
-        search: (H, W) the threshold with a mask's pixels out of reach (:func:`masked`), which blobs are searched
-            against; None: ``threshold`` (and a mask is applied to each image).
+        search: (H, W) the threshold blobs are searched against, a mask's pixels out of reach (:func:`masked`);
+            None: ``structure`` or ``threshold`` (and a mask is applied to each image).
+        structure: (H, W) the threshold that follows the camera's static structure pixel by pixel
+            (:mod:`~wand_calib_ros.detection.structure`), or None: none learned yet (``threshold`` applies).
+        static: (H, W) the static structure's pixels (the grey image's dtype: what never moves, taken away
+            before a spot is measured), or None.
+        static_noise: (a, b) of a pixel's noise variance a + b x level over time (grey levels), with ``static``.
+        static_sums: (H, W) the static structure's box sums (the threshold's dtype), with ``static``.
     """
 
     level: FloatArray
@@ -80,6 +86,17 @@ class Background:
     sums: NDArray[Any] | None = None
     unit: float = 1.0
     search: NDArray[Any] | None = None
+    structure: NDArray[Any] | None = None
+    static: NDArray[Any] | None = None
+    static_noise: tuple[float, float] = (0.0, 0.0)
+    static_sums: NDArray[Any] | None = None
+
+    @property
+    def searched(self) -> NDArray[Any]:
+        """What blobs are searched against: the masked threshold, else the structure's, else the threshold."""
+        if self.search is not None:
+            return self.search
+        return self.threshold if self.structure is None else self.structure
 
     def at(self, uv: FloatArray) -> tuple[FloatArray, FloatArray]:
         """(N,) background level and noise at (N, 2) pixels (their nearest samples')."""
@@ -88,11 +105,13 @@ class Background:
         return self.level[rows, cols], self.noise[rows, cols]
 
 
-def _noise_model(level: FloatArray, variance: FloatArray) -> tuple[float, float]:
+def noise_model(level: FloatArray, variance: FloatArray, *, from_median: bool = False) -> tuple[float, float]:
     """(a, b) of variance = a + b x level fitted to tiles (a, b >= 0), by least squares that drop, three times
-    over, the tiles more than three times above the fit (a lamp or an LED in the tile, a textured window)."""
+    over, the tiles more than three times above the fit (a lamp or an LED in the tile, a textured window).
+    ``from_median``: the first fit leaves out the tiles more than three times the median variance too (one bright
+    tile far from the others, a lamp that flickered between two images, would otherwise set the slope)."""
     x, y = level.ravel().astype(np.float64), variance.ravel().astype(np.float64)
-    keep = np.ones(x.size, dtype=bool)
+    keep = y <= 3.0 * float(np.median(y)) + 1e-6 if from_median else np.ones(x.size, dtype=bool)
     a, b = float(np.mean(y)), 0.0
     for _ in range(3):
         n = float(keep.sum())
@@ -107,25 +126,38 @@ def _noise_model(level: FloatArray, variance: FloatArray) -> tuple[float, float]
     return a, b
 
 
-def _tile_noise(samples: NDArray[np.float32], median: NDArray[np.float32]) -> tuple[FloatArray, FloatArray]:
-    """(level, noise variance) of tiles of TILE_SAMPLES x TILE_SAMPLES samples, every other row (enough, and half
-    the cost); one tile of all the samples when there are fewer than two tiles' worth."""
-    rows, cols = samples.shape[0] // (2 * TILE_SAMPLES), (samples.shape[1] - 1) // TILE_SAMPLES
+def tile_noise(squared: NDArray[np.float32], level: NDArray[np.float32]) -> tuple[FloatArray, FloatArray]:
+    """(level, noise variance) per tile of TILE_SAMPLES x TILE_SAMPLES of an image of squared differences of
+    independent samples (twice the noise's variance: neighbours STEP px apart, or one pixel in two images) and the
+    level there; one tile of everything when there are fewer than a tile's worth. A tile's variance is from the
+    lower half of its squared differences (LOWER_HALF_MEAN): edges or an LED crossing the other half do not
+    count."""
+    rows, cols = squared.shape[0] // TILE_SAMPLES, squared.shape[1] // TILE_SAMPLES
     if rows < 1 or cols < 1:
-        squared = np.square(samples[:, 1:] - samples[:, :-1]).reshape(1, -1)
-        levels = np.array([[float(np.median(median))]])
+        tiles = squared.reshape(1, -1)
+        levels = np.array([[float(np.median(level))]])
     else:
-        height, width = 2 * rows * TILE_SAMPLES, cols * TILE_SAMPLES
-        squared = np.square(samples[:height:2, 1 : width + 1] - samples[:height:2, :width])
-        squared = squared.reshape(rows, TILE_SAMPLES, cols, TILE_SAMPLES).transpose(0, 2, 1, 3).reshape(rows * cols, -1)
-        levels = cv2.resize(median[:height:2, :width], (cols, rows), interpolation=cv2.INTER_AREA)
-    if squared.shape[1] < 2:
+        height, width = rows * TILE_SAMPLES, cols * TILE_SAMPLES
+        blocks = squared[:height, :width].reshape(rows, TILE_SAMPLES, cols, TILE_SAMPLES)
+        tiles = blocks.transpose(0, 2, 1, 3).reshape(rows * cols, -1)
+        levels = cv2.resize(level[:height, :width], (cols, rows), interpolation=cv2.INTER_AREA)
+    if tiles.shape[1] < 2:
         return np.zeros((1, 1)), np.zeros((1, 1))
-    half = squared.shape[1] // 2
-    lower = np.partition(squared, half - 1, axis=1)[:, :half].mean(axis=1)
-    # Differences of neighbouring samples (STEP px apart: independent noise) have twice the noise's variance.
+    half = tiles.shape[1] // 2
+    lower = np.partition(tiles, half - 1, axis=1)[:, :half].mean(axis=1)
     variance = lower / (2.0 * LOWER_HALF_MEAN)
     return levels.astype(np.float64).reshape(-1), variance.astype(np.float64)
+
+
+def _spatial_noise(samples: NDArray[np.float32], median: NDArray[np.float32]) -> tuple[FloatArray, FloatArray]:
+    """(level, noise variance) of tiles of neighbouring samples' differences, every other row (enough, and half the
+    cost)."""
+    rows, cols = samples.shape[0] // (2 * TILE_SAMPLES), (samples.shape[1] - 1) // TILE_SAMPLES
+    if rows < 1 or cols < 1:
+        return tile_noise(np.square(samples[:, 1:] - samples[:, :-1]).reshape(1, -1), median)
+    height, width = 2 * rows * TILE_SAMPLES, cols * TILE_SAMPLES
+    squared = np.square(samples[:height:2, 1 : width + 1] - samples[:height:2, :width])
+    return tile_noise(squared, median[:height:2, :width])
 
 
 def estimate_background(
@@ -147,7 +179,7 @@ def estimate_background(
     samples = sampled.astype(np.float32)
     median = cv2.medianBlur(sampled, SPOT_SAMPLES).astype(np.float32)
     level = cv2.dilate(median, np.ones((5, 5), np.uint8), borderType=cv2.BORDER_REPLICATE)
-    a, b = _noise_model(*_tile_noise(samples, median))
+    a, b = noise_model(*_spatial_noise(samples, median))
     noise = np.sqrt(a + b * level)
     contrast = np.maximum(options.noise_sigmas * noise, options.min_contrast * unit)
     small = np.minimum(np.ceil(level + contrast), full).astype(image.dtype)
@@ -160,7 +192,7 @@ def masked(background: Background, mask: NDArray[np.uint8] | None) -> Background
     mask is then applied once per background rather than to each image."""
     if mask is None:
         return replace(background, search=None)
-    search = background.threshold.copy()
+    search = (background.threshold if background.structure is None else background.structure).copy()
     search[mask > 0] = saturation_of(search) if search.dtype.kind == "u" else np.inf
     return replace(background, search=search)
 

@@ -13,6 +13,7 @@ dropped.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -29,8 +30,9 @@ from wand_calib_ros.detection.background import (
     estimate_background,
     saturation_of,
 )
-from wand_calib_ros.detection.centres import spot_centre
+from wand_calib_ros.detection.centres import SpotCentre, saturated_centre, side_medians, spot_centre
 from wand_calib_ros.detection.errors import ImageError
+from wand_calib_ros.detection.structure import SATURATED_STATIC
 
 FloatArray = NDArray[np.float64]
 
@@ -65,13 +67,14 @@ class BlobOptions:
     Attributes:
         background: how far above its local background a pixel must be.
         min_area: smallest blob (px) that counts as an LED.
-        max_area: largest blob (px); larger ones are windows or reflections.
+        max_area: largest blob (px); larger ones are no LED (a person walking by, a lamp switched on; an LED 30x
+            over full scale 0.4 m from a fisheye blooms over about 2,500 px with its streak).
         window: margin (px) around a blob's pixels in which it is measured.
     """
 
     background: BackgroundOptions = field(default_factory=BackgroundOptions)
     min_area: int = 2
-    max_area: int = 2000
+    max_area: int = 8000
     window: int = 3
 
 
@@ -107,6 +110,11 @@ class Blobs:
         border = self.at_border is not None and bool(self.at_border[index].any())
         return border or (self.masked is not None and bool(self.masked[index].any()))
 
+    def radii(self) -> FloatArray:
+        """(N,) each blob's extent as a radius, px: from its area, and its streak's length."""
+        lengths = self.lengths if self.lengths is not None else np.zeros(self.areas.shape)
+        return np.asarray(np.sqrt(self.areas / np.pi) + 0.5 * lengths)
+
     def subset(self, keep: NDArray[np.bool_]) -> Blobs:
         """The blobs where ``keep``."""
 
@@ -135,6 +143,8 @@ CORE_FRACTION = 0.25
 CORE_SPLIT = 10.0
 #: A blob of at most this fraction of the area of a blob it touches is a fringe of that blob.
 FRINGE_AREA = 0.1
+#: ... or, in the halo of a blob (within its radius beyond touching it), of at most this fraction of its peak.
+FRINGE_PEAK = 0.2
 #: Blobs touch when they are closer than their radii (from their areas) plus this, px.
 TOUCH_PX = 2.0
 
@@ -145,17 +155,24 @@ def distances(points: FloatArray, others: FloatArray) -> FloatArray:
     return np.hypot(points[:, None, 0] - others[None, :, 0], points[:, None, 1] - others[None, :, 1])
 
 
-def touching(centres: FloatArray, areas: NDArray[np.int64], margin_px: float = TOUCH_PX) -> NDArray[np.bool_]:
-    """(N, N) which blobs touch or overlap: closer than their radii (from their areas) plus ``margin_px`` (the
-    diagonal True)."""
+def touching(
+    centres: FloatArray, areas: NDArray[np.int64], margin_px: float | FloatArray = TOUCH_PX
+) -> NDArray[np.bool_]:
+    """(N, N) which blobs touch or overlap: closer than their radii (from their areas) plus ``margin_px`` (a number,
+    or (1, N) per blob of the second axis; the diagonal True)."""
     gaps = distances(centres, centres)
     radii = np.sqrt(areas / np.pi)
     return np.asarray(gaps < radii[:, None] + radii[None, :] + margin_px)
 
 
-def fringes(centres: FloatArray, areas: NDArray[np.int64]) -> NDArray[np.bool_]:
-    """(N,) blobs that are fringes of a larger blob they touch (FRINGE_AREA)."""
-    return np.asarray((touching(centres, areas) & (areas[:, None] <= FRINGE_AREA * areas[None, :])).any(axis=1))
+def fringes(centres: FloatArray, areas: NDArray[np.int64], peaks: FloatArray) -> NDArray[np.bool_]:
+    """(N,) blobs that are fringes of a larger blob: touching it and at most FRINGE_AREA of its area (JPEG ringing,
+    demosaicing, a flare), or in its halo (within its radius beyond touching) and also at most FRINGE_PEAK of its
+    peak (the noise on a blooming LED's halo breaks into faint flecks around it)."""
+    smaller = areas[:, None] <= FRINGE_AREA * areas[None, :]
+    radii = np.sqrt(areas / np.pi)
+    halo = touching(centres, areas, TOUCH_PX + radii[None, :]) & (peaks[:, None] <= FRINGE_PEAK * peaks[None, :])
+    return np.asarray((smaller & (touching(centres, areas) | halo)).any(axis=1))
 
 
 NO_BLOBS = Blobs(np.zeros((0, 2)), np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros(0, dtype=bool))
@@ -188,6 +205,25 @@ def to_gray(image: NDArray[Any], encoding: str) -> NDArray[Any]:
     return array if array.dtype in (np.uint8, np.uint16) else array.astype(np.float32)
 
 
+def _local(
+    background: Background, row: int, col: int, options: BlobOptions, unit: float
+) -> tuple[float, float, float, float]:
+    """(level, noise, static, contrast) where a spot is measured (grey levels of a pixel): the level its window
+    stands on once the static structure (``static`` there, 0 without) is taken away, the noise of a pixel there, and
+    how far above its background the search threshold is."""
+    threshold = float(background.searched[row, col])
+    if background.static is not None:  # the structure taken away: a flat field of the noise over time
+        static = float(background.static[row, col])
+        a, b = background.static_noise
+        noise = math.sqrt(max(a + b * static, 0.0))
+        return 0.0, noise, static, max(threshold - BOX**2 * static, 1.0) / BOX**2
+    step, levels = background.step, background.level
+    sample = (min(round(row / step), levels.shape[0] - 1), min(round(col / step), levels.shape[1] - 1))
+    level = float(levels[sample])
+    contrast = max(float(background.threshold[row, col]) - level, 1.0) / BOX**2
+    return level / BOX**2, float(background.noise[sample]) / BOX, 0.0, contrast
+
+
 def _measure(
     gray: NDArray[Any],
     box: tuple[int, int, int, int],
@@ -195,28 +231,28 @@ def _measure(
     background: Background,
     options: BlobOptions,
     full: float,
-    mask: NDArray[np.uint8] | None,
+    hidden: bool,
+    above: NDArray[Any],
 ) -> list[tuple[float, ...]]:
     """The blob (or blobs) of one connected region above the threshold: (u, v, area, peak, saturated, at border,
-    masked, streak length, background, contrast) each.
+    cut, streak length, background, contrast) each.
 
-    A bright region is looked at again at CORE_FRACTION of its own peak: two cores there are two spots that touch
-    at the low threshold (two LEDs close together), each measured on its own core; the core, not the faint
-    halo, tells whether the spot is cut by the image border."""
+    The static structure (where learned) is taken away from the window first. A bright region is looked at again
+    at CORE_FRACTION of its own peak: two cores there are two spots that touch at the low threshold (two LEDs close
+    together), each measured on its own core; the core, not the faint halo, tells whether the spot is cut by the
+    image border. A saturated spot is measured by its outline (:func:`~wand_calib_ros.detection.centres.
+    saturated_centre`). ``hidden``: the spot touches a mask or continues where a brighter region hides it (it is
+    cut). ``above``: the image's pixels above the search threshold (the spot's own, and what is near it)."""
     height, width = gray.shape
     x, y, bw, bh = box
     w = options.window
     x0, y0 = max(x - w, 0), max(y - w, 0)
     x1, y1 = min(x + bw + w, width), min(y + bh + w, height)
-    window = gray[y0:y1, x0:x1].astype(np.float32)  # (exact for 8- and 16-bit pixels)
+    raw = gray[y0:y1, x0:x1].astype(np.float32)  # (exact for 8- and 16-bit pixels)
     row, col = min(y + bh // 2, height - 1), min(x + bw // 2, width - 1)
-    step, levels = background.step, background.level
-    sample = (min(round(row / step), levels.shape[0] - 1), min(round(col / step), levels.shape[1] - 1))
-    level = float(levels[sample])
-    contrast = max(float(background.threshold[row, col]) - level, 1.0) / BOX**2  # in grey levels (of a pixel)
-    level /= BOX**2
-    noise = float(background.noise[sample]) / BOX  # a pixel's, from its box sums'
     unit = 1.0 if gray.dtype == np.uint8 else 257.0
+    level, noise, static, contrast = _local(background, row, col, options, unit)
+    window = raw if background.static is None else raw - background.static[y0:y1, x0:x1]
     floor = max(CENTRE_FLOOR_SIGMAS * noise, 0.5 * options.background.min_contrast * unit)
     peak = float(window.max()) - level
     bright = peak >= CORE_SPLIT * noise
@@ -238,21 +274,79 @@ def _measure(
             region = np.asarray(cv2.dilate(drawn, np.ones((3, 3), np.uint8)) > 0)
             split.append((region, tuple(cv2.boundingRect(outline))))  # type: ignore[arg-type]
         parts = split if len(split) >= 2 else parts
-    touches = mask is not None and cv2.countNonZero(mask[max(y - 1, 0) : y + bh + 1, max(x - 1, 0) : x + bw + 1]) > 0
+    own = cv2.dilate(above[y0:y1, x0:x1], np.ones((5, 5), np.uint8)) > 0  # its pixels (not a lamp beside it) ...
+    if background.static is not None:  # (... nor a lamp's or a window's saturated pixels under it: next to those a
+        # spot is cut, nothing of it can be seen there)
+        visible = background.static[y0:y1, x0:x1] < SATURATED_STATIC * full
+        hidden |= not bool(visible[own].all())
+        own &= visible
+    if not own.any():
+        return []
+    sides = side_medians(window)
+    if background.static is not None and not hidden and float(raw[own].max()) < full:
+        # an unsaturated spot's window must hold it: its sides on the flat field (a saturated one is measured by its
+        # outline, which its region holds)
+        hidden = max(sides) > max(floor, SIDE_FRACTION * peak)
     measured: list[tuple[float, ...]] = []
     for part, (cx, cy, cw, ch) in parts:
-        spot_floor = floor if part is None else CORE_FRACTION * peak
-        spot = spot_centre(window, spot_floor, part)
+        mine = own if part is None else own & part
+        if not mine.any():  # (a core of something else in the window)
+            continue
+        saturated = float(raw[mine].max()) >= full
+        if saturated:
+            base = 0.25 * sum(sides)
+            under = raw - window  # (the static structure where it is known, else 0)
+            ceiling = float(np.min(np.float32(full) - under[mine])) - base
+            spot: SpotCentre | None = saturated_centre(window, base, ceiling, mine)
+        else:
+            spot = spot_centre(window, floor if part is None else CORE_FRACTION * peak, mine, sides)
         if spot is None:
             continue
         cut = x0 + cx == 0 or y0 + cy == 0 or x0 + cx + cw == width or y0 + cy + ch == height
         size = area if part is None else int(part.sum())
-        saturated = float((window if part is None else window[part]).max() >= full)
         measured.append(
-            (x0 + spot.u, y0 + spot.v, size, spot.peak, saturated, float(cut), float(touches), spot.length_px,
-             spot.background, contrast)
+            (x0 + spot.u, y0 + spot.v, size, spot.peak, float(saturated), float(cut), float(hidden), spot.length_px,
+             static + spot.background, contrast)
         )  # fmt: skip
     return measured
+
+
+#: An unsaturated spot continues beyond its window (a brighter region's threshold hid part of it) when a side of the
+#: window, the static structure taken away, stands above the centre's floor and this fraction of its peak.
+SIDE_FRACTION = 0.2
+
+
+def hidden_continuation(
+    sums: NDArray[Any],
+    above: NDArray[Any],
+    threshold: NDArray[Any],
+    box: tuple[int, int, int, int],
+    background: Background,
+) -> bool:
+    """Whether a blob (its bounding ``box`` in ``above``, the search's result) may continue where it cannot be seen,
+    before a static structure is learned: next to it the search threshold rises by more than the blob's own contrast
+    and the light there is above the blob's own threshold (a bright region's edge: the spot may go on under it).
+    Its centre would be cut. (With the structure learned, :func:`_measure` takes it away, cuts a spot next to
+    saturated structure, and checks that a spot's window holds it.)"""
+    height, width = above.shape
+    x, y, bw, bh = box
+    x0, y0, x1, y1 = max(x - 1, 0), max(y - 1, 0), min(x + bw + 1, width), min(y + bh + 1, height)
+    region = above[y0:y1, x0:x1] > 0
+    ring = cv2.dilate(region.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    ring &= ~region
+    if not ring.any():
+        return False
+    limits = threshold[y0:y1, x0:x1].astype(np.float32)
+    own = float(np.median(limits[region]))
+    margin = max(own - _level_sum(background, y + bh // 2, x + bw // 2), 1.0)
+    light = sums[y0:y1, x0:x1][ring].astype(np.float32)
+    return bool(((limits[ring] > own + margin) & (light > own)).any())
+
+
+def _level_sum(background: Background, row: int, col: int) -> float:
+    """The spatial background's level (box sums) at a pixel."""
+    step, levels = background.step, background.level
+    return float(levels[min(round(row / step), levels.shape[0] - 1), min(round(col / step), levels.shape[1] - 1)])
 
 
 def find_blobs(
@@ -282,26 +376,30 @@ def find_blobs(
     sums, unit = box_sums(gray) if background is None or background.sums is None else (background.sums, background.unit)
     if background is None or background.threshold.shape != sums.shape or background.threshold.dtype != sums.dtype:
         background = estimate_background(sums, options.background, unit=unit)
-    if background.search is not None and background.search.shape == sums.shape:  # the mask is in the threshold
-        above = cv2.compare(sums, background.search, cv2.CMP_GT)
-    else:
-        above = cv2.compare(sums, background.threshold, cv2.CMP_GT)
-        if mask is not None:
-            above = cv2.subtract(above, mask)
+    threshold = background.searched
+    above = cv2.compare(sums, threshold, cv2.CMP_GT)
+    if background.search is None and mask is not None:  # (else the mask is in the threshold)
+        above = cv2.subtract(above, mask)
     # External contours of a sparse mask are much cheaper than labelling the whole image.
     contours, _ = cv2.findContours(above, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
     rows: list[tuple[float, ...]] = []
     for contour in contours:
         x, y, bw, bh = cv2.boundingRect(contour)
+        box = (x, y, bw, bh)
         if bw * bh < options.min_area:
             continue
         area = cv2.countNonZero(above[y : y + bh, x : x + bw])
         if options.min_area <= area <= options.max_area:
-            rows += _measure(gray, (x, y, bw, bh), area, background, options, full, mask)
+            near = mask[max(y - 1, 0) : y + bh + 1, max(x - 1, 0) : x + bw + 1] if mask is not None else None
+            touches = near is not None and cv2.countNonZero(near) > 0
+            hidden = touches or (
+                background.static is None and hidden_continuation(sums, above, threshold, box, background)
+            )
+            rows += _measure(gray, box, area, background, options, full, hidden, above)
     if not rows:
         return NO_BLOBS
     table = np.array(rows, dtype=np.float64)
-    table = table[~fringes(table[:, :2], table[:, 2].astype(np.int64))]
+    table = table[~fringes(table[:, :2], table[:, 2].astype(np.int64), table[:, 3])]
     return Blobs(
         table[:, :2].copy(),
         table[:, 2].astype(np.int64),

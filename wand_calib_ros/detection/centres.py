@@ -13,6 +13,14 @@ an LED that sped up moves it by a T^2 / 24 from mid-exposure, one that brightene
 streak by g L / 12 towards its bright end. It is not corrected: a streak brighter at one end
 looks the same whether the LED brightened or slowed down there, and for the second the
 weighted mean is already the better estimate (the streak's middle would be off by a T^2 / 8).
+
+A saturated spot is measured by its outline instead (:func:`saturated_centre`): the light above half-way between
+its background and full scale, clipped there. Its flat top and the steep edge around it are the LED's own
+light; a bloom or glare halo (tens of grey levels even 30x over full scale), another LED's halo or a gradient
+of the room under it stay below half-way and do not pull it, and the outline of a saturated streak is as
+symmetric about its mid-exposure position as the streak. Across a bright edge (a window's, a reflection's) the
+LED clips at less of its own light where the room is bright: every pixel is clipped at the least light any of
+them can show, and the outline stays symmetric.
 """
 
 from __future__ import annotations
@@ -46,28 +54,41 @@ class SpotCentre:
     length_px: float
 
 
-def side_plane(window: Pixels) -> tuple[float, float, float]:
-    """(level at the window's centre, slope along u, slope along v) of a plane through the medians of the
-    window's four sides (grey levels, per px)."""
+def side_medians(window: Pixels) -> tuple[float, float, float, float]:
+    """The medians of a window's (left, right, top, bottom) sides (a middle value for an even count)."""
     height, width = window.shape
     # (sorted Python lists: a side has a few dozen pixels, where numpy's per-call cost is most of the work)
-    left, right = (sorted(window[:, k].tolist())[height // 2] for k in (0, -1))  # (a middle value for an even count)
-    top, bottom = (sorted(window[k].tolist())[width // 2] for k in (0, -1))
-    slope_u = float(right - left) / max(width - 1, 1)
-    slope_v = float(bottom - top) / max(height - 1, 1)
-    return 0.25 * float(left + right + top + bottom), slope_u, slope_v
+    left, right = (float(sorted(window[:, k].tolist())[height // 2]) for k in (0, -1))
+    top, bottom = (float(sorted(window[k].tolist())[width // 2]) for k in (0, -1))
+    return left, right, top, bottom
 
 
-def spot_centre(window: Pixels, floor: float, region: NDArray[np.bool_] | None = None) -> SpotCentre | None:
+def side_plane(window: Pixels, sides: tuple[float, float, float, float] | None = None) -> tuple[float, float, float]:
+    """(level at the window's centre, slope along u, slope along v) of a plane through the medians of the
+    window's four sides (grey levels, per px; ``sides``: those medians when they are known)."""
+    height, width = window.shape
+    left, right, top, bottom = side_medians(window) if sides is None else sides
+    slope_u = (right - left) / max(width - 1, 1)
+    slope_v = (bottom - top) / max(height - 1, 1)
+    return 0.25 * (left + right + top + bottom), slope_u, slope_v
+
+
+def spot_centre(
+    window: Pixels,
+    floor: float,
+    region: NDArray[np.bool_] | None = None,
+    sides: tuple[float, float, float, float] | None = None,
+) -> SpotCentre | None:
     """The centre of the spot in a window (see the module docstring), or None when nothing stands above the floor.
 
     Args:
         window: (h, w) pixels around the spot, at least 3x3, the spot inside and the window's sides on background.
         floor: how far above the background plane a pixel must be to count, grey levels.
         region: (h, w) the pixels that may count (one of two spots that touch), or None: all.
+        sides: the window's :func:`side_medians`, when they are known.
     """
     height, width = window.shape
-    level, slope_u, slope_v = side_plane(window)
+    level, slope_u, slope_v = side_plane(window, sides)
     cols = np.arange(width, dtype=np.float32) - (width - 1) / 2.0
     rows = np.arange(height, dtype=np.float32) - (height - 1) / 2.0
     above = window.astype(np.float32, copy=False) - (level + slope_u * cols[None, :] + slope_v * rows[:, None])
@@ -89,3 +110,31 @@ def spot_centre(window: Pixels, floor: float, region: NDArray[np.bool_] | None =
         level + slope_u * du + slope_v * dv,
         length,
     )
+
+
+def saturated_centre(
+    window: Pixels, base: float, ceiling: float, region: NDArray[np.bool_] | None = None
+) -> SpotCentre:
+    """The centre of a saturated spot (see the module docstring): the mean of its pixels weighted by how far they
+    stand above half-way between its background and the lowest full scale under it, clipped there.
+
+    Args:
+        window: (h, w) the spot's light around it (what the camera gave, less the static structure where it is known).
+        base: the background under the spot in ``window``, grey levels.
+        ceiling: the most light any of the spot's pixels can show above ``base`` before it clips (full scale less
+            the brightest static light under it): every pixel is clipped there, so a spot across a bright edge
+            stays symmetric.
+        region: (h, w) the pixels that may count (its own, or one of two spots that touch), or None: all.
+    """
+    half = 0.5 * ceiling
+    weights = np.clip(window.astype(np.float32, copy=False) - np.float32(base + half), 0.0, np.float32(half))
+    if region is not None:
+        weights = weights * region
+    moments = cv2.moments(weights)
+    total = moments["m00"]
+    height, width = window.shape
+    if total <= 0.0:  # (nothing reaches half-way: the window's centre)
+        return SpotCentre((width - 1) / 2.0, (height - 1) / 2.0, ceiling, base, 0.0)
+    suu, svv, suv = moments["mu20"] / total, moments["mu02"] / total, moments["mu11"] / total
+    spread = math.sqrt(max((suu - svv) ** 2 + 4.0 * suv**2, 0.0))
+    return SpotCentre(moments["m10"] / total, moments["m01"] / total, ceiling, base, math.sqrt(12.0 * spread))

@@ -136,12 +136,6 @@ def mask_fraction(mask: Mask) -> float:
     return float(cv2.countNonZero(mask)) / max(mask.size, 1)
 
 
-def _radii(blobs: Blobs) -> FloatArray:
-    """(N,) a blob's extent as a radius, px: from its area, and its streak's length."""
-    lengths = blobs.lengths if blobs.lengths is not None else np.zeros(blobs.areas.shape)
-    return np.sqrt(blobs.areas / np.pi) + 0.5 * lengths
-
-
 @dataclass(frozen=True)
 class Source:
     """A light that does not move.
@@ -390,13 +384,13 @@ class StaticSources:
         """(N,) whether each blob matches a candidate, and the nearest candidate's index."""
         distance = distances(blobs.centres, self._centres)
         index = np.argmin(distance, axis=1)
-        reach = MATCH_PX + 0.25 * np.maximum(_radii(blobs), self._radii[index])
+        reach = MATCH_PX + 0.25 * np.maximum(blobs.radii(), self._radii[index])
         return distance[np.arange(index.size), index] <= reach, index
 
     def _match(self, stamp_ns: int, blobs: Blobs, claimed: NDArray[np.bool_], since_ns: int | None) -> None:
         """Count the blobs on the candidates they match (a claimed blob only on a candidate older than the track);
         the unclaimed others are new candidates."""
-        radii = _radii(blobs)
+        radii = blobs.radii()
         new = ~claimed
         if self._centres.size:
             matched, index = self._nearest(blobs)
@@ -431,7 +425,7 @@ class StaticSources:
         halo became known)."""
         full = saturation_of(gray)
         changed = False
-        radii = _radii(blobs)
+        radii = blobs.radii()
         for source, patch in zip(self.sources, self.patches, strict=True):
             if not patch.due():
                 continue
@@ -489,7 +483,7 @@ class MaskTaker:
     def add(self, blobs: Blobs) -> None:
         """Take one image's blobs."""
         self.images += 1
-        radii = _radii(blobs) + MASK_MARGIN_PX
+        radii = blobs.radii() + MASK_MARGIN_PX
         self.circles += [(float(u), float(v), float(r)) for (u, v), r in zip(blobs.centres, radii, strict=True)]
 
     @property

@@ -37,7 +37,8 @@ from wand_calib_ros.detection.background import Background, box_sums, estimate_b
 from wand_calib_ros.detection.blobs import ENCODINGS, BlobOptions, Blobs, distances, find_blobs, to_gray
 from wand_calib_ros.detection.errors import ImageError
 from wand_calib_ros.detection.health import CameraHealth, HealthReport, ViewLight, health_report, view_light
-from wand_calib_ros.detection.masks import Mask, MaskTaker, StaticSources, mask_fraction
+from wand_calib_ros.detection.masks import Mask, MaskTaker, StaticSources
+from wand_calib_ros.detection.structure import StaticStructure
 from wand_calib_ros.detection.tracking import Released, StreamLabeller
 from wand_calib_ros.detection.wand import WandDetection, WandOptions, identify_wand
 from wand_calib_ros.io.bags import ImageFrame
@@ -48,6 +49,8 @@ BACKGROUND_REFRESH = 8
 #: little out of their stamps' order, and only this much of it is held in memory. An image stamped further back
 #: than that behind its camera's newest is counted "late" and not searched.
 REORDER_S = 2.0
+#: The wand is kept out of the static structure this far (px) beyond its spots' extent and its track's gate.
+WAND_MARGIN_PX = 4.0
 #: The value a saturated pixel of each encoding reads (a 12-bit camera's mono16 is scaled to 16 bits).
 SATURATION = {"mono16": 65520.0}
 
@@ -139,6 +142,9 @@ class CameraStream:
         self.model = nominal_bearings(spec)
         self.labeller = StreamLabeller(max_hold_ns)
         self.sources = StaticSources(spec.image_size)
+        self.structure = StaticStructure(blob_options.background)
+        self._wand_radius = WAND_MARGIN_PX  # how far the wand's spots reach from their centres, px
+        self._encoding = "mono8"  # the newest image's
         self.given_mask = mask
         self.stats = CameraStats()
         self.health = CameraHealth()
@@ -175,6 +181,7 @@ class CameraStream:
         """Blobs, wand and rejection reason (None when the wand was found) of one image at ``stamp_ns`` (None:
         its pixels could not be read)."""
         self.stats.images += 1
+        self._encoding = encoding
         if image is None:
             return None, None, "bad_image"
         if encoding not in ENCODINGS:
@@ -187,13 +194,16 @@ class CameraStream:
         except ImageError:
             return None, None, "bad_image"
         raw, gray = gray, self.sources.clean(gray)  # the learned lights' halos taken away
-        background = self._search_of(self._background_of(gray))
+        prediction = self.labeller.predict(stamp_ns)
+        wand = [] if prediction is None or not prediction.moved else [
+            (float(u), float(v), prediction.gate_px + self._wand_radius) for u, v in prediction.points
+        ]  # fmt: skip
+        background = self._search_of(self._background_of(gray, stamp_ns, wand))
         blobs = find_blobs(
             gray, self.blob_options, saturation=SATURATION.get(encoding, 255.0), mask=self._mask, background=background
         )
         if self._taker is not None:
             return blobs, None, self._take(stamp_ns, blobs)
-        prediction = self.labeller.predict(stamp_ns)
         claimed = np.zeros(blobs.centres.shape[0], dtype=bool)
         if prediction is not None and prediction.moved and blobs.centres.size:
             gaps = distances(blobs.centres, prediction.points).min(axis=1)
@@ -204,6 +214,9 @@ class CameraStream:
         if detection.points is not None and prediction is not None and prediction.moved and blobs.centres.size:
             gaps = distances(blobs.centres, detection.points).min(axis=1)
             claimed |= gaps < 1e-6
+        if detection.points is not None and blobs.centres.size:  # how far the wand's spots reach, for the structure
+            spots = distances(detection.points, blobs.centres).argmin(axis=1)
+            self._wand_radius = float(np.max(blobs.radii()[spots])) + WAND_MARGIN_PX
         standing_out = self.sources.centres_standing_out(raw, background.threshold)
         since = self.labeller.since_ns if prediction is not None else None
         if self.sources.observe(stamp_ns, blobs, claimed, standing_out, since, raw):  # the mask changed
@@ -238,8 +251,13 @@ class CameraStream:
 
     def report(self) -> HealthReport:
         """What this camera saw so far (:mod:`~wand_calib_ros.detection.health`)."""
-        sources = tuple((s.centre[0], s.centre[1], s.radius_px) for s in self.sources.sources)
-        masked = 0.0 if self._mask is None else mask_fraction(self._mask)
+        full = SATURATION.get(self._encoding, 255.0)
+        learned = tuple((s.centre[0], s.centre[1], s.radius_px) for s in self.sources.sources)
+        sources = learned + self.structure.lights(full)
+        ignored = self.structure.saturated(full)
+        if self._mask is not None:
+            ignored = self._mask > 0 if ignored is None else ignored | (self._mask > 0)
+        masked = 0.0 if ignored is None else float(np.count_nonzero(ignored)) / ignored.size
         stats = self.stats
         return health_report(self.spec.name, stats.images, stats.detected, stats.rejected, self.health, sources, masked)
 
@@ -252,16 +270,20 @@ class CameraStream:
         searched = self._searched[2]
         return searched if background.sums is None else replace(searched, sums=background.sums)
 
-    def _background_of(self, gray: NDArray[Any]) -> Background:
+    def _background_of(self, gray: NDArray[Any], stamp_ns: int, wand: list[tuple[float, float, float]]) -> Background:
         """The background of the image's box sums, estimated again every BACKGROUND_REFRESH images (or when the
-        image changed kind)."""
+        image changed kind, or a snapshot of the static structure is due), with the structure's threshold; ``wand``:
+        (u, v, radius px) where the wand's LEDs are expected (kept out of the structure)."""
         current = self._background
-        stale = self._since_background >= BACKGROUND_REFRESH
+        stale = self._since_background >= BACKGROUND_REFRESH or self.structure.due(stamp_ns)
         depth = np.uint16 if gray.dtype == np.uint8 else np.float32
         self._since_background += 1
         if current is None or stale or current.threshold.shape != gray.shape or current.threshold.dtype != depth:
             sums, unit = box_sums(gray)
-            self._background = estimate_background(sums, self.blob_options.background, unit=unit)
+            if self.structure.due(stamp_ns):
+                self.structure.add(stamp_ns, gray, sums, wand)
+            background = estimate_background(sums, self.blob_options.background, unit=unit)
+            self._background = self.structure.apply(background)
             self._since_background = 1
             return replace(self._background, sums=sums)  # this image's sums: find_blobs need not sum again
         return current

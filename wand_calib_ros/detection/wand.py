@@ -124,6 +124,31 @@ class WandDetection:
     tool: bool = False
 
 
+#: The far end of a wand is at most this many times as far from the camera as its near end (a 600 mm wand 0.3 m
+#: away): a triple whose segments' ratio needs more is no wand.
+MAX_DEPTH_RATIO = 3.0
+
+
+def _depth_ratio(ab: float, bc: float, ratio: float, bearings: FloatArray | None) -> float:
+    """How many times as far from the camera one end of a triple must be as the other for its segments to look as
+    they do (under the better of its two labellings): a line's image (a pinhole's, or the bearings' on a plane
+    across their mean) scales each segment by the inverse of its ends' depths, so |ab| / |bc| = (|AB| / |BC|)
+    z_C / z_A; ``bearings`` (3, 3) of one end, the middle and the other end, or None: the pixels' ``ab`` and
+    ``bc``."""
+    if bearings is not None:
+        (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = bearings.tolist()
+        n0, n1, n2 = a0 + b0 + c0, a1 + b1 + c1, a2 + b2 + c2  # (their mean direction, unnormalised)
+        da, db, dc = a0 * n0 + a1 * n1 + a2 * n2, b0 * n0 + b1 * n1 + b2 * n2, c0 * n0 + c1 * n1 + c2 * n2
+        if min(da, db, dc) <= 0:  # (more than a hemisphere apart: no plane shows them all)
+            return 1.0
+        pa, pb, pc = [(x / d, y / d, z / d) for (x, y, z), d in zip(bearings.tolist(), (da, db, dc), strict=True)]
+        ab, bc = math.dist(pa, pb), math.dist(pb, pc)
+    if min(ab, bc) <= 0:
+        return math.inf
+    seen = ab / bc  # (either end may be A: the smaller of what the two labellings need)
+    return min(max(seen / ratio, ratio / seen), max(1.0 / (seen * ratio), seen * ratio))
+
+
 def _score(
     triple: FloatArray, options: WandOptions, bearings: FloatArray | None = None
 ) -> tuple[float, FloatArray, float] | None:
@@ -157,6 +182,8 @@ def _score(
     ab, bc = math.hypot(b[0] - a[0], b[1] - a[1]), math.hypot(c[0] - b[0], c[1] - b[1])
     if min(ab, bc) <= 0:
         return None
+    if _depth_ratio(ab, bc, options.ratio, None if bearings is None else bearings[[i, m, j]]) > MAX_DEPTH_RATIO:
+        return None
     if ab < bc:  # A is the end farther from B
         a, c, ab, bc = c, a, bc, ab
     ratio = ab / bc
@@ -181,14 +208,21 @@ def identify_wand(
         options: tolerances.
         model: the camera's (nominal or calibrated) model, or its BearingTable: collinearity is
             then tested on the unit sphere, which keeps fisheye images of the wand straight.
-        usable: (N,) the blobs that may be part of the wand (None: all).
+        usable: (N,) the blobs that may be part of the wand (None: all; a blob a mask or a saturated light cuts,
+            ``blobs.masked``, never is).
         near: (points (3, 2), gate px) a track's prediction: a triple within the gate of it wins over
             the others; two within it make the image ambiguous.
     """
+    cut = blobs.masked if blobs.masked is not None else np.zeros(blobs.centres.shape[0], dtype=bool)
+    if cut.any():  # a spot a mask or a saturated light cuts is no LED's centre: never part of a wand
+        usable = ~cut if usable is None else usable & ~cut
+    usable = _searched(blobs, usable, near)
     if usable is not None and not usable.all():
         found = _find_wand(blobs.subset(usable), options, model, near)
-        if found.points is None and found.reason in ("no_blobs", "too_few_blobs"):  # the lights there were still
-            return WandDetection(None, 0.0, "still")
+        if found.points is None and found.reason in ("no_blobs", "too_few_blobs"):  # the lights left out were still
+            # (or cut)
+            still = ~usable & ~cut
+            return WandDetection(None, 0.0, "still" if still.any() or not cut.any() else "at_border")
     else:
         found = _find_wand(blobs, options, model, near)
     n = blobs.centres.shape[0]
@@ -199,6 +233,29 @@ def identify_wand(
     points = np.full((max(options.n_points, n), 2), np.nan)
     points[:n] = blobs.centres
     return WandDetection(points, 1.0, None, tool=True)
+
+
+#: At most this many blobs are searched for the wand (the triples grow as their cube): those nearest the track's
+#: prediction, then the brightest.
+MAX_WAND_BLOBS = 24
+
+
+def _searched(
+    blobs: Blobs, usable: NDArray[np.bool_] | None, near: tuple[FloatArray, float] | None
+) -> NDArray[np.bool_] | None:
+    """The usable blobs, at most MAX_WAND_BLOBS of them (None: all)."""
+    count = blobs.centres.shape[0] if usable is None else int(usable.sum())
+    if count <= MAX_WAND_BLOBS:
+        return usable
+    keep = np.ones(blobs.centres.shape[0], dtype=bool) if usable is None else usable.copy()
+    rank = -blobs.peaks * np.sqrt(blobs.areas)  # the brightest first ...
+    if near is not None:  # ... after those within the track's gate
+        gaps = np.hypot(*(blobs.centres[:, None, :] - near[0][None, :, :]).transpose(2, 0, 1)).min(axis=1)
+        rank = np.where(gaps <= near[1], rank - 1e18, rank)
+    order = np.argsort(np.where(keep, rank, np.inf), kind="stable")
+    chosen = np.zeros_like(keep)
+    chosen[order[:MAX_WAND_BLOBS]] = True
+    return chosen & keep
 
 
 def _find_wand(

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -132,22 +134,62 @@ def _compare(
     return right, swapped, errors, images
 
 
-def score(observations: WandObservations, truth: tuple[CameraTruth, ...]) -> DetectionScore:
-    """The detector's views against the truth of the images they came from (matched by camera and stamp)."""
+def score(
+    observations: WandObservations,
+    truth: tuple[CameraTruth, ...],
+    select: Callable[[CameraTruth], NDArray[np.bool_]] | None = None,
+) -> DetectionScore:
+    """The detector's views against the truth of the images they came from (matched by camera and stamp).
+
+    Args:
+        observations: the detector's views, with their stamps.
+        truth: per camera what was drawn.
+        select: per camera the (N,) images to count (:func:`brightness_classes`), or None: all, and returned
+            views that match no image's stamp count as false.
+    """
     right, swapped, errors, images = _compare(observations, truth)
-    visible = 0
-    found = 0
+    visible = found = returned = false = turned = 0
+    squares = 0.0
+    centres = 0
     for c, camera in enumerate(truth):
         column = observations.camera_names.index(camera.name)
-        clear = clearly_visible(camera)
+        chosen = np.ones(camera.stamps_ns.shape, dtype=bool) if select is None else select(camera)
+        clear = clearly_visible(camera) & chosen
         visible += int(clear.sum())
-        hit = images[c][right[:, column]]
-        found += int(clear[hit].sum())
-    returned = int(observations.complete.sum())
-    good = errors[right]
-    return DetectionScore(
-        visible, found, returned, returned - int(right.sum()), int(swapped.sum()), float(np.sum(good**2)), good.size
-    )
+        found += int(clear[images[c][right[:, column]]].sum())
+        counted = observations.complete[:, column] & (images[c] >= 0)
+        counted &= chosen[np.maximum(images[c], 0)]
+        if select is None:
+            counted = observations.complete[:, column]
+        returned += int(counted.sum())
+        false += int((counted & ~right[:, column]).sum())
+        turned += int((counted & swapped[:, column]).sum())
+        good = errors[counted & right[:, column], column]
+        squares += float(np.sum(good**2))
+        centres += good.size
+    return DetectionScore(visible, found, returned, false, turned, squares, centres)
+
+
+#: Brightness classes of a view (its brightest LED before clipping, in multiples of full scale): lower edges.
+BRIGHTNESS_EDGES = (0.0, 4.0, 8.0, 16.0)
+
+
+def brightness_classes(
+    edges: tuple[float, ...] = BRIGHTNESS_EDGES,
+) -> dict[str, Callable[[CameraTruth], NDArray[np.bool_]]]:
+    """Per class name ("<4x", "4-8x", ...) a selector of the images whose brightest LED falls in it, for
+    :func:`score`."""
+    bounds = [*edges, np.inf]
+    classes: dict[str, Callable[[CameraTruth], NDArray[np.bool_]]] = {}
+    for low, high in itertools.pairwise(bounds):
+        name = f"<{high:g}x" if low == 0 else (f">{low:g}x" if not np.isfinite(high) else f"{low:g}-{high:g}x")
+
+        def chosen(truth: CameraTruth, low: float = low, high: float = high) -> NDArray[np.bool_]:
+            over = truth.over_saturation()
+            return np.asarray((over >= low) & (over < high))
+
+        classes[name] = chosen
+    return classes
 
 
 def detect_room_recording(recording: RoomRecording, rig: RigSpec) -> tuple[WandObservations, Detections]:

@@ -134,6 +134,38 @@ class Window:
 
 
 @dataclass(frozen=True)
+class Stripe:
+    """A painted line on a floor (a track, a marking): a straight band brighter than the floor.
+
+    Attributes:
+        start: (u, v) one end, px.
+        end: (u, v) the other end, px.
+        width_px: its width.
+        level: how much brighter than the floor it is, before the optics, grey levels per ms.
+    """
+
+    start: tuple[float, float]
+    end: tuple[float, float]
+    width_px: float
+    level: float
+
+
+@dataclass(frozen=True)
+class Reflection:
+    """A broad specular reflection of a ceiling lamp on a glossy floor: a soft elliptical glow.
+
+    Attributes:
+        centre: (u, v) px.
+        sigma_px: (along u, along v) its Gaussian widths, px.
+        level: its peak above the floor, grey levels per ms.
+    """
+
+    centre: tuple[float, float]
+    sigma_px: tuple[float, float]
+    level: float
+
+
+@dataclass(frozen=True)
 class CameraRoom:
     """What one camera sees besides the wand, and how it sees it.
 
@@ -150,6 +182,14 @@ class CameraRoom:
         led_distance_mm: the distance ``led_peak`` is quoted at.
         led_falloff: the exponent p of the LEDs' fall-off as the wand turns towards the line of sight.
         led_colour: relative (R, G, B) response to the LEDs.
+        led_diameter_mm: the diameter of each LED's glowing diffuser (0: a point; near a wide-angle camera a
+            12 mm ball is a disc of several px).
+        stripes: painted lines on the floor or wall (static structure brighter than it).
+        reflections: broad reflections of lamps on a glossy floor.
+        grain: a fixed texture of the wall or floor: its relative standard deviation (0: a smooth wall).
+        grain_seed: the seed of that texture (it is the same in every image).
+        saturated_shift_px: LED spots that saturate are drawn this far (px) radially outward from the image centre,
+            a bias on purpose (a lens's coma, a sensor's blooming to one side): the truth stays where the LED is.
     """
 
     sensor: Sensor = field(default_factory=Sensor)
@@ -163,6 +203,12 @@ class CameraRoom:
     led_distance_mm: float = 1000.0
     led_falloff: float = 3.0
     led_colour: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    led_diameter_mm: float = 0.0
+    stripes: tuple[Stripe, ...] = ()
+    reflections: tuple[Reflection, ...] = ()
+    grain: float = 0.0
+    grain_seed: int = 0
+    saturated_shift_px: float = 0.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -180,6 +226,8 @@ class CameraTruth:
         near_lamp: (N, K) the LED is within LAMP_MARGIN_PX of a lamp's disc or a window.
         streak_px: (N, K) the length of the LED's motion streak, px.
         image_size: (width, height).
+        peak: (N, K) the LED's brightest pixel before clipping, grey levels (0 where not drawn).
+        full_scale: the grey levels a pixel holds above black (what ``peak`` saturates at).
     """
 
     name: str
@@ -191,6 +239,14 @@ class CameraTruth:
     near_lamp: NDArray[np.bool_]
     streak_px: FloatArray
     image_size: tuple[int, int]
+    peak: FloatArray | None = None
+    full_scale: float = 253.0
+
+    def over_saturation(self) -> FloatArray:
+        """(N,) each image's brightest LED before clipping, in multiples of full scale (0 where none was drawn)."""
+        if self.peak is None:
+            return np.zeros(self.uv.shape[0])
+        return np.asarray(np.nanmax(np.where(np.isfinite(self.uv[..., 0]), self.peak, 0.0), axis=1) / self.full_scale)
 
 
 @dataclass(frozen=True, eq=False)

@@ -13,7 +13,7 @@ from numpy.typing import NDArray
 from scipy.special import erf
 
 from wand_calib_ros.io.images import encode_compressed
-from wand_calib_ros.sim.room import CameraRoom, Optics, Window
+from wand_calib_ros.sim.room import CameraRoom, Optics, Stripe, Window
 
 FloatArray = NDArray[np.float64]
 
@@ -124,13 +124,47 @@ class _Scene:
     luma_light: FloatArray  # the lamps' and windows' light (luma) per ms, for the truth
 
 
-def _scene(room: CameraRoom, size: tuple[int, int]) -> _Scene:
+def _stripe(size: tuple[int, int], stripe: Stripe) -> FloatArray:
+    """(H, W) coverage (0..1) of a painted stripe: a band of its width along its segment, edges a pixel soft."""
+    width, height = size
+    (u0, v0), (u1, v1) = stripe.start, stripe.end
+    us, vs = np.meshgrid(np.arange(width, dtype=np.float64), np.arange(height, dtype=np.float64))
+    du, dv = u1 - u0, v1 - v0
+    t = np.clip(((us - u0) * du + (vs - v0) * dv) / max(du * du + dv * dv, 1e-9), 0.0, 1.0)
+    distance = np.hypot(us - (u0 + t * du), vs - (v0 + t * dv))
+    return np.clip(0.5 * stripe.width_px - distance + 0.5, 0.0, 1.0)
+
+
+def _grain(size: tuple[int, int], seed: int) -> FloatArray:
+    """(H, W) a fixed texture of unit standard deviation: noise smoothed over about two pixels (a floor's grain)."""
+    width, height = size
+    noise = np.random.default_rng(seed).standard_normal((height, width))
+    smooth = cv2.GaussianBlur(noise, (0, 0), 1.0, borderType=cv2.BORDER_REFLECT)
+    return np.asarray(smooth / max(float(smooth.std()), 1e-12))
+
+
+def _floor(room: CameraRoom, size: tuple[int, int]) -> FloatArray:
+    """(H, W) the wall or floor per ms before the mosaic: lit unevenly, with its grain, painted stripes and
+    reflections (static structure, part of the background a detector must see past)."""
     width, height = size
     us, vs = np.meshgrid(np.arange(width), np.arange(height))
     x, y = us / (width - 1) - 0.5, vs / (height - 1) - 0.5
     wall = room.wall_level * (1 + room.wall_gradient[0] * x + room.wall_gradient[1] * y)
     wall *= 1.0 - room.vignetting * (x**2 + y**2) / 0.5
-    wall = _response(room, (1.0, 1.0, 1.0), wall, (0, 0))
+    if room.grain:
+        wall = wall * np.maximum(1.0 + room.grain * _grain(size, room.grain_seed), 0.0)
+    if room.stripes:
+        paint = sum((stripe.level * _stripe(size, stripe) for stripe in room.stripes), np.zeros((height, width)))
+        wall = wall + _blurred(paint, room.optics)
+    for glow in room.reflections:
+        (cu, cv), (su, sv) = glow.centre, glow.sigma_px
+        wall = wall + glow.level * np.exp(-0.5 * (((us - cu) / su) ** 2 + ((vs - cv) / sv) ** 2))
+    return np.asarray(wall, dtype=np.float64)
+
+
+def _scene(room: CameraRoom, size: tuple[int, int]) -> _Scene:
+    width, height = size
+    wall = _response(room, (1.0, 1.0, 1.0), _floor(room, size), (0, 0))
     windows = np.zeros((height, width))
     light = np.zeros((height, width))
     for window in room.windows:
@@ -212,6 +246,8 @@ def render_camera(
     encoding = room.sensor.encoding
     k = led_paths[0].shape[0] if led_paths else 0
     peaks = np.zeros((len(led_paths), k))
+    luma = float(_LUMA @ np.asarray(room.led_colour))
+    headroom = 255.0 - room.sensor.black_level
     for i, (paths, energy) in enumerate(zip(led_paths, led_energy, strict=True)):
         signal = static.copy()
         for lamp, (patch, u0, v0) in zip(room.lamps, scene.lamps, strict=True):
@@ -224,12 +260,28 @@ def render_camera(
             patch, u0, v0 = _spread(paths[p][keep], energy[p][keep], room.optics, size)
             if patch.size == 0:
                 continue
-            peaks[i, p] = float(patch.max()) * float(_LUMA @ np.asarray(room.led_colour))
+            peaks[i, p] = float(patch.max()) * luma
+            if room.saturated_shift_px and _saturates(patch * luma, static[v0:, u0:], headroom):
+                patch, u0, v0 = _spread(_outward(paths[p][keep], size, room.saturated_shift_px), energy[p][keep],
+                                        room.optics, size)  # fmt: skip
             recorded = _response(room, room.led_colour, patch, (u0, v0))
             signal[v0 : v0 + patch.shape[0], u0 : u0 + patch.shape[1]] += recorded.astype(np.float32)
         image, encoding = _encoded(room, signal, bank, rng)
         images.append(image)
     return images, encoding, peaks, scene.luma_light * exposure
+
+
+def _saturates(patch: FloatArray, static: NDArray[np.float32], headroom: float) -> bool:
+    """Whether a light's patch over the static picture (from the patch's top-left pixel on) clips anywhere."""
+    behind = static[: patch.shape[0], : patch.shape[1]]
+    return bool(np.any(patch[: behind.shape[0], : behind.shape[1]] + behind >= headroom))
+
+
+def _outward(path: FloatArray, size: tuple[int, int], shift_px: float) -> FloatArray:
+    """(M, 2) a light's path moved ``shift_px`` away from the image centre (along the line from it)."""
+    centre = np.array([(size[0] - 1) / 2.0, (size[1] - 1) / 2.0])
+    away = path.mean(axis=0) - centre
+    return np.asarray(path + shift_px * away / max(float(np.linalg.norm(away)), 1e-9))
 
 
 def scene_level(room: CameraRoom, size: tuple[int, int]) -> FloatArray:

@@ -4,15 +4,22 @@ named scenes of the benchmark and the tests."""
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.sim.room import REFERENCE_EXPOSURE_MS, CameraRoom, Lamp, Sensor, Window
-from wand_calib_ros.sim.scenarios import Scenario
+from wand_calib_ros.sim.room import REFERENCE_EXPOSURE_MS, CameraRoom, Lamp, Optics, Reflection, Sensor, Stripe, Window
+from wand_calib_ros.sim.scenarios import SCENARIOS, Scenario
 
 FloatArray = NDArray[np.float64]
+
+
+#: What lies behind the wand: "wall" a smooth wall lit unevenly; "painted" a lab floor with a painted track (long
+#: stripes and dashed lines brighter than the floor, and its grain); "glossy" a bright floor with broad reflections
+#: of ceiling lamps; "cluttered" a room's clutter (chair legs, glints on metal, some lined up).
+Floor = Literal["wall", "painted", "glossy", "cluttered"]
 
 
 @dataclass(frozen=True)
@@ -29,6 +36,12 @@ class RoomOptions:
             distance of the wand, at REFERENCE_EXPOSURE_MS.
         led_falloff: exponent of the LEDs' fall-off as the wand turns towards the line of sight.
         led_colour: (R, G, B) of the LEDs.
+        led_diameter_mm: the LEDs' glowing diffusers' diameter (0: points).
+        led_peak_mm: the distance ``led_peak`` is quoted at, mm (None: each camera's median distance of the wand).
+        optics: every camera's lens (a fisheye seeing LEDs far beyond saturation blooms widely).
+        window_on_path: the window's edge (where there is one) placed across the wand's path.
+        floor: what lies behind the wand besides lamps and windows (:data:`Floor`).
+        saturated_shift_px: saturated LED spots drawn this far outward from the image centre (a bias on purpose).
     """
 
     sensor: Sensor = field(default_factory=Sensor)
@@ -39,6 +52,12 @@ class RoomOptions:
     led_peak: float = 400.0
     led_falloff: float = 3.0
     led_colour: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    led_peak_mm: float | None = None
+    led_diameter_mm: float = 0.0
+    optics: Optics = field(default_factory=Optics)
+    window_on_path: bool = False
+    floor: Floor = "wall"
+    saturated_shift_px: float = 0.0
 
 
 def _lamp_positions(
@@ -107,6 +126,8 @@ def room_for(
             u0 = rng.choice([rng.uniform(5, 0.2 * width), rng.uniform(0.6 * width, width - w - 5)])
             v0 = rng.uniform(5, 0.15 * height)
             level = rng.uniform(150.0, 220.0) / REFERENCE_EXPOSURE_MS
+            across = _across_path(uv, size, (w, h), rng) if options.window_on_path else None
+            u0, v0 = (u0, v0) if across is None else across
             windows.append(Window((u0, v0, u0 + w, v0 + h), level))
         boxes = [w.box for w in windows]
         lamps: list[Lamp] = []
@@ -131,20 +152,107 @@ def room_for(
                 break
             if all(np.hypot(centre[0] - u, centre[1] - v) >= 60 for u, v in taken):
                 lamps.append(Lamp(centre, rng.uniform(2.0, 5.0), rng.uniform(300.0, 2000.0)))
-        rooms.append(
-            CameraRoom(
-                sensor=options.sensor,
-                lamps=tuple(lamps),
-                windows=tuple(windows),
-                wall_gradient=(float(rng.uniform(-0.5, 0.5)), float(rng.uniform(-0.5, 0.5))),
-                led_peak=options.led_peak / REFERENCE_EXPOSURE_MS,
-                led_distance_mm=distances_mm[c],
-                led_falloff=options.led_falloff,
-                led_colour=options.led_colour,
-            )
+        room = CameraRoom(
+            sensor=options.sensor,
+            optics=options.optics,
+            lamps=tuple(lamps),
+            windows=tuple(windows),
+            wall_gradient=(float(rng.uniform(-0.5, 0.5)), float(rng.uniform(-0.5, 0.5))),
+            led_peak=options.led_peak / REFERENCE_EXPOSURE_MS,
+            led_distance_mm=distances_mm[c] if options.led_peak_mm is None else options.led_peak_mm,
+            led_falloff=options.led_falloff,
+            led_colour=options.led_colour,
+            led_diameter_mm=options.led_diameter_mm,
+            saturated_shift_px=options.saturated_shift_px,
         )
+        rooms.append(room if options.floor == "wall" else _with_floor(room, options.floor, size, rng))
     return tuple(rooms)
 
+
+def _across_path(
+    uv: FloatArray, size: tuple[int, int], extent: tuple[float, float], rng: np.random.Generator
+) -> tuple[float, float] | None:
+    """The top-left corner of a window of ``extent`` (w, h) whose left or right edge runs through a point of the
+    path of one LED (B), the window inside the image; None when the path gives no such point."""
+    width, height = size
+    w, h = extent
+    track = uv[:, 1]
+    track = track[np.all(np.isfinite(track), axis=1)]
+    for _ in range(200):
+        if not len(track):
+            return None
+        u, v = track[int(rng.integers(0, len(track)))]
+        u0 = u if rng.random() < 0.5 else u - w  # the path crosses its left (or right) edge
+        v0 = v - rng.uniform(0.2, 0.8) * h
+        if 5 <= u0 <= width - w - 5 and 5 <= v0 <= height - h - 5:
+            return float(u0), float(v0)
+    return None
+
+
+def _with_floor(room: CameraRoom, floor: Floor, size: tuple[int, int], rng: np.random.Generator) -> CameraRoom:
+    """The room with its floor's static structure (:data:`Floor`), levels as seen at the room's exposure."""
+    width, height = size
+    exposure = room.sensor.exposure_ms
+    seed = int(rng.integers(0, 2**31))
+    if floor == "painted":  # a floor at 40-60, a track's lines (some dashed) 30-80 brighter, converging
+        vanishing = np.array([rng.uniform(-0.5, 1.5) * width, rng.uniform(-1.5, -0.6) * height])
+        stripes: list[Stripe] = []
+        for _ in range(int(rng.integers(4, 7))):
+            foot = np.array([rng.uniform(-0.2, 1.2) * width, 1.3 * height])
+            start, end = vanishing + 0.55 * (foot - vanishing), foot
+            level, wide = rng.uniform(30.0, 80.0) / exposure, rng.uniform(3.0, 10.0)
+            if rng.random() < 0.5:  # dashed: dashes of 15-40 px with gaps of 15-40 px
+                along = end - start
+                length = float(np.linalg.norm(along))
+                dash, gap, t = rng.uniform(15.0, 40.0), rng.uniform(15.0, 40.0), rng.uniform(0.0, 30.0)
+                while t < length:
+                    a, b = start + along * t / length, start + along * min(t + dash, length) / length
+                    stripes.append(Stripe((float(a[0]), float(a[1])), (float(b[0]), float(b[1])), wide, level))
+                    t += dash + gap
+            else:
+                stripes.append(Stripe((float(start[0]), float(start[1])), (float(end[0]), float(end[1])), wide, level))
+        return replace(room, wall_level=rng.uniform(40.0, 60.0) / exposure, stripes=tuple(stripes), grain=0.06,
+                       grain_seed=seed, vignetting=0.2)  # fmt: skip
+    if floor == "glossy":  # a floor at 40-60 with two to four broad reflections reaching 130-190
+        glows = tuple(
+            Reflection(
+                (float(rng.uniform(0.1, 0.9) * width), float(rng.uniform(0.1, 0.9) * height)),
+                (float(rng.uniform(25.0, 70.0)), float(rng.uniform(25.0, 70.0))),
+                float(rng.uniform(90.0, 130.0) / exposure),
+            )
+            for _ in range(int(rng.integers(2, 5)))
+        )
+        return replace(room, wall_level=rng.uniform(40.0, 60.0) / exposure, reflections=glows, grain=0.04,
+                       grain_seed=seed, vignetting=0.2)  # fmt: skip
+    # cluttered: chair legs and table edges a little brighter than the wall, glints on metal, some of them in a row
+    legs = []
+    for _ in range(int(rng.integers(4, 9))):
+        u, v = rng.uniform(0.05, 0.95) * width, rng.uniform(0.3, 0.95) * height
+        tilt, length = rng.uniform(-0.3, 0.3), rng.uniform(40.0, 150.0)
+        bottom = (float(u + tilt * length), float(min(v + length, height + 10)))
+        wide, level = float(rng.uniform(3.0, 6.0)), float(rng.uniform(15.0, 50.0) / exposure)
+        legs.append(Stripe((float(u), float(v)), bottom, wide, level))
+    glints = [
+        Lamp((float(rng.uniform(10, width - 10)), float(rng.uniform(10, height - 10))), float(rng.uniform(0.6, 1.5)),
+             float(rng.uniform(60.0, 400.0) / exposure * 4.0), flicker=float(rng.uniform(0.0, 0.03)))
+        for _ in range(int(rng.integers(6, 13)))
+    ]  # fmt: skip
+    for leg in legs[:2]:  # glints along an edge: three or four lined up, unevenly spaced
+        (u0, v0), (u1, v1) = leg.start, leg.end
+        for t in np.sort(rng.uniform(0.0, 1.0, size=int(rng.integers(3, 5)))):
+            centre = (float(u0 + t * (u1 - u0)), float(min(v0 + t * (v1 - v0), height - 10)))
+            glints.append(Lamp(centre, float(rng.uniform(0.6, 1.2)), float(rng.uniform(100.0, 300.0) / exposure * 4.0),
+                               flicker=0.02))  # fmt: skip
+    return replace(room, lamps=room.lamps + tuple(glints), stripes=tuple(legs), grain=0.03, grain_seed=seed)
+
+
+#: A fisheye lens seeing LEDs far beyond saturation: a wide bloom (a 10-20 px halo around an LED 8-30x over full scale).
+BLOOMING = Optics(core_sigma_px=1.0, bloom=(0.25, 8.0), glare=(0.06, 20.0))
+#: An LED 1 m away, on axis, at REFERENCE_EXPOSURE_MS: eight times full scale (in a small room, the wand 0.4-1.4 m
+#: from the cameras, 1-30x as it turns and nears).
+NEAR_LED_PEAK = 16.0 * 253.0
+#: The diameter of a wand's diffused LED ball, mm (near a fisheye, 5-10 px across).
+NEAR_LED_MM = 5.0
 
 #: Named rooms of the benchmark and the tests.
 ROOM_SCENES: dict[str, Callable[[], RoomOptions]] = {
@@ -158,4 +266,27 @@ ROOM_SCENES: dict[str, Callable[[], RoomOptions]] = {
     "mono16": lambda: RoomOptions(Sensor(exposure_ms=6.0, encoding="mono16")),
     "bayer": lambda: RoomOptions(Sensor(exposure_ms=6.0, encoding="bayer_rggb8")),
     "hard": lambda: RoomOptions(Sensor(exposure_ms=16.0), lamps=4, windows="every", lamp_near_path=True, lamp_row=True),
+    "near_fisheye": lambda: RoomOptions(Sensor(exposure_ms=6.0), led_peak=NEAR_LED_PEAK, led_peak_mm=1000.0,
+                                        led_diameter_mm=NEAR_LED_MM, optics=BLOOMING, window_on_path=True),
+    "near_biased": lambda: RoomOptions(Sensor(exposure_ms=6.0), led_peak=NEAR_LED_PEAK, led_peak_mm=1000.0,
+                                       led_diameter_mm=NEAR_LED_MM, optics=BLOOMING, window_on_path=True,
+                                       saturated_shift_px=0.5),
+    "cluttered": lambda: RoomOptions(Sensor(exposure_ms=6.0), floor="cluttered"),
+    "painted_floor": lambda: RoomOptions(Sensor(exposure_ms=12.0, encoding="bgr8"), lamps=0, windows="none",
+                                         floor="painted", led_peak=150.0),
+    "glossy_floor": lambda: RoomOptions(Sensor(exposure_ms=12.0, encoding="bgr8"), lamps=0, windows="none",
+                                        floor="glossy", led_peak=45.0),
+}  # fmt: skip
+#: The rig of each scene (:data:`wand_calib_ros.sim.scenarios.SCENARIOS`) where it is not the paper's three fisheyes.
+ROOM_RIGS = {
+    "colour_jpeg": "mixed",
+    "near_fisheye": "small_room",
+    "near_biased": "small_room",
+    "painted_floor": "conventional",
+    "glossy_floor": "conventional",
 }
+
+
+def scene_scenario(scene: str) -> Scenario:
+    """The rig a named scene is rendered on (:data:`ROOM_RIGS`; the paper's three fisheyes by default)."""
+    return SCENARIOS[ROOM_RIGS.get(scene, "paper3")]()

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.model.camera_model import project
+from wand_calib_ros.core.model.camera_model import CameraModel, project
 from wand_calib_ros.core.model.rig import WandObservations
 from wand_calib_ros.sim.clocks import CameraClock, film, stamp_ns, synchronised_clocks
 from wand_calib_ros.sim.motion import WavedWand, shared_volume, waved_wand
@@ -30,13 +30,15 @@ def _exposure_steps(streak_px: float) -> int:
 
 def _led_light(
     scenario: Scenario, camera: int, room: CameraRoom, trajectory: WavedWand, times: FloatArray
-) -> tuple[FloatArray, FloatArray]:
-    """(M, K, 2) pixels and (M, K) light (grey levels x px per ms) of the LEDs at ``times`` (NaN: not seen)."""
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """(M, K, 2) pixels, (M, K) light (grey levels x px per ms) and (M, K) image radius (px) of the LEDs at
+    ``times`` (NaN: not seen)."""
     true_camera = scenario.cameras[camera]
     motion = trajectory.at(times)
     points = motion.points(scenario.wand)  # (M, K, 3)
     in_camera = true_camera.pose.apply(points)
     uv = project(true_camera.model, in_camera)
+    radius = _image_radius(true_camera.model, in_camera, uv, 0.5 * room.led_diameter_mm)
     seen = visibility(scenario, motion.wand_a, motion.direction, motion.facing)[:, camera]
     distance = np.linalg.norm(in_camera, axis=-1)
     to_camera = true_camera.pose.center[None, None, :] - points
@@ -44,7 +46,35 @@ def _led_light(
     core = room.optics.terms()[0][0]
     energy = room.led_peak / core * 2 * np.pi * room.optics.core_sigma_px**2
     light = energy * (room.led_distance_mm / distance) ** 2 * falloff
-    return np.where(seen[..., None], uv, np.nan), np.where(seen, light, np.nan)
+    return np.where(seen[..., None], uv, np.nan), np.where(seen, light, np.nan), radius
+
+
+def _image_radius(model: CameraModel, in_camera: FloatArray, uv: FloatArray, radius_mm: float) -> FloatArray:
+    """(...) the image radius (px) of a glowing ball of ``radius_mm`` at (..., 3) points of the camera's frame, whose
+    (..., 2) images are ``uv``: the mean of its image extent along two directions across the line of sight."""
+    if radius_mm <= 0.0:
+        return np.zeros(in_camera.shape[:-1])
+    ray = in_camera / np.linalg.norm(in_camera, axis=-1, keepdims=True)
+    first = np.cross(ray, [1.0, 0.0, 0.0])
+    first /= np.maximum(np.linalg.norm(first, axis=-1, keepdims=True), 1e-12)
+    second = np.cross(ray, first)
+    extents = [np.linalg.norm(project(model, in_camera + radius_mm * e) - uv, axis=-1) for e in (first, second)]
+    return np.asarray(0.5 * (extents[0] + extents[1]))
+
+
+def _disc_points(centres: FloatArray, energy: FloatArray, radius: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """A glowing disc instead of a point: each of the (K, M, 2) positions (energy (K, M), radius (K,) px) spread
+    over D points filling the disc evenly (a sunflower pattern, about two per px^2), each with 1/D of the light:
+    (K, M * D, 2) and (K, M * D)."""
+    largest = float(np.nanmax(radius)) if np.isfinite(radius).any() else 0.0
+    count = int(np.clip(np.ceil(2.0 * np.pi * largest**2), 1, 200))
+    if count == 1:
+        return centres, energy
+    index = np.arange(count) + 0.5
+    spiral = np.sqrt(index / count)[:, None] * np.stack([np.cos(2.39996323 * index), np.sin(2.39996323 * index)], -1)
+    offsets = np.nan_to_num(radius)[:, None, None, None] * spiral[None, None]  # (K, 1, D, 2)
+    points = (centres[:, :, None, :] + offsets).reshape(centres.shape[0], -1, 2)
+    return points, np.repeat(energy / count, count, axis=1)
 
 
 def render_room_take(
@@ -73,7 +103,7 @@ def render_room_take(
         exposure_s = room.sensor.exposure_ms / 1000.0
         mids = take.exposures
         # the streak's length from its ends, then the steps along it
-        ends, _ = _led_light(
+        ends, _, _ = _led_light(
             scenario, c, room, trajectory, np.concatenate([mids - exposure_s / 2, mids + exposure_s / 2])
         )
         streak = np.linalg.norm(ends[: len(mids)] - ends[len(mids) :], axis=-1)  # (N, K)
@@ -82,9 +112,11 @@ def render_room_take(
             longest = float(np.nanmax(streak[i])) if np.isfinite(streak[i]).any() else 0.0
             steps = _exposure_steps(longest)
             times = mid + exposure_s * (np.arange(steps) / (steps - 1) - 0.5)
-            uv, light = _led_light(scenario, c, room, trajectory, times)
-            paths.append(np.transpose(uv, (1, 0, 2)))
-            energies.append(light.T * room.sensor.exposure_ms / steps)
+            uv, light, radius = _led_light(scenario, c, room, trajectory, times)
+            path, energy = _disc_points(np.transpose(uv, (1, 0, 2)), light.T * room.sensor.exposure_ms / steps,
+                                        radius[steps // 2])  # fmt: skip
+            paths.append(path)
+            energies.append(energy)
         images, encoding, peaks, light = render_camera(room, size, paths, energies, rng)
         uv_mid = take.uv
         behind = _sample(light, uv_mid)
@@ -115,6 +147,8 @@ def render_room_take(
                 near_lamp,
                 np.nan_to_num(streak),
                 size,
+                np.where(np.isfinite(uv_mid[..., 0]), peaks, 0.0),
+                255.0 - room.sensor.black_level,
             )
         )
         for stamp, image in zip(stamp_ns(take.stamps), images, strict=True):

@@ -240,6 +240,14 @@ def paper_three_camera_scenario(**kwargs: float | tuple[float, float]) -> Scenar
     return Scenario("paper3", scenario.wand, scenario.cameras, scenario.volume, scenario.n_placements)
 
 
+def small_room_scenario() -> Scenario:
+    """The paper's three fisheyes in a small room: the wand waved 0.4-1.4 m from them (0.75-1 m median), where
+    its LEDs are far brighter than the sensor's full scale."""
+    scenario = paper_three_camera_scenario()
+    volume = np.array([[-100.0, -300.0, 500.0], [400.0, 200.0, 850.0]])
+    return Scenario("small_room", scenario.wand, scenario.cameras, volume, scenario.n_placements)
+
+
 def _look_at(centre: FloatArray, target: FloatArray, down: FloatArray) -> Pose:
     """Pose of a camera at ``centre`` looking at ``target`` with image y along ``down``."""
     z = (target - centre) / np.linalg.norm(target - centre)
@@ -466,6 +474,7 @@ def action_pair_scenario(*, n_placements: int = 322) -> Scenario:
 SCENARIOS: dict[str, Callable[..., Scenario]] = {
     "paper": paper_fisheye_scenario,
     "paper3": paper_three_camera_scenario,
+    "small_room": small_room_scenario,
     "conventional": conventional_pair_scenario,
     "mixed": mixed_pair_scenario,
     "mixed3": mixed_three_camera_scenario,

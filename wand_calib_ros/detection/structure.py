@@ -1,0 +1,301 @@
+"""Static structure: what a camera sees that never moves, learned from its own images, so that only what moves
+stands out.
+
+A room is not a smooth wall: a lab floor has painted lines and grain, a glossy floor broad reflections of the
+ceiling lamps, a room chair legs and glints, a window its bars. A threshold from a spatial median (the local
+background of :mod:`~wand_calib_ros.detection.background`, about 20 px across) does not follow a 5 px stripe, so
+the stripe's pieces are blobs, collinear ones wand-like; and it is widened over a bright region's neighbourhood,
+so an LED 30 grey levels above a reflection's slope stays below it. Over time, though, the wand moves and the
+room does not:
+
+- every SNAPSHOT_NS (the first few EARLY_NS apart) the image's box sums are kept, the newest SNAPSHOTS of them
+  (two seconds); the structure is their per-pixel median: a moving LED is at a pixel in one or two
+  of them, so it is not part of it (an LED at rest for longer is: it is still, not the wand);
+- the threshold that follows it is the structure plus the noise's contrast at its level. The noise is measured
+  over time, from two snapshots' differences (tiles' lower halves, as the background measures it in space): a
+  floor's grain or a window's bars are structure, not noise;
+- light that flickers (a mains lamp's glare varies by 10 % and more from image to image, JPEG blocks shift with
+  the noise) spreads its snapshots: FLICKER_SPREAD times the spread between their median and their second largest
+  beyond what the noise spreads (SPREAD_NOISE of its standard deviation) is added where it shows. A painted stripe
+  does not flicker and keeps the noise's threshold; the wand is kept out of the snapshots where its track is
+  known, and an LED passing a pixel in one snapshot moves neither the median nor the second largest. Only light
+  that stands above its surroundings (the spatial background) flickers, by at most FLICKER_MAX of what it stands
+  above them: a wand passing twice over a dark wall does not raise its threshold. Until there are SNAPSHOTS of
+  them, such light is assumed to flicker by that much and any light by EARLY_FLICKER, and the threshold is never
+  below the spatial one.
+
+An LED in front of a stripe or a reflection is found where it stands out of that: the threshold follows the
+structure pixel by pixel.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import replace
+from typing import Any
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from wand_calib_ros.detection.background import (
+    STEP,
+    Background,
+    BackgroundOptions,
+    noise_model,
+    tile_noise,
+)
+
+#: A snapshot of the box sums is kept this often (ns) ...
+SNAPSHOT_NS = 400_000_000
+#: ... the first EARLY_SNAPSHOTS of them this often (a structure within a tenth of a second of the start).
+EARLY_NS = 50_000_000
+EARLY_SNAPSHOTS = 3
+#: The structure is the median of the newest this many snapshots (odd), once there are MIN_SNAPSHOTS.
+SNAPSHOTS = 5
+MIN_SNAPSHOTS = 3
+#: Flickering light's threshold: this many times the spread of its snapshots (second largest minus median) beyond
+#: what the noise spreads them (SPREAD_NOISE noise sigmas: the spread's mean for five draws of pure noise is 0.5).
+#: A lamp flickering uniformly by +-f spreads five snapshots by f / 3 on average.
+FLICKER_SPREAD = 4.0
+SPREAD_NOISE = 0.8
+
+#: Static light that stands above its surroundings (the spatial background) flickers by at most this fraction of
+#: what it stands above them (mains lamps: 10-20 %); until there are SNAPSHOTS snapshots, it is assumed to.
+FLICKER_MAX = 0.3
+#: ... and until there are SNAPSHOTS snapshots, any static light may flicker by this fraction of it.
+EARLY_FLICKER = 0.15
+
+#: A static pixel this close to full scale (a fraction) is saturated: nothing of a spot can be seen there.
+SATURATED_STATIC = 0.98
+
+#: Comparators (i, j) that sort 2-5 values (optimal networks): after them value i <= value j for every pair.
+_NETWORKS = {
+    2: ((0, 1),),
+    3: ((0, 1), (1, 2), (0, 1)),
+    4: ((0, 1), (2, 3), (0, 2), (1, 3), (1, 2)),
+    5: ((0, 1), (3, 4), (2, 4), (2, 3), (0, 3), (0, 2), (1, 4), (1, 3), (1, 2)),
+}
+
+
+def sorted_pixels(snapshots: list[NDArray[Any]]) -> list[NDArray[Any]]:
+    """The images' values sorted pixel by pixel (1-5 images of one size and dtype): item k holds every pixel's k-th
+    smallest, by a sorting network of minima and maxima (a fraction of numpy's sort's cost)."""
+    n = len(snapshots)
+    if not 1 <= n <= 5:
+        raise ValueError(f"1-5 snapshots, not {n}")
+    values = list(snapshots)
+    for i, j in _NETWORKS.get(n, ()):
+        values[i], values[j] = cv2.min(values[i], values[j]), cv2.max(values[i], values[j])
+    return values
+
+
+def median_of(snapshots: list[NDArray[Any]]) -> NDArray[Any]:
+    """The per-pixel median of 1-5 images (the lower median of an even count); of five by seven minima and maxima
+    (the median of 5 is the median of the fifth and the middle two of the other four's pairs)."""
+    if len(snapshots) != 5:
+        return sorted_pixels(snapshots)[(len(snapshots) - 1) // 2]
+    a, b, c, d, e = snapshots
+    low, high = cv2.max(cv2.min(a, b), cv2.min(c, d)), cv2.min(cv2.max(a, b), cv2.max(c, d))
+    return cv2.max(cv2.min(low, high), cv2.min(cv2.max(low, high), e))
+
+
+class StaticStructure:
+    """One camera's static structure over time (see the module docstring): feed the images (and their box sums) a
+    background is estimated from (:meth:`add`, when :meth:`due`), then let :meth:`apply` put the structure into
+    each new background: its threshold for the search, its pixels and their noise for the centres."""
+
+    def __init__(self, options: BackgroundOptions | None = None) -> None:
+        self.options = options or BackgroundOptions()
+        self._images: deque[NDArray[Any]] = deque(maxlen=SNAPSHOTS)
+        self._sums: deque[NDArray[Any]] = deque(maxlen=SNAPSHOTS)
+        self._taken = 0
+        self._last_ns: int | None = None
+        self._noise: tuple[float, float] | None = None  # (a, b) of the sums' variance over time
+        self._pixel_noise: tuple[float, float] = (0.0, 0.0)  # (a, b) of a pixel's
+        self._made: tuple[NDArray[Any], NDArray[Any], NDArray[Any], NDArray[Any]] | None = None  # (see _make)
+
+    def due(self, stamp_ns: int) -> bool:
+        """Whether an image at ``stamp_ns`` should give a snapshot (:meth:`add`)."""
+        if self._last_ns is None:
+            return True
+        every = EARLY_NS if self._taken < EARLY_SNAPSHOTS else SNAPSHOT_NS
+        return not 0 <= stamp_ns - self._last_ns < every  # (a stamp going back: start again from it)
+
+    def add(
+        self,
+        stamp_ns: int,
+        gray: NDArray[Any],
+        sums: NDArray[Any],
+        keep_out: list[tuple[float, float, float]] | None = None,
+    ) -> None:
+        """Keep an image and its box sums as a snapshot (a new kind of image starts the structure again).
+
+        Args:
+            stamp_ns: its stamp.
+            gray: (H, W) the image.
+            sums: (H, W) its box sums.
+            keep_out: (u, v, radius px) discs where the wand is: the structure learned so far stands in for the image
+                there (a wand moving slowly at the end of a stroke is not learned as structure).
+        """
+        if self._images and (self._images[0].shape != gray.shape or self._images[0].dtype != gray.dtype):
+            self.reset()
+        if self._sums and repeated(self._sums[-1], sums):  # a driver that sent one image twice: no news
+            return
+        made = self._made if self._made is not None else self._make(1.0)
+        if keep_out and made is not None:
+            gray, sums = gray.copy(), sums.copy()
+            for u, v, radius in keep_out:
+                disc = _disc_box(gray.shape, u, v, radius)
+                if disc is not None:
+                    rows, cols, inside = disc
+                    gray[rows, cols][inside] = made[0][rows, cols][inside]
+                    sums[rows, cols][inside] = made[1][rows, cols][inside]
+        if self._images:
+            self._noise = temporal_noise(self._sums[-1], sums)
+            self._pixel_noise = temporal_noise(self._images[-1], gray)
+        self._images.append(gray)
+        self._sums.append(sums)
+        self._taken += 1
+        self._last_ns = stamp_ns
+        self._made = None
+
+    def reset(self) -> None:
+        """Forget what was learned (the view changed)."""
+        self._images.clear()
+        self._sums.clear()
+        self._taken, self._last_ns, self._noise, self._made = 0, None, None, None
+
+    @property
+    def noise(self) -> tuple[float, float] | None:
+        """(a, b) of the box sums' noise variance a + b x level over time, or None: fewer than two snapshots."""
+        return self._noise
+
+    def structure(self) -> NDArray[Any] | None:
+        """(H, W) the static structure's box sums, or None: fewer than MIN_SNAPSHOTS yet."""
+        made = self._make(1.0)
+        return None if made is None else made[1]
+
+    def apply(self, background: Background) -> Background:
+        """The background with the structure (:attr:`~wand_calib_ros.detection.background.Background.structure`,
+        ``static``, ``static_sums``, ``static_noise``); unchanged while none is learned, or for an image of another
+        size or kind."""
+        made = self._make(background.unit)
+        if made is None:
+            return background
+        pixels, structure, above, flicker = made
+        if above.shape != background.threshold.shape or above.dtype != background.threshold.dtype:
+            return background
+        height, width = above.shape
+        level = cv2.resize(background.level.astype(np.float32), (width, height), interpolation=cv2.INTER_LINEAR)
+        if structure.dtype == np.uint16:
+            excess = cv2.subtract(structure, np.minimum(level, 65535.0).astype(np.uint16))  # (saturates at 0)
+            cap = cv2.multiply(excess, FLICKER_MAX, dtype=-1)  # type: ignore[call-overload]
+        else:
+            cap = np.maximum(structure - level, 0.0) * np.float32(FLICKER_MAX)
+        if len(self._sums) < SNAPSHOTS:  # too few snapshots to tell flicker: any static light may flicker by
+            # EARLY_FLICKER of it, and the threshold is never below the spatial one
+            early = cv2.multiply(structure, EARLY_FLICKER, dtype=-1)  # type: ignore[call-overload]
+            threshold = cv2.max(cv2.add(above, cv2.max(cap, early)), background.threshold)
+        else:
+            threshold = cv2.add(above, cv2.min(flicker, cap))
+        return replace(background, search=None, structure=threshold, static=pixels, static_sums=structure,
+                       static_noise=self._pixel_noise)  # fmt: skip
+
+    def saturated(self, full: float) -> NDArray[np.bool_] | None:
+        """(H, W) where the structure is saturated (a lamp's core, a window in daylight: nothing can be seen there, a
+        spot touching it is cut), or None: none learned yet."""
+        made = self._made
+        return None if made is None else np.asarray(made[0] >= SATURATED_STATIC * full)
+
+    def lights(self, full: float) -> tuple[tuple[float, float, float], ...]:
+        """(u, v, radius px) of each saturated region of the structure: the static lights it learned."""
+        where = self.saturated(full)
+        if where is None or not where.any():
+            return ()
+        count, _, stats, centres = cv2.connectedComponentsWithStats(where.astype(np.uint8), connectivity=8)
+        return tuple(
+            (float(centres[i, 0]), float(centres[i, 1]), float(np.sqrt(stats[i, cv2.CC_STAT_AREA] / np.pi)))
+            for i in range(1, count)
+        )
+
+    def _make(self, unit: float) -> tuple[NDArray[Any], NDArray[Any], NDArray[Any], NDArray[Any]] | None:
+        """(the structure's pixels, its sums, its sums plus the noise's contrast, the flicker's margin measured over
+        the snapshots), made again when a snapshot comes (``unit``: of min_contrast, the first time)."""
+        if self._made is None and self._noise is not None and len(self._sums) >= MIN_SNAPSHOTS:
+            ordered = sorted_pixels(list(self._sums))
+            structure, upper = ordered[(len(ordered) - 1) // 2], ordered[-2]
+            a, b = self._noise
+            # an image stands out of the median of n snapshots with its own noise and the median's (pi / 2n of it)
+            sigmas = np.float32(self.options.noise_sigmas * np.sqrt(1.0 + np.pi / (2 * len(ordered))))
+            least = np.float32(self.options.min_contrast * unit)
+            if structure.dtype == np.uint16:  # box sums of 8-bit images: a table of every sum's contrast
+                sums = np.arange(int(structure.max()) + 1, dtype=np.float32)
+                noise = np.sqrt(np.float32(a) + np.float32(b) * sums)
+                table = np.minimum(np.ceil(np.maximum(sigmas * noise, least)), 65535.0).astype(np.uint16)
+                contrast = np.take(table, structure)
+                above = cv2.add(structure, contrast)
+                flicker = _flicker(structure, upper, (a, b), contrast, float(sigmas))
+            else:
+                level = structure.astype(np.float32)
+                above = level + np.maximum(sigmas * np.sqrt(np.float32(a) + np.float32(b) * level), least)
+                flicker = _flicker(structure, upper, (a, b))
+            self._made = (median_of(list(self._images)), structure, above, flicker)
+        return self._made
+
+
+def _flicker(
+    structure: NDArray[Any],
+    upper: NDArray[Any],
+    noise: tuple[float, float],
+    contrast: NDArray[Any] | None = None,
+    sigmas: float = 1.0,
+) -> NDArray[Any]:
+    """(H, W) the threshold flickering light needs (the structure's units and dtype): FLICKER_SPREAD times the spread
+    between the snapshots' median and second largest beyond SPREAD_NOISE noise sigmas, widened by a pixel (a
+    lamp's edge moves with its brightness). ``contrast``: the noise's contrast at the structure (``sigmas`` noise
+    sigmas), where it is known (8-bit box sums)."""
+    a, b = noise
+    if structure.dtype == np.uint16 and contrast is not None:  # box sums of 8-bit images: the allowance from the
+        # noise's contrast there
+        allowed = cv2.multiply(contrast, SPREAD_NOISE / sigmas, dtype=-1)  # type: ignore[call-overload]
+        excess = cv2.subtract(cv2.subtract(upper, structure), allowed)  # (saturates at 0)
+        margin = cv2.multiply(excess, FLICKER_SPREAD, dtype=-1)  # type: ignore[call-overload]
+    else:
+        level = structure.astype(np.float32)
+        allowed = np.float32(SPREAD_NOISE) * np.sqrt(np.float32(a) + np.float32(b) * level)
+        margin = np.float32(FLICKER_SPREAD) * np.maximum(upper - structure - allowed, 0.0)
+    widened: NDArray[Any] = cv2.dilate(margin, np.ones((3, 3), np.uint8))
+    return widened
+
+
+def _disc_box(
+    shape: tuple[int, ...], u: float, v: float, radius: float
+) -> tuple[slice, slice, NDArray[np.bool_]] | None:
+    """(rows, columns, the disc's pixels in them) of a disc (u, v, radius px) in an image of ``shape``, or None: off
+    the image."""
+    height, width = shape[:2]
+    u0, u1 = max(int(u - radius), 0), min(int(u + radius) + 2, width)
+    v0, v1 = max(int(v - radius), 0), min(int(v + radius) + 2, height)
+    if u1 <= u0 or v1 <= v0:
+        return None
+    cols, rows = np.arange(u0, u1) - u, np.arange(v0, v1)[:, None] - v
+    return slice(v0, v1), slice(u0, u1), np.asarray(cols[None, :] ** 2 + rows**2 <= radius**2)
+
+
+#: Two images are one image sent twice when more than this fraction of their samples are equal (noise makes a
+#: few of them equal: box sums of 8-bit images about 10 % of them at a noise of one grey level).
+REPEATED = 0.5
+
+
+def repeated(first: NDArray[Any], second: NDArray[Any]) -> bool:
+    """Whether two images (box sums) are one image sent twice (REPEATED of every STEP-th pixel equal)."""
+    return bool(np.mean(first[::STEP, ::STEP] == second[::STEP, ::STEP]) > REPEATED)
+
+
+def temporal_noise(first: NDArray[Any], second: NDArray[Any]) -> tuple[float, float]:
+    """(a, b) of the noise variance a + b x level over time of two images of one view (pixels or box sums), from every
+    STEP-th pixel's difference between them in tiles (an LED in one of them is in the upper half of its tile)."""
+    x = first[::STEP, ::STEP].astype(np.float32)
+    y = second[::STEP, ::STEP].astype(np.float32)
+    return noise_model(*tile_noise(np.square(y - x), np.minimum(x, y)), from_median=True)
