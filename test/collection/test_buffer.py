@@ -95,3 +95,18 @@ def test_a_buffer_that_never_stored_anything_reopens_empty(tmp_path: Path) -> No
     ObservationBuffer.open(tmp_path / "observations.csv", rig)  # a collector that saw no wand
     again = ObservationBuffer.open(tmp_path / "observations.csv", rig)
     assert again.frames == [] and again.next_frame == 0
+
+
+def test_saturation_flags_are_stored_and_resumed(tmp_path: Path) -> None:
+    scenario = paper_fisheye_scenario()
+    data = simulate(scenario, 0.5, np.random.default_rng(3), n=12)
+    path = tmp_path / "observations.csv"
+    buffer = ObservationBuffer.open(path, scenario.rig, with_saturation=True)
+    flags = np.random.default_rng(4).random((12, 2, 3)) < 0.5
+    for k, uv in enumerate(data.observations.uv):
+        assert buffer.offer(uv, _stamps(k), saturated=flags[k])
+    on_disk = read_observations(path, scenario.rig.camera_names)
+    seen = np.isfinite(data.observations.uv[..., 0])
+    assert on_disk.saturated is not None and np.array_equal(on_disk.saturated, flags & seen)
+    again = ObservationBuffer.open(path, scenario.rig)  # a restart keeps the column
+    assert again.with_saturation and np.array_equal(again.observations().saturated, flags & seen)  # type: ignore[arg-type]

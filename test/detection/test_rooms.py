@@ -1,10 +1,13 @@
-"""The detector in a real room (issue 32's acceptance, on our own renders): over four seeds of each scene, what
-``wand-calib detect`` makes of the images against the truth, and the calibration from its views against the
-calibration from the right views alone.
+"""The detector in a real room (issues 32 and 38, on our own renders): over four seeds of each scene, what
+``wand-calib detect`` makes of the images against the truth, in every brightness class of the views' brightest LED,
+and the calibration from its views against the calibration from the right views alone.
 
 Scenes: the paper's three fisheyes in mono8 at 6 ms with two lamps and a window; a fisheye and a conventional
-camera sending JPEG colour at 12 ms with three lamps; and harder, 16 ms streaks, four lamps of which three in a
-row (a static false wand) and one beside the wand's path, a window in every camera.
+camera sending JPEG colour at 12 ms with three lamps; harder, 16 ms streaks, four lamps of which three in a row (a
+static false wand) and one beside the wand's path, a window in every camera; the three fisheyes in a small room, the
+wand 0.4-1.4 m from them, its LEDs 1-30x over full scale and blooming, a window across its path; two conventional
+cameras over a lab floor with a painted track, and over a glossy floor with broad reflections. With saturated
+spots drawn 0.5 px off on purpose, the calibration names the bias and does not call itself excellent.
 """
 
 from __future__ import annotations
@@ -18,28 +21,29 @@ from wand_calib_ros.core.model.rig import WandObservations
 from wand_calib_ros.core.pipeline import calibrate
 from wand_calib_ros.sim.detection_score import (
     DetectionScore,
+    brightness_classes,
     calibration_errors,
     detect_room_recording,
     right_and_labelled,
     score,
 )
 from wand_calib_ros.sim.room import RoomRecording
-from wand_calib_ros.sim.room_layout import ROOM_SCENES
+from wand_calib_ros.sim.room_layout import ROOM_SCENES, scene_scenario
 from wand_calib_ros.sim.room_take import room_take
-from wand_calib_ros.sim.scenarios import Scenario, mixed_pair_scenario, paper_three_camera_scenario
+from wand_calib_ros.sim.scenarios import Scenario
 
 SEEDS = range(4)
 SECONDS = 8.0
-SCENES = {
-    "lamps_window": paper_three_camera_scenario,
-    "colour_jpeg": mixed_pair_scenario,
-    "hard": paper_three_camera_scenario,
-}
+SCENES = ("lamps_window", "colour_jpeg", "hard", "near_fisheye", "painted_floor", "glossy_floor")
+#: A brightness class is judged on its own once it holds this many clearly visible views over the seeds: enough to
+#: tell a recall of 95 % from one of 90 % (2.8 binomial standard deviations; the first tenth of a second of a take,
+#: before the structure is learned, counts twice as much in an 8 s take as in a minute's).
+CLASS_VIEWS = 150
 
 
 @cache
 def _take(scene: str, seed: int) -> tuple[Scenario, RoomRecording, WandObservations]:
-    scenario = SCENES[scene]()
+    scenario = scene_scenario(scene)
     recording = room_take(scenario, ROOM_SCENES[scene](), SECONDS, np.random.default_rng(seed))
     observations, _ = detect_room_recording(recording, scenario.rig)
     return scenario, recording, observations
@@ -48,18 +52,27 @@ def _take(scene: str, seed: int) -> tuple[Scenario, RoomRecording, WandObservati
 @pytest.mark.parametrize("scene", SCENES)
 def test_views_are_found_right_and_labelled_in_a_room(scene: str) -> None:
     total: DetectionScore | None = None
+    classes = brightness_classes()
+    by_class: dict[str, DetectionScore] = {}
     for seed in SEEDS:
         _, recording, observations = _take(scene, seed)
         measured = score(observations, recording.truth)
         total = measured if total is None else total + measured
-    assert total is not None and total.clearly_visible > 1000
+        for name, chosen in classes.items():
+            part = score(observations, recording.truth, chosen)
+            by_class[name] = by_class[name] + part if name in by_class else part
+    assert total is not None and total.clearly_visible > 500
     assert total.recall >= 0.95, total
     assert total.false_rate <= 0.005, total
     assert total.centre_rms_px / np.sqrt(2) <= 0.2, total  # per image coordinate, as the calibration's sigma
     assert total.labels_right >= 0.99, total
+    for name, part in by_class.items():  # in every brightness class of the views' brightest LED
+        if part.clearly_visible >= CLASS_VIEWS:
+            assert part.recall >= 0.95, (name, part)
+            assert part.centre_rms_px / np.sqrt(2) <= 0.2, (name, part)
 
 
-@pytest.mark.parametrize("scene", ["lamps_window", "hard"])
+@pytest.mark.parametrize("scene", ["lamps_window", "hard", "near_fisheye", "painted_floor"])
 def test_the_calibration_from_the_detections_is_at_the_floor_of_the_right_views(scene: str) -> None:
     found: dict[str, list[float]] = {}
     floor: dict[str, list[float]] = {}
@@ -73,3 +86,13 @@ def test_the_calibration_from_the_detections_is_at_the_floor_of_the_right_views(
     for key in found:
         ratio = np.sqrt(np.mean(np.square(found[key]))) / np.sqrt(np.mean(np.square(floor[key])))
         assert ratio <= 1.3, (key, ratio)
+
+
+def test_saturated_centres_drawn_off_on_purpose_are_named_and_the_result_is_not_excellent() -> None:
+    for seed in range(2):
+        scenario = scene_scenario("near_biased")
+        recording = room_take(scenario, ROOM_SCENES["near_biased"](), 6.0, np.random.default_rng(seed))
+        observations, _ = detect_room_recording(recording, scenario.rig)
+        result = calibrate(scenario.rig, observations)
+        assert result.systematic and "centres of saturated LEDs" in result.systematic[0], seed
+        assert result.quality is not None and result.quality.grade != "excellent"

@@ -155,7 +155,8 @@ def test_the_fast_reader_and_the_row_by_row_reader_agree(tmp_path: Path, stamps:
     rng = np.random.default_rng(5)
     uv = rng.uniform(-5, 1020, (40, 3, 3, 2)) * rng.choice([1.0, np.nan], (40, 3, 3, 1), p=[0.8, 0.2])
     times = np.cumsum(rng.uniform(0.01, 0.05, (40, 3)), axis=0) + 1.7e9 if stamps else None
-    observations = WandObservations(np.arange(40) * 3 + 7, ("left", "c2", "right_camera"), uv, times)
+    flags = (rng.random((40, 3, 3)) < 0.4) & np.isfinite(uv[..., 0]) if stamps else None  # (with and without)
+    observations = WandObservations(np.arange(40) * 3 + 7, ("left", "c2", "right_camera"), uv, times, flags)
     path = tmp_path / "observations.csv"
     write_observations(observations, path)
     text = path.read_text()
@@ -177,5 +178,26 @@ def test_the_fast_reader_and_the_row_by_row_reader_agree(tmp_path: Path, stamps:
     assert (read.stamps is None) == (slow.stamps is None)
     if read.stamps is not None:
         assert np.array_equal(read.stamps, slow.stamps, equal_nan=True)
+    assert (read.saturated is None) == (slow.saturated is None) == (flags is None)
+    if read.saturated is not None:
+        assert np.array_equal(read.saturated, slow.saturated)
+        assert read.saturated.sum() == observations.saturated.sum()  # type: ignore[union-attr]
     fast = _parse_plain(path.read_bytes(), known, sizes)
     assert (fast is not None) == (variant in ("plain", "crlf", "bom", "extra column", "unknown cameras"))
+
+
+def test_saturation_flags_round_trip_and_a_bad_flag_names_its_row(tmp_path: Path) -> None:
+    uv = np.arange(2 * 2 * 3 * 2, dtype=float).reshape(2, 2, 3, 2) + 10.0
+    flags = np.array([[[True, False, False], [False, False, True]], [[False, False, False], [True, True, True]]])
+    observations = WandObservations(np.array([0, 1]), ("cam0", "cam1"), uv, None, flags)
+    path = tmp_path / "obs.csv"
+    write_observations(observations, path)
+    assert path.read_text().splitlines()[0] == "frame,camera,point,u,v,saturated"
+    back = read_observations(path, ("cam0", "cam1"))
+    assert back.saturated is not None and np.array_equal(back.saturated, flags)
+    assert np.array_equal(back.select_cameras(("cam1",)).saturated, flags[:, 1:])  # type: ignore[arg-type]
+    swapped = back.with_uv(back.uv[:, :, ::-1])  # labels exchanged: each point keeps its own flag
+    assert swapped.saturated is not None and np.array_equal(swapped.saturated, flags[:, :, ::-1])
+    path.write_text("frame,camera,point,u,v,saturated\n0,cam0,A,1,2,1\n0,cam0,B,3,4,yes\n")
+    with pytest.raises(FormatError, match=r"row 3.*saturated must be 0 or 1, got 'yes'"):
+        read_observations(path)

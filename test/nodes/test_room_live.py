@@ -77,11 +77,15 @@ def test_a_room_sent_as_jpeg_is_detected_live_as_offline(ros: Ros, tmp_path: Pat
     assert stored.complete.shape == offline.complete.shape
     assert np.array_equal(stored.complete, offline.complete)  # in the same frames: none lost on the way
     assert offline.stamps is not None and stored.stamps is not None
+    assert offline.saturated is not None and stored.saturated is not None
     for c in range(len(names)):
         views = {round(s, 6): uv for s, uv in zip(offline.stamps[:, c], offline.uv[:, c], strict=True)}
+        flags = {round(s, 6): f for s, f in zip(offline.stamps[:, c], offline.saturated[:, c], strict=True)}
         mine = np.isfinite(stored.stamps[:, c]) & stored.complete[:, c]
-        for stamp, uv in zip(stored.stamps[mine, c], stored.uv[mine, c], strict=True):
+        for stamp, uv, flag in zip(stored.stamps[mine, c], stored.uv[mine, c], stored.saturated[mine, c], strict=True):
             assert np.abs(views[round(stamp, 6)] - uv).max() < 1e-3  # float32 on the way: same pixels
+            assert np.array_equal(flags[round(stamp, 6)], flag)  # and the same saturated spots
+    assert stored.saturated[stored.complete].mean() > 0.5  # 30 ms: most LEDs saturate, and the buffer says so
 
     # What each camera sees: in /diagnostics, beside the buffer, drawn on its detections topic.
     assert wait_until(lambda: bool(drawn) and bool(diagnostics), 5)

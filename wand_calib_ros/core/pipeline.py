@@ -110,6 +110,8 @@ def calibrate(
         log.info("using %d of %d placements (max_placements)", options.max_placements, usable.size)
         usable = usable[spread_subset(usable.size, options.max_placements)]
     uv = obs.uv[usable]  # partial views stay: the bundle adjustment uses every point seen
+    # (a two-marker wand's views are relabelled below: their flags would not follow)
+    saturated = None if obs.saturated is None or rig.wand.n_points == 2 else obs.saturated[usable]
     log.info("%d of %d frames show the whole wand to at least two cameras", usable.size, complete.shape[0])
     reference = reference_index(names, covisibility(complete[usable]), options.reference_camera)
     line = timing.line.subset(usable)
@@ -137,6 +139,7 @@ def calibrate(
             lens_trials=init.trials,
             timing=replace(timing, line=line),
             start_uv=start_uv,
+            saturated=saturated,
         )
         return replace(result, warnings=(*result.warnings, *check_result(rig, result))), views
 

@@ -74,6 +74,7 @@ from wand_calib_ros.core.adjust.timing import (
     start_clocks,
 )
 from wand_calib_ros.core.initialise.lens_choice import choose_models
+from wand_calib_ros.core.judge.centre_bias import saturated_pull
 from wand_calib_ros.core.judge.degeneracy import check_camera_views, check_geometry, check_uncertainty, require
 from wand_calib_ros.core.judge.plausibility import check_given_intrinsics
 from wand_calib_ros.core.model.camera_model import (
@@ -108,6 +109,7 @@ def refine_calibration(
     min_placements: int = 10,
     timing: TimingInput | None = None,
     start_uv: FloatArray | None = None,
+    saturated: NDArray[np.bool_] | None = None,
 ) -> CalibrationResult:
     """Gate, bundle-adjust and report (paper Step 4 / Section III-B Step 2).
 
@@ -125,6 +127,8 @@ def refine_calibration(
         start_uv: (P, C, 3, 2) the views moved to their placements' times (free-running cameras, see
             :func:`wand_calib_ros.core.adjust.timing.align_views`) for the gate and the starting placements;
             None: ``uv``. The adjustments model the timing on the observed pixels.
+        saturated: (P, C, 3) which points of ``uv`` the detector measured on saturated spots (None: not known):
+            what they pull is checked (:mod:`~wand_calib_ros.core.judge.centre_bias`).
     """
     wand = rig.wand
     n_cameras = len(rig.cameras)
@@ -213,6 +217,10 @@ def refine_calibration(
             )
     seen = np.any(np.isfinite(uv[used]), axis=(2, 3))
     rejected_views = (seen & ~np.any(np.isfinite(uv_used), axis=(2, 3))).sum(axis=0)
+    pulls = () if saturated is None else saturated_pull(
+        rig, uv_used, saturated[used], clocks.placements(used), result, free_mask(n_cameras, reference, fixed)
+    )  # fmt: skip
+    warnings += [pull.line() for pull in pulls]
     return assemble(
         rig,
         uv_used,
@@ -226,6 +234,7 @@ def refine_calibration(
         rejected_views,
         warnings,
         clocks,
+        tuple(pull.line() for pull in pulls),
     )
 
 

@@ -30,7 +30,13 @@ from wand_calib_ros.detection.background import (
     estimate_background,
     saturation_of,
 )
-from wand_calib_ros.detection.centres import SpotCentre, saturated_centre, side_medians, spot_centre
+from wand_calib_ros.detection.centres import (
+    SATURATED_FLOOR,
+    SpotCentre,
+    saturated_centre,
+    side_medians,
+    spot_centre,
+)
 from wand_calib_ros.detection.errors import ImageError
 from wand_calib_ros.detection.structure import SATURATED_STATIC
 
@@ -274,19 +280,34 @@ def _measure(
             region = np.asarray(cv2.dilate(drawn, np.ones((3, 3), np.uint8)) > 0)
             split.append((region, tuple(cv2.boundingRect(outline))))  # type: ignore[arg-type]
         parts = split if len(split) >= 2 else parts
-    own = cv2.dilate(above[y0:y1, x0:x1], np.ones((5, 5), np.uint8)) > 0  # its pixels (not a lamp beside it) ...
-    if background.static is not None:  # (... nor a lamp's or a window's saturated pixels under it: next to those a
-        # spot is cut, nothing of it can be seen there)
-        visible = background.static[y0:y1, x0:x1] < SATURATED_STATIC * full
-        hidden |= not bool(visible[own].all())
-        own &= visible
-    if not own.any():
+    own = cv2.dilate(above[y0:y1, x0:x1], _SQUARE5) > 0  # its pixels (not a lamp beside it) ...
+    if background.static is None:
+        under: NDArray[Any] | float = 0.0
+        visible = own
+    else:  # (... nor a lamp's or a window's saturated pixels under it: nothing of it can be seen there)
+        under = background.static[y0:y1, x0:x1]
+        visible = np.asarray(under < SATURATED_STATIC * full)
+    seen = own & visible
+    if not seen.any():
         return []
     sides = side_medians(window)
-    if background.static is not None and not hidden and float(raw[own].max()) < full:
-        # an unsaturated spot's window must hold it: its sides on the flat field (a saturated one is measured by its
-        # outline, which its region holds)
-        hidden = max(sides) > max(floor, SIDE_FRACTION * peak)
+    base = 0.25 * sum(sides)
+    least, ceiling = 0.0, 0.0
+    if float(raw[seen].max()) >= full:  # saturated: measured by its outline, cut if that touches a saturated light
+        # (its clipped pixels show the least of its light that any of them can), or if so little of its light shows
+        # above a bright region that the noise there would shape it
+        brightest = float(np.max(under[seen])) if isinstance(under, np.ndarray) else under
+        least = OUTLINE_SIGMAS * _noise_at(background, brightest, noise)
+        ceiling = _ceiling(raw, under, seen, full) - base
+        outline = ((window - base >= max(SATURATED_FLOOR * ceiling, least)) & seen).astype(np.uint8)
+        touches = background.static is not None and not bool(visible[cv2.dilate(outline, _SQUARE3) > 0].all())
+        hidden |= ceiling < 2.0 * least or touches
+    else:  # unsaturated: cut if its pixels touch a saturated light, or its window does not hold it (its sides on
+        # the flat field)
+        hidden |= not bool(visible[own].all())
+        if background.static is not None and not hidden:
+            hidden = max(sides) > max(floor, SIDE_FRACTION * peak)
+    own = seen
     measured: list[tuple[float, ...]] = []
     for part, (cx, cy, cw, ch) in parts:
         mine = own if part is None else own & part
@@ -294,10 +315,8 @@ def _measure(
             continue
         saturated = float(raw[mine].max()) >= full
         if saturated:
-            base = 0.25 * sum(sides)
-            under = raw - window  # (the static structure where it is known, else 0)
-            ceiling = float(np.min(np.float32(full) - under[mine])) - base
-            spot: SpotCentre | None = saturated_centre(window, base, ceiling, mine)
+            top = ceiling if part is None else _ceiling(raw, under, mine, full) - base
+            spot: SpotCentre | None = saturated_centre(window, base, top, mine, least)
         else:
             spot = spot_centre(window, floor if part is None else CORE_FRACTION * peak, mine, sides)
         if spot is None:
@@ -314,6 +333,29 @@ def _measure(
 #: An unsaturated spot continues beyond its window (a brighter region's threshold hid part of it) when a side of the
 #: window, the static structure taken away, stands above the centre's floor and this fraction of its peak.
 SIDE_FRACTION = 0.2
+
+
+_SQUARE3, _SQUARE5 = np.ones((3, 3), np.uint8), np.ones((5, 5), np.uint8)
+
+
+def _ceiling(raw: NDArray[Any], under: NDArray[Any] | float, region: NDArray[np.bool_], full: float) -> float:
+    """The least light any clipped pixel of ``region`` shows above the static light ``under`` it (full scale less
+    that light)."""
+    clipped = region & (raw >= full)
+    return float(full - (np.max(under[clipped]) if isinstance(under, np.ndarray) else under))
+
+
+#: A saturated spot's outline stands at least this many noise sigmas (where the noise under it is highest) above
+#: its background.
+OUTLINE_SIGMAS = 4.0
+
+
+def _noise_at(background: Background, level: float, noise: float) -> float:
+    """A pixel's noise over time at a static ``level`` (grey levels), or ``noise`` where no structure is learned."""
+    if background.static is None:
+        return noise
+    a, b = background.static_noise
+    return math.sqrt(max(a + b * level, 0.0))
 
 
 def hidden_continuation(

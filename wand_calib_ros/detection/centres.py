@@ -14,11 +14,12 @@ streak by g L / 12 towards its bright end. It is not corrected: a streak brighte
 looks the same whether the LED brightened or slowed down there, and for the second the
 weighted mean is already the better estimate (the streak's middle would be off by a T^2 / 8).
 
-A saturated spot is measured by its outline instead (:func:`saturated_centre`): the light above half-way between
-its background and full scale, clipped there. Its flat top and the steep edge around it are the LED's own
-light; a bloom or glare halo (tens of grey levels even 30x over full scale), another LED's halo or a gradient
-of the room under it stay below half-way and do not pull it, and the outline of a saturated streak is as
-symmetric about its mid-exposure position as the streak. Across a bright edge (a window's, a reflection's) the
+A saturated spot is measured by its outline instead (:func:`saturated_centre`): the light above SATURATED_FLOOR
+of the way from its background to full scale, clipped there. Its flat top and the steep edge around it are the
+LED's own light (the edge, where the light falls from full scale to the floor, is what places it to a few
+hundredths of a pixel); a faint glare halo, another LED's halo or a gradient of the room under it stay below
+the floor, a symmetric bloom above it pulls nothing, and the outline of a saturated streak is as symmetric about
+its mid-exposure position as the streak. Across a bright edge (a window's, a reflection's) the
 LED clips at less of its own light where the room is bright: every pixel is clipped at the least light any of
 them can show, and the outline stays symmetric.
 """
@@ -34,6 +35,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 Pixels = NDArray[np.floating[Any]]
+
+
+#: A saturated spot's outline is its light above this fraction of the way from its background to full scale (at
+#: half-way the edge is a quarter of a pixel wide 30x over full scale, and its centre pixel-locked to 0.06 px RMS;
+#: here 0.02 px, the light of another LED's glare still below it).
+SATURATED_FLOOR = 0.125
 
 
 @dataclass(frozen=True)
@@ -113,10 +120,10 @@ def spot_centre(
 
 
 def saturated_centre(
-    window: Pixels, base: float, ceiling: float, region: NDArray[np.bool_] | None = None
+    window: Pixels, base: float, ceiling: float, region: NDArray[np.bool_] | None = None, least: float = 0.0
 ) -> SpotCentre:
     """The centre of a saturated spot (see the module docstring): the mean of its pixels weighted by how far they
-    stand above half-way between its background and the lowest full scale under it, clipped there.
+    stand above SATURATED_FLOOR of the way from its background to the lowest full scale under it, clipped there.
 
     Args:
         window: (h, w) the spot's light around it (what the camera gave, less the static structure where it is known).
@@ -125,15 +132,17 @@ def saturated_centre(
             the brightest static light under it): every pixel is clipped there, so a spot across a bright edge
             stays symmetric.
         region: (h, w) the pixels that may count (its own, or one of two spots that touch), or None: all.
+        least: the outline's floor is at least this far above ``base`` (a few of the noise's sigmas where it is
+            highest under the spot: a bright window's noise beside it is not its light).
     """
-    half = 0.5 * ceiling
-    weights = np.clip(window.astype(np.float32, copy=False) - np.float32(base + half), 0.0, np.float32(half))
+    low = min(max(SATURATED_FLOOR * ceiling, least), 0.5 * ceiling)
+    weights = np.minimum(np.maximum(window.astype(np.float32, copy=False) - np.float32(base + low), 0.0), ceiling - low)
     if region is not None:
-        weights = weights * region
+        weights *= region
     moments = cv2.moments(weights)
     total = moments["m00"]
     height, width = window.shape
-    if total <= 0.0:  # (nothing reaches half-way: the window's centre)
+    if total <= 0.0:  # (nothing reaches the floor: the window's centre)
         return SpotCentre((width - 1) / 2.0, (height - 1) / 2.0, ceiling, base, 0.0)
     suu, svv, suv = moments["mu20"] / total, moments["mu02"] / total, moments["mu11"] / total
     spread = math.sqrt(max((suu - svv) ** 2 + 4.0 * suv**2, 0.0))

@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 from wand_calib_ros.core.adjust.placements import triangulate_placements
 from wand_calib_ros.core.model.result import CalibrationResult
 from wand_calib_ros.core.model.rig import RigSpec, WandObservations, WandSpec
-from wand_calib_ros.detection.recording import Detections
+from wand_calib_ros.detection.recording import Detections, Unsettled
 from wand_calib_ros.errors import WandCalibError
 
 log = logging.getLogger(__name__)
@@ -159,7 +159,7 @@ def flip_contradicted_tracks(
 
 def label_across_cameras(
     observations: WandObservations,
-    ambiguous: list[tuple[int, str, FloatArray, float]],
+    ambiguous: list[Unsettled],
     result: CalibrationResult,
     wand: WandSpec,
 ) -> tuple[WandObservations, list[str]]:
@@ -167,7 +167,7 @@ def label_across_cameras(
 
     Args:
         observations: labelled views (frame ids as in ``ambiguous``).
-        ambiguous: (frame id, camera, (3, 2) points in either order, the image's stamp in s).
+        ambiguous: the views whose labels their camera could not settle (frame ids as in ``observations``).
         result: a calibration of the same cameras.
         wand: the wand lengths.
 
@@ -180,8 +180,9 @@ def label_across_cameras(
     row_of = {int(f): i for i, f in enumerate(observations.frames)}
     uv = observations.uv.copy()
     stamps = None if observations.stamps is None else observations.stamps.copy()
+    flags = None if observations.saturated is None else observations.saturated.copy()
     settled: list[str] = []
-    for frame, camera, points, stamp in ambiguous:
+    for frame, camera, points, stamp, saturated in ambiguous:
         row = row_of.get(frame)
         if row is None:
             continue
@@ -205,8 +206,10 @@ def label_across_cameras(
             uv[row, c] = points if best == 0 else points[::-1]
             if stamps is not None:
                 stamps[row, c] = stamp
+            if flags is not None and saturated is not None:
+                flags[row, c] = saturated if best == 0 else saturated[::-1]
             settled.append(camera)
-    return WandObservations(observations.frames, names, uv, stamps), settled
+    return WandObservations(observations.frames, names, uv, stamps, flags), settled
 
 
 @dataclass

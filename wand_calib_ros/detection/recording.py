@@ -55,6 +55,25 @@ WAND_MARGIN_PX = 4.0
 SATURATION = {"mono16": 65520.0}
 
 
+class Unsettled(NamedTuple):
+    """A view whose A/C labels neither its image nor its track settled (other cameras can,
+    :func:`wand_calib_ros.detection.consistency.label_across_cameras`).
+
+    Attributes:
+        frame: the frame id of the recording's observations it belongs to.
+        camera: its camera.
+        points: (K, 2) its points, the wand's ends in either order.
+        stamp_s: its image's stamp, s.
+        saturated: (K,) which of ``points`` were saturated spots, or None: not measured.
+    """
+
+    frame: int
+    camera: str
+    points: NDArray[np.float64]
+    stamp_s: float
+    saturated: NDArray[np.bool_] | None = None
+
+
 @dataclass(frozen=True, eq=False)
 class Detections:
     """What a recording gave.
@@ -62,9 +81,7 @@ class Detections:
     Attributes:
         observations: labelled wand points per frame (time slot) and camera.
         stats: per camera counts.
-        ambiguous: (frame id, camera, (3, 2) points in either order, stamp in s) of views whose
-            A/C labels neither the image nor time settled; other cameras can (see
-            :func:`wand_calib_ros.detection.consistency.label_across_cameras`).
+        ambiguous: the views whose A/C labels neither the image nor time settled (other cameras can).
         tracks: (F, C) the camera's track of each view (-1: no view): views of one track were labelled together.
         reports: per camera what it saw (:mod:`~wand_calib_ros.detection.health`).
         masks: per camera the pixels its detector ignored at the end (given and learned), or None: none.
@@ -72,7 +89,7 @@ class Detections:
 
     observations: WandObservations
     stats: dict[str, CameraStats]
-    ambiguous: list[tuple[int, str, NDArray[np.float64], float]]
+    ambiguous: list[Unsettled]
     tracks: NDArray[np.int64]
     reports: dict[str, HealthReport]
     masks: dict[str, Mask | None]
@@ -111,12 +128,14 @@ class Labelled(NamedTuple):
         unsettled: (3, 2) the wand's ends and middle in either order when only the A/C labels were
             missing (other cameras may settle them), else None.
         track: the camera's track the view belongs to (-1: none): its views' labels stand or fall together.
+        saturated: (K,) which of ``points`` (or ``unsettled``) were measured on saturated spots, or None: not known.
     """
 
     stamp_ns: int
     points: NDArray[np.float64] | None
     unsettled: NDArray[np.float64] | None = None
     track: int = -1
+    saturated: NDArray[np.bool_] | None = None
 
 
 class CameraStream:
@@ -271,11 +290,13 @@ class CameraStream:
         return searched if background.sums is None else replace(searched, sums=background.sums)
 
     def _background_of(self, gray: NDArray[Any], stamp_ns: int, wand: list[tuple[float, float, float]]) -> Background:
-        """The background of the image's box sums, estimated again every BACKGROUND_REFRESH images (or when the
-        image changed kind, or a snapshot of the static structure is due), with the structure's threshold; ``wand``:
-        (u, v, radius px) where the wand's LEDs are expected (kept out of the structure)."""
+        """The background of the image's box sums, estimated again every BACKGROUND_REFRESH images until a static
+        structure is learned, then with each snapshot of it (and when the image changed kind), with the structure's
+        threshold; ``wand``: (u, v, radius px) where the wand's LEDs are expected (kept out of the structure)."""
         current = self._background
-        stale = self._since_background >= BACKGROUND_REFRESH or self.structure.due(stamp_ns)
+        learned = current is not None and current.structure is not None  # (then the spatial background only shapes
+        # the structure's threshold, made once per snapshot)
+        stale = (self._since_background >= BACKGROUND_REFRESH and not learned) or self.structure.due(stamp_ns)
         depth = np.uint16 if gray.dtype == np.uint8 else np.float32
         self._since_background += 1
         if current is None or stale or current.threshold.shape != gray.shape or current.threshold.dtype != depth:
@@ -298,7 +319,8 @@ class CameraStream:
         if self.wand_options.n_points != 3 or detection.tool:  # two or a tool: the calibration labels them
             self.stats.detected += 1
             self.health.add(light)
-            return [*self.flush(), Labelled(stamp_ns, detection.points)]
+            flags = None if light is None or detection.tool else light.saturated
+            return [*self.flush(), Labelled(stamp_ns, detection.points, saturated=flags)]
         self._pending.append((stamp_ns, detection, light))
         return self._in_order(self._released(self.labeller.push(stamp_ns, detection)))
 
@@ -323,17 +345,29 @@ class CameraStream:
         out = []
         for stamp, points, reason, track in results:
             _, detection, light = self._pending.popleft()
+            flags = None if light is None else light.saturated  # (in the order of detection.points)
             if points is not None:
                 self.stats.detected += 1
                 self.health.add(light)
-                out.append(Labelled(stamp, points, None, track))
+                labelled = (
+                    flags if flags is None or detection.points is None else _reordered(flags, detection.points, points)
+                )
+                out.append(Labelled(stamp, points, None, track, labelled))
             elif reason == "ambiguous":
                 self.stats.rejected["ambiguous"] += 1
-                out.append(Labelled(stamp, None, detection.points, track))
+                out.append(Labelled(stamp, None, detection.points, track, flags))
             else:
                 self.stats.rejected[reason or "no_wand"] += 1
                 out.append(Labelled(stamp, None))
         return out
+
+
+def _reordered(
+    flags: NDArray[np.bool_], found: NDArray[np.float64], labelled: NDArray[np.float64]
+) -> NDArray[np.bool_]:
+    """(K,) the flags of the ``found`` (K, 2) points in the order of the same points ``labelled`` (A and C exchanged
+    or not)."""
+    return np.asarray(flags[distances(labelled, found).argmin(axis=1)])
 
 
 def in_stamp_order(frames: Iterable[ImageFrame], window_ns: int) -> Iterator[ImageFrame]:
@@ -404,16 +438,20 @@ def detect_recording(
     }  # fmt: skip
     index = {name: i for i, name in enumerate(rig.camera_names)}
     ambiguous = [
-        (frame_of[(index[camera], out.stamp_ns)], camera, out.unsettled, out.stamp_ns / 1e9)
+        Unsettled(frame_of[(index[camera], out.stamp_ns)], camera, out.unsettled, out.stamp_ns / 1e9, out.saturated)
         for camera, out in outcomes
         if out.unsettled is not None and (index[camera], out.stamp_ns) in frame_of
     ]
     tracks = np.full((len(grouped), len(rig.camera_names)), -1, dtype=np.int64)
+    saturated = np.zeros((len(grouped), len(rig.camera_names), rig.wand.n_points), dtype=bool)
     for camera, out in outcomes:
         row = frame_of.get((index[camera], out.stamp_ns))
         if out.points is not None and row is not None:
             tracks[row, index[camera]] = out.track
+            if out.saturated is not None and out.saturated.size == rig.wand.n_points:
+                saturated[row, index[camera]] = out.saturated
     stats = {name: stream.stats for name, stream in streams.items()}
     reports = {name: stream.report() for name, stream in streams.items()}
     ignored: dict[str, Mask | None] = {name: stream.mask for name, stream in streams.items()}
+    observations = replace(observations, saturated=saturated[observations.frames])
     return Detections(observations, stats, ambiguous, tracks[observations.frames], reports, ignored)

@@ -9,7 +9,7 @@ so an LED 30 grey levels above a reflection's slope stays below it. Over time, t
 room does not:
 
 - every SNAPSHOT_NS (the first few EARLY_NS apart) the image's box sums are kept, the newest SNAPSHOTS of them
-  (two seconds); the structure is their per-pixel median: a moving LED is at a pixel in one or two
+  (three seconds); the structure is their per-pixel median: a moving LED is at a pixel in one or two
   of them, so it is not part of it (an LED at rest for longer is: it is still, not the wand);
 - the threshold that follows it is the structure plus the noise's contrast at its level. The noise is measured
   over time, from two snapshots' differences (tiles' lower halves, as the background measures it in space): a
@@ -47,10 +47,11 @@ from wand_calib_ros.detection.background import (
 )
 
 #: A snapshot of the box sums is kept this often (ns) ...
-SNAPSHOT_NS = 400_000_000
-#: ... the first EARLY_SNAPSHOTS of them this often (a structure within a tenth of a second of the start).
+SNAPSHOT_NS = 600_000_000
+#: ... the first EARLY_SNAPSHOTS of them this often (a structure within a tenth of a second of the start, whole in
+#: a fifth).
 EARLY_NS = 50_000_000
-EARLY_SNAPSHOTS = 3
+EARLY_SNAPSHOTS = 5
 #: The structure is the median of the newest this many snapshots (odd), once there are MIN_SNAPSHOTS.
 SNAPSHOTS = 5
 MIN_SNAPSHOTS = 3
@@ -90,6 +91,19 @@ def sorted_pixels(snapshots: list[NDArray[Any]]) -> list[NDArray[Any]]:
     return values
 
 
+def median_and_upper(snapshots: list[NDArray[Any]]) -> tuple[NDArray[Any], NDArray[Any]]:
+    """The per-pixel median and second largest of 3-5 images (the lower median and the second largest of four): of
+    five by thirteen minima and maxima instead of a sort's eighteen."""
+    if len(snapshots) != 5:
+        ordered = sorted_pixels(snapshots)
+        return ordered[(len(ordered) - 1) // 2], ordered[-2]
+    a, b, c, d, e = snapshots
+    a, b, c, d = cv2.min(a, b), cv2.max(a, b), cv2.min(c, d), cv2.max(c, d)
+    low, high, top = cv2.max(a, c), cv2.min(b, d), cv2.max(b, d)  # the middle two and the largest of four
+    middle_low, middle_high = cv2.min(low, high), cv2.max(low, high)
+    return cv2.max(middle_low, cv2.min(middle_high, e)), cv2.max(middle_high, cv2.min(top, e))
+
+
 def median_of(snapshots: list[NDArray[Any]]) -> NDArray[Any]:
     """The per-pixel median of 1-5 images (the lower median of an even count); of five by seven minima and maxima
     (the median of 5 is the median of the fifth and the middle two of the other four's pairs)."""
@@ -112,8 +126,11 @@ class StaticStructure:
         self._taken = 0
         self._last_ns: int | None = None
         self._noise: tuple[float, float] | None = None  # (a, b) of the sums' variance over time
+        self._pairs: deque[tuple[tuple[float, float], tuple[float, float]]] = deque(maxlen=NOISE_PAIRS)
+        self._last: tuple[NDArray[Any], NDArray[Any]] | None = None  # the newest snapshot's image and sums as they came
         self._pixel_noise: tuple[float, float] = (0.0, 0.0)  # (a, b) of a pixel's
         self._made: tuple[NDArray[Any], NDArray[Any], NDArray[Any], NDArray[Any]] | None = None  # (see _make)
+        self._threshold: NDArray[Any] | None = None  # made from it (see apply)
 
     def due(self, stamp_ns: int) -> bool:
         """Whether an image at ``stamp_ns`` should give a snapshot (:meth:`add`)."""
@@ -140,8 +157,14 @@ class StaticStructure:
         """
         if self._images and (self._images[0].shape != gray.shape or self._images[0].dtype != gray.dtype):
             self.reset()
-        if self._sums and repeated(self._sums[-1], sums):  # a driver that sent one image twice: no news
+        if self._last is not None and repeated(self._last[1], sums):  # a driver that sent one image twice: no news
             return
+        if self._last is not None:  # the noise from the images as they came (not from the structure pasted in)
+            # each pair's estimate is a draw: the median of the newest NOISE_PAIRS of them
+            self._pairs.append((temporal_noise(self._last[1], sums), temporal_noise(self._last[0], gray)))
+            self._noise = _median_model([pair[0] for pair in self._pairs])
+            self._pixel_noise = _median_model([pair[1] for pair in self._pairs])
+        self._last = (gray, sums)
         made = self._made if self._made is not None else self._make(1.0)
         if keep_out and made is not None:
             gray, sums = gray.copy(), sums.copy()
@@ -151,20 +174,19 @@ class StaticStructure:
                     rows, cols, inside = disc
                     gray[rows, cols][inside] = made[0][rows, cols][inside]
                     sums[rows, cols][inside] = made[1][rows, cols][inside]
-        if self._images:
-            self._noise = temporal_noise(self._sums[-1], sums)
-            self._pixel_noise = temporal_noise(self._images[-1], gray)
         self._images.append(gray)
         self._sums.append(sums)
         self._taken += 1
         self._last_ns = stamp_ns
-        self._made = None
+        self._made = self._threshold = None
 
     def reset(self) -> None:
         """Forget what was learned (the view changed)."""
         self._images.clear()
         self._sums.clear()
-        self._taken, self._last_ns, self._noise, self._made = 0, None, None, None
+        self._pairs.clear()
+        self._last = None
+        self._taken, self._last_ns, self._noise, self._made, self._threshold = 0, None, None, None, None
 
     @property
     def noise(self) -> tuple[float, float] | None:
@@ -179,27 +201,17 @@ class StaticStructure:
     def apply(self, background: Background) -> Background:
         """The background with the structure (:attr:`~wand_calib_ros.detection.background.Background.structure`,
         ``static``, ``static_sums``, ``static_noise``); unchanged while none is learned, or for an image of another
-        size or kind."""
+        size or kind. The threshold is made once per snapshot, with the spatial background of the image that asks
+        first (it changes slowly)."""
         made = self._make(background.unit)
         if made is None:
             return background
         pixels, structure, above, flicker = made
         if above.shape != background.threshold.shape or above.dtype != background.threshold.dtype:
             return background
-        height, width = above.shape
-        level = cv2.resize(background.level.astype(np.float32), (width, height), interpolation=cv2.INTER_LINEAR)
-        if structure.dtype == np.uint16:
-            excess = cv2.subtract(structure, np.minimum(level, 65535.0).astype(np.uint16))  # (saturates at 0)
-            cap = cv2.multiply(excess, FLICKER_MAX, dtype=-1)  # type: ignore[call-overload]
-        else:
-            cap = np.maximum(structure - level, 0.0) * np.float32(FLICKER_MAX)
-        if len(self._sums) < SNAPSHOTS:  # too few snapshots to tell flicker: any static light may flicker by
-            # EARLY_FLICKER of it, and the threshold is never below the spatial one
-            early = cv2.multiply(structure, EARLY_FLICKER, dtype=-1)  # type: ignore[call-overload]
-            threshold = cv2.max(cv2.add(above, cv2.max(cap, early)), background.threshold)
-        else:
-            threshold = cv2.add(above, cv2.min(flicker, cap))
-        return replace(background, search=None, structure=threshold, static=pixels, static_sums=structure,
+        if self._threshold is None:
+            self._threshold = _threshold(structure, above, flicker, background, len(self._sums) < SNAPSHOTS)
+        return replace(background, search=None, structure=self._threshold, static=pixels, static_sums=structure,
                        static_noise=self._pixel_noise)  # fmt: skip
 
     def saturated(self, full: float) -> NDArray[np.bool_] | None:
@@ -223,11 +235,10 @@ class StaticStructure:
         """(the structure's pixels, its sums, its sums plus the noise's contrast, the flicker's margin measured over
         the snapshots), made again when a snapshot comes (``unit``: of min_contrast, the first time)."""
         if self._made is None and self._noise is not None and len(self._sums) >= MIN_SNAPSHOTS:
-            ordered = sorted_pixels(list(self._sums))
-            structure, upper = ordered[(len(ordered) - 1) // 2], ordered[-2]
+            structure, upper = median_and_upper(list(self._sums))
             a, b = self._noise
             # an image stands out of the median of n snapshots with its own noise and the median's (pi / 2n of it)
-            sigmas = np.float32(self.options.noise_sigmas * np.sqrt(1.0 + np.pi / (2 * len(ordered))))
+            sigmas = np.float32(self.options.noise_sigmas * np.sqrt(1.0 + np.pi / (2 * len(self._sums))))
             least = np.float32(self.options.min_contrast * unit)
             if structure.dtype == np.uint16:  # box sums of 8-bit images: a table of every sum's contrast
                 sums = np.arange(int(structure.max()) + 1, dtype=np.float32)
@@ -244,6 +255,34 @@ class StaticStructure:
         return self._made
 
 
+def _scaled(image: NDArray[Any], factor: float) -> NDArray[Any]:
+    """``image`` times ``factor`` in its own dtype (rounded, saturated: cv2's weighted sum, three times as fast as its
+    multiply by a scalar on 16-bit images)."""
+    scaled: NDArray[Any] = cv2.addWeighted(image, float(factor), image, 0.0, 0.0)
+    return scaled
+
+
+def _threshold(
+    structure: NDArray[Any], above: NDArray[Any], flicker: NDArray[Any], background: Background, early: bool
+) -> NDArray[Any]:
+    """(H, W) the search threshold from the structure's sums, those plus the noise's contrast (``above``) and the
+    flicker's margin measured over the snapshots, capped at FLICKER_MAX of the structure's excess over the spatial
+    background; ``early`` (too few snapshots to tell flicker): any static light may flicker by EARLY_FLICKER of it,
+    and the threshold is never below the spatial one."""
+    height, width = above.shape
+    level = cv2.resize(background.level.astype(np.float32), (width, height), interpolation=cv2.INTER_LINEAR)
+    if structure.dtype == np.uint16:
+        excess = cv2.subtract(structure, np.minimum(level, 65535.0).astype(np.uint16))  # (saturates at 0)
+        cap = _scaled(excess, FLICKER_MAX)
+    else:
+        cap = np.maximum(structure - level, 0.0) * np.float32(FLICKER_MAX)
+    if early:
+        light = _scaled(structure, EARLY_FLICKER)
+        threshold: NDArray[Any] = cv2.max(cv2.add(above, cv2.max(cap, light)), background.threshold)
+        return threshold
+    return cv2.add(above, cv2.min(flicker, cap))
+
+
 def _flicker(
     structure: NDArray[Any],
     upper: NDArray[Any],
@@ -258,9 +297,9 @@ def _flicker(
     a, b = noise
     if structure.dtype == np.uint16 and contrast is not None:  # box sums of 8-bit images: the allowance from the
         # noise's contrast there
-        allowed = cv2.multiply(contrast, SPREAD_NOISE / sigmas, dtype=-1)  # type: ignore[call-overload]
+        allowed = _scaled(contrast, SPREAD_NOISE / sigmas)
         excess = cv2.subtract(cv2.subtract(upper, structure), allowed)  # (saturates at 0)
-        margin = cv2.multiply(excess, FLICKER_SPREAD, dtype=-1)  # type: ignore[call-overload]
+        margin = _scaled(excess, FLICKER_SPREAD)
     else:
         level = structure.astype(np.float32)
         allowed = np.float32(SPREAD_NOISE) * np.sqrt(np.float32(a) + np.float32(b) * level)
@@ -283,6 +322,8 @@ def _disc_box(
     return slice(v0, v1), slice(u0, u1), np.asarray(cols[None, :] ** 2 + rows**2 <= radius**2)
 
 
+#: The noise is the median of the estimates of the newest this many pairs of snapshots (one pair's is a draw).
+NOISE_PAIRS = 3
 #: Two images are one image sent twice when more than this fraction of their samples are equal (noise makes a
 #: few of them equal: box sums of 8-bit images about 10 % of them at a noise of one grey level).
 REPEATED = 0.5
@@ -291,6 +332,13 @@ REPEATED = 0.5
 def repeated(first: NDArray[Any], second: NDArray[Any]) -> bool:
     """Whether two images (box sums) are one image sent twice (REPEATED of every STEP-th pixel equal)."""
     return bool(np.mean(first[::STEP, ::STEP] == second[::STEP, ::STEP]) > REPEATED)
+
+
+def _median_model(models: list[tuple[float, float]]) -> tuple[float, float]:
+    """The noise model whose variance at a typical level is the median of the models' (the larger of two)."""
+    level = 100.0 * max(1.0, max(b for _, b in models))  # (a level where both terms count)
+    ranked = sorted(models, key=lambda model: model[0] + model[1] * level)
+    return ranked[len(ranked) // 2]
 
 
 def temporal_noise(first: NDArray[Any], second: NDArray[Any]) -> tuple[float, float]:

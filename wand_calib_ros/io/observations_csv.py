@@ -1,13 +1,14 @@
 """The observations CSV: one row per wand point seen by one camera.
 
-Header ``frame,camera,point,u,v[,stamp]`` (extra columns are ignored): ``frame`` an
+Header ``frame,camera,point,u,v[,stamp][,saturated]`` (extra columns are ignored): ``frame`` an
 integer id, ``camera`` a name from the rig description, ``point`` A, B or C,
 ``u, v`` pixels in the OpenCV convention ((0, 0) is the centre of the top-left
 pixel), ``stamp`` (optional) the capture stamp of that camera's image in seconds
-(the image's header stamp). Without stamps, rows sharing ``frame`` are
-simultaneous and consecutive ids are consecutive frames of one recording at a
-constant rate; with stamps, rows sharing ``frame`` are a grouping of images close
-in time, and each image is placed at its own stamp.
+(the image's header stamp), ``saturated`` (optional) 1 where the point was measured on a
+saturated spot, else 0 (the detector writes it; the calibration checks such centres for a bias).
+Without stamps, rows sharing ``frame`` are simultaneous and consecutive ids are consecutive frames
+of one recording at a constant rate; with stamps, rows sharing ``frame`` are a grouping of images
+close in time, and each image is placed at its own stamp.
 """
 
 from __future__ import annotations
@@ -31,6 +32,8 @@ log = logging.getLogger(__name__)
 
 #: The optional column of per-image capture stamps (seconds).
 STAMP = "stamp"
+#: The optional column of per-point saturation flags (1: measured on a saturated spot, 0: not).
+SATURATED = "saturated"
 #: How far (px) beyond its image's border a point may lie: real detections never do, but simulated
 #: pixel noise (up to 1 px, about 5 sigma over a large take) pushes points near the border out;
 #: a wrong image_size or a wrong camera is off by tens of pixels or more.
@@ -144,10 +147,11 @@ def _parse_plain(
     if any(c not in header for c in COLUMNS) or not _cells_per_line_are(raw, len(header)):
         return None
     longest = 1 + (max(map(len, known)) if known else 64)  # a longer name shows as this long: not known
-    fields = [*COLUMNS, *([STAMP] if STAMP in header else [])]
+    fields = [*COLUMNS, *([STAMP] if STAMP in header else []), *([SATURATED] if SATURATED in header else [])]
     text_kind = "S" if text.isascii() else "U"  # bytes compare and sort faster than str
     kinds = {"frame": "i8", "camera": f"{text_kind}{longest}", "point": f"{text_kind}2", "u": "f8", "v": "f8"}
     kinds[STAMP] = "f8"
+    kinds[SATURATED] = "i8"
     try:
         table = np.loadtxt(
             io.BytesIO(raw),  # numpy's reader decodes bytes faster than it reads a str
@@ -166,7 +170,8 @@ def _parse_plain(
     frame = table["frame"]
     uv_rows = np.stack([table["u"], table["v"]], axis=1)
     stamp = table[STAMP] if STAMP in header else None
-    if not np.all(np.isfinite(uv_rows)):
+    flag = table[SATURATED] if SATURATED in header else None
+    if not np.all(np.isfinite(uv_rows)) or (flag is not None and not np.all((flag == 0) | (flag == 1))):
         return None
     camera_text = table["camera"]
     if known is not None:
@@ -203,7 +208,11 @@ def _parse_plain(
             seen = stamps[:, c][np.isfinite(stamps[:, c])]
             if np.any(np.diff(seen) <= 0):  # stamps must increase with the frame id
                 return None
-    return WandObservations(frame_ids.astype(np.int64), names, uv, stamps)
+    saturated = None
+    if flag is not None:
+        saturated = np.zeros(uv.shape[:3], dtype=bool)
+        saturated[frame_row, camera, point] = flag == 1
+    return WandObservations(frame_ids.astype(np.int64), names, uv, stamps, saturated)
 
 
 def _ends_with_newline(path: Path) -> bool:
@@ -234,11 +243,13 @@ def _parse(
         )
     index = [header.index(c) for c in COLUMNS]
     stamp_index = header.index(STAMP) if STAMP in header else None
-    width = max(index + ([stamp_index] if stamp_index is not None else [])) + 1
+    flag_index = header.index(SATURATED) if SATURATED in header else None
+    width = max(index + [i for i in (stamp_index, flag_index) if i is not None]) + 1
     label_index = {label: i for i, label in enumerate(labels)}
     frames: dict[int, int] = {}
     cameras: dict[str, int] = {name: i for i, name in enumerate(known)} if known is not None else {}
     entries: list[tuple[int, int, int, float, float]] = []
+    flags: list[bool] = []
     seen: set[tuple[int, int, int]] = set()
     view_stamps: dict[tuple[int, int], tuple[float, int]] = {}  # (frame, camera) -> (stamp, first row)
     for row_number, row in enumerate(reader, start=2):
@@ -294,6 +305,14 @@ def _parse(
             raise FormatError(path, f"camera '{camera}' frame {frame} point {point} appears twice", row=row_number)
         seen.add(key)
         entries.append((*key, u, v))
+        if flag_index is not None:
+            flag = row[flag_index].strip()
+            if flag not in ("0", "1"):
+                raise FormatError(
+                    path, f"camera '{camera}' frame {frame} point {point}: saturated must be 0 or 1, got {flag!r}",
+                    row=row_number,
+                )  # fmt: skip
+            flags.append(flag == "1")
         if stamp_index is not None:
             stamp = _stamp(path, row_number, camera, frame, row[stamp_index].strip())
             first = view_stamps.setdefault(key[:2], (stamp, row_number))
@@ -321,7 +340,12 @@ def _parse(
             stamps[frame_row, camera_index] = stamp
         stamps = stamps[order]
         _check_stamp_order(path, frame_ids[order], names, stamps, view_stamps, order)
-    return WandObservations(frame_ids[order], names, uv[order], stamps)
+    saturated = None
+    if flag_index is not None:
+        saturated = np.zeros(uv.shape[:3], dtype=bool)
+        saturated[f, c, p] = flags
+        saturated = saturated[order]
+    return WandObservations(frame_ids[order], names, uv[order], stamps, saturated)
 
 
 def _stamp(path: Path, row_number: int, camera: str, frame: int, text: str) -> float:
@@ -369,9 +393,14 @@ def _check_stamp_order(
 
 
 def observation_rows(
-    frame: int, camera_names: tuple[str, ...], uv: NDArray[np.float64], stamps: NDArray[np.float64] | None
+    frame: int,
+    camera_names: tuple[str, ...],
+    uv: NDArray[np.float64],
+    stamps: NDArray[np.float64] | None,
+    saturated: NDArray[np.bool_] | None = None,
 ) -> list[list[object]]:
-    """The CSV rows of one frame: (C, K, 2) pixels (NaN: not seen) and (C,) stamps in s (or None)."""
+    """The CSV rows of one frame: (C, K, 2) pixels (NaN: not seen), (C,) stamps in s (or None) and (C, K)
+    saturation flags (or None)."""
     rows: list[list[object]] = []
     for c, name in enumerate(camera_names):
         for p, label in enumerate(ALL_POINT_LABELS[: uv.shape[1]]):
@@ -380,20 +409,27 @@ def observation_rows(
                 row: list[object] = [frame, name, label, f"{u:.6f}", f"{v:.6f}"]
                 if stamps is not None:
                     row.append(f"{stamps[c]:.9f}")
+                if saturated is not None:
+                    row.append(int(saturated[c, p]))
                 rows.append(row)
     return rows
 
 
-def header(with_stamps: bool) -> tuple[str, ...]:
-    """The CSV header, with the stamp column or without."""
-    return (*COLUMNS, STAMP) if with_stamps else COLUMNS
+def header(with_stamps: bool, with_saturation: bool = False) -> tuple[str, ...]:
+    """The CSV header, with the stamp column or without, and the saturation flags' column or without."""
+    return (*COLUMNS, *((STAMP,) if with_stamps else ()), *((SATURATED,) if with_saturation else ()))
 
 
 def write_observations(observations: WandObservations, path: str | Path) -> None:
-    """Write every finite point of ``observations`` as CSV rows (frame, camera, A/B/C order; stamps if any)."""
+    """Write every finite point of ``observations`` as CSV rows (frame, camera, A/B/C order; stamps and saturation
+    flags if any)."""
+    flags = observations.saturated
     with Path(path).open("w", newline="") as handle:
         writer = csv.writer(handle, lineterminator="\n")
-        writer.writerow(header(observations.stamps is not None))
+        writer.writerow(header(observations.stamps is not None, flags is not None))
         for f, frame in enumerate(observations.frames):
             stamps = None if observations.stamps is None else observations.stamps[f]
-            writer.writerows(observation_rows(int(frame), observations.camera_names, observations.uv[f], stamps))
+            rows = observation_rows(
+                int(frame), observations.camera_names, observations.uv[f], stamps, None if flags is None else flags[f]
+            )
+            writer.writerows(rows)

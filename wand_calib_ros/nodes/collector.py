@@ -150,6 +150,8 @@ DEBUG_PERIOD_S = 0.5
 SUMMARY_PERIOD_S = 10.0
 
 #: Points from detector nodes are few and small: deliver every one.
+#: Released views' saturation flags held for their frames at most (a view no frame took is forgotten after them).
+MAX_HELD_FLAGS = 10_000
 POINTS_QOS = QoSProfile(depth=200, reliability=ReliabilityPolicy.RELIABLE)
 
 
@@ -171,7 +173,9 @@ class CollectorNode(Node):
             self.rig,
             capacity=values["buffer_capacity"],
             min_motion_px=values["min_motion_px"],
+            with_saturation=values["input"] == "images",  # (its own detector measures the spots)
         )
+        self._saturation: dict[tuple[str, int], NDArray[np.bool_]] = {}  # released views' flags, until stored
         if self.buffer.repaired is not None:
             self.get_logger().warning(self.buffer.repaired.describe(self.buffer.path))
         self.coverage = CoverageTracker(self.rig, coverage_thresholds(values))
@@ -350,14 +354,29 @@ class CollectorNode(Node):
     def _offer(self, camera: str, outcomes: list[Labelled]) -> None:
         """Synchronise released outcomes and store completed frames (caller holds the lock)."""
         for outcome in outcomes:
+            if outcome.points is not None and outcome.saturated is not None:
+                self._saturation[(camera, outcome.stamp_ns)] = outcome.saturated
             self._store(self.sync.add(camera, outcome.stamp_ns, outcome.points))
+
+    def _flags(self, frame: SyncedFrame) -> NDArray[np.bool_]:
+        """(C, K) the saturation flags of a frame's views (forgotten once asked: a view is in one frame)."""
+        flags = np.zeros(frame.uv.shape[:2], dtype=bool)
+        for c, name in enumerate(self.rig.camera_names):
+            found = self._saturation.pop((name, int(frame.stamps_ns[c])), None) if frame.reported[c] else None
+            if found is not None and found.shape == flags[c].shape:
+                flags[c] = found
+        if len(self._saturation) > MAX_HELD_FLAGS:  # (views no frame took: a camera's images dropped late)
+            for key in list(self._saturation)[: len(self._saturation) - MAX_HELD_FLAGS]:
+                del self._saturation[key]
+        return flags
 
     def _store(self, frames: list[SyncedFrame]) -> None:
         for frame in frames:
             on_floor = self.floor.is_open(time.monotonic())
             if self.watch is not None:
                 self.watch.offer(frame.uv)
-            if self.buffer.offer(frame.uv, messages.frame_stamps(frame), keep=on_floor):
+            flags = self._flags(frame)
+            if self.buffer.offer(frame.uv, messages.frame_stamps(frame), keep=on_floor, saturated=flags):
                 self.coverage.add(frame.uv)
                 if on_floor:
                     append_floor_frame(self.buffer.path.with_name(FLOOR_FILE), self.buffer.frames[-1])
@@ -591,6 +610,7 @@ class CollectorNode(Node):
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         with self.lock:  # serialised with the frames being stored and with other resets
             backup = self.buffer.reset()
+            self._saturation.clear()
             for name in (FLOOR_FILE, ESTIMATES_FILE, EVENTS_FILE):  # they belong to the buffer just moved away
                 kept = self.buffer.path.with_name(name)
                 if kept.exists():

@@ -30,7 +30,9 @@ def _pixel_gaussian(centres: FloatArray, start: int, size: int, sigma: float) ->
     return np.diff(cdf, axis=1)
 
 
-def _spread(path: FloatArray, energy: FloatArray, optics: Optics, size: tuple[int, int]) -> tuple[FloatArray, int, int]:
+def _spread(
+    path: FloatArray, energy: FloatArray, optics: Optics, size: tuple[int, int], radius: float = 0.0
+) -> tuple[FloatArray, int, int]:
     """A light moving along ``path`` through the optics, as a patch of the image.
 
     Args:
@@ -38,11 +40,14 @@ def _spread(path: FloatArray, energy: FloatArray, optics: Optics, size: tuple[in
         energy: (M,) the light of each step (grey levels x px).
         optics: the point spread.
         size: the image's (width, height).
+        radius: the light is a glowing disc this wide (px; 0: a point): under the sharp core it is spread over
+            the disc (:func:`_glowing_disc`), the wide terms see it as a point (a disc of r px under a Gaussian of sigma
+            px is that Gaussian to (r / sigma)^2).
 
     Returns:
         The (h, w) patch and its top-left pixel (u0, v0).
     """
-    reach = 4.0 * max(sigma for _, sigma in optics.terms())
+    reach = 4.0 * max(sigma for _, sigma in optics.terms()) + radius
     u0 = max(int(np.floor(path[:, 0].min() - reach)), 0)
     v0 = max(int(np.floor(path[:, 1].min() - reach)), 0)
     u1 = min(int(np.ceil(path[:, 0].max() + reach)), size[0] - 1)
@@ -50,11 +55,26 @@ def _spread(path: FloatArray, energy: FloatArray, optics: Optics, size: tuple[in
     if u1 < u0 or v1 < v0:
         return np.zeros((0, 0)), 0, 0
     patch = np.zeros((v1 - v0 + 1, u1 - u0 + 1))
-    for fraction, sigma in optics.terms():
-        gx = _pixel_gaussian(path[:, 0], u0, u1 - u0 + 1, sigma)
-        gy = _pixel_gaussian(path[:, 1], v0, v1 - v0 + 1, sigma)
-        patch += fraction * (gy * energy[:, None]).T @ gx
+    for k, (fraction, sigma) in enumerate(optics.terms()):
+        points, light = _glowing_disc(path, energy, radius) if k == 0 else (path, energy)
+        gx = _pixel_gaussian(points[:, 0], u0, u1 - u0 + 1, sigma)
+        gy = _pixel_gaussian(points[:, 1], v0, v1 - v0 + 1, sigma)
+        patch += fraction * (gy * light[:, None]).T @ gx
     return patch, u0, v0
+
+
+def _glowing_disc(centres: FloatArray, energy: FloatArray, radius: float) -> tuple[FloatArray, FloatArray]:
+    """A glowing disc instead of a point: each of the (M, 2) positions (energy (M,)) spread over D points filling a
+    disc of ``radius`` px evenly (a sunflower pattern, about two per px^2), each with 1/D of the light:
+    (M * D, 2) and (M * D,)."""
+    count = int(np.clip(np.ceil(2.0 * np.pi * radius**2), 1, 200)) if np.isfinite(radius) else 1
+    if count == 1:
+        return centres, energy
+    index = np.arange(count) + 0.5
+    angle = 2.39996323 * index  # (the golden angle: no two points in line)
+    spiral = radius * np.sqrt(index / count)[:, None] * np.stack([np.cos(angle), np.sin(angle)], axis=-1)
+    points = (centres[:, None, :] + spiral[None]).reshape(-1, 2)
+    return points, np.repeat(energy / count, count)
 
 
 def _bayer_gain(colour: tuple[float, float, float], shape: tuple[int, int], origin: tuple[int, int]) -> FloatArray:
@@ -184,17 +204,18 @@ def _scene(room: CameraRoom, size: tuple[int, int]) -> _Scene:
 
 
 class _NoiseBank:
-    """Standard normal noise for many images: slices of a bank at random rows, with a random sign (cheap, and
-    no image's noise is another's)."""
+    """Standard normal noise for many images: slices of a bank at a random row and column, with a random sign
+    (cheap; two images share noise, even shifted by a pixel or two as a 3x3 sum of it would show, about once in
+    a million pairs)."""
 
     def __init__(self, shape: tuple[int, int], rng: np.random.Generator) -> None:
-        self.height = shape[0]
-        self.bank = rng.standard_normal((2 * shape[0], shape[1]), dtype=np.float32)
+        self.height, self.width = shape
+        self.bank = rng.standard_normal((2 * shape[0], 2 * shape[1]), dtype=np.float32)
 
     def draw(self, rng: np.random.Generator) -> NDArray[np.float32]:
-        row = int(rng.integers(0, self.height))
+        row, col = int(rng.integers(0, self.height)), int(rng.integers(0, self.width))
         sign = np.float32(1.0 if rng.random() < 0.5 else -1.0)
-        return self.bank[row : row + self.height] * sign
+        return self.bank[row : row + self.height, col : col + self.width] * sign
 
 
 def _encoded(
@@ -223,6 +244,7 @@ def render_camera(
     led_paths: list[FloatArray],
     led_energy: list[FloatArray],
     rng: np.random.Generator,
+    led_radius: list[FloatArray] | None = None,
 ) -> tuple[list[NDArray[np.uint8] | NDArray[np.uint16] | bytes], str, FloatArray, FloatArray]:
     """One camera's images.
 
@@ -232,6 +254,7 @@ def render_camera(
         led_paths: per image (K, M, 2) each LED's positions over the exposure (NaN: not in view).
         led_energy: per image (K, M) each LED's light per step (grey levels x px, this exposure).
         rng: noise and flicker.
+        led_radius: per image (K,) each LED's glowing disc's radius, px (None: points).
 
     Returns:
         The images (arrays, or bytes when compressed), their encoding (or CompressedImage format), and
@@ -257,13 +280,14 @@ def render_camera(
             keep = np.all(np.isfinite(paths[p]), axis=1)
             if not keep.any():
                 continue
-            patch, u0, v0 = _spread(paths[p][keep], energy[p][keep], room.optics, size)
+            radius = 0.0 if led_radius is None else float(np.nan_to_num(led_radius[i][p]))
+            patch, u0, v0 = _spread(paths[p][keep], energy[p][keep], room.optics, size, radius)
             if patch.size == 0:
                 continue
             peaks[i, p] = float(patch.max()) * luma
             if room.saturated_shift_px and _saturates(patch * luma, static[v0:, u0:], headroom):
                 patch, u0, v0 = _spread(_outward(paths[p][keep], size, room.saturated_shift_px), energy[p][keep],
-                                        room.optics, size)  # fmt: skip
+                                        room.optics, size, radius)  # fmt: skip
             recorded = _response(room, room.led_colour, patch, (u0, v0))
             signal[v0 : v0 + patch.shape[0], u0 : u0 + patch.shape[1]] += recorded.astype(np.float32)
         image, encoding = _encoded(room, signal, bank, rng)

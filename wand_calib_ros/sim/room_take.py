@@ -62,21 +62,6 @@ def _image_radius(model: CameraModel, in_camera: FloatArray, uv: FloatArray, rad
     return np.asarray(0.5 * (extents[0] + extents[1]))
 
 
-def _disc_points(centres: FloatArray, energy: FloatArray, radius: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """A glowing disc instead of a point: each of the (K, M, 2) positions (energy (K, M), radius (K,) px) spread
-    over D points filling the disc evenly (a sunflower pattern, about two per px^2), each with 1/D of the light:
-    (K, M * D, 2) and (K, M * D)."""
-    largest = float(np.nanmax(radius)) if np.isfinite(radius).any() else 0.0
-    count = int(np.clip(np.ceil(2.0 * np.pi * largest**2), 1, 200))
-    if count == 1:
-        return centres, energy
-    index = np.arange(count) + 0.5
-    spiral = np.sqrt(index / count)[:, None] * np.stack([np.cos(2.39996323 * index), np.sin(2.39996323 * index)], -1)
-    offsets = np.nan_to_num(radius)[:, None, None, None] * spiral[None, None]  # (K, 1, D, 2)
-    points = (centres[:, :, None, :] + offsets).reshape(centres.shape[0], -1, 2)
-    return points, np.repeat(energy / count, count, axis=1)
-
-
 def render_room_take(
     scenario: Scenario,
     rooms: tuple[CameraRoom, ...],
@@ -107,17 +92,16 @@ def render_room_take(
             scenario, c, room, trajectory, np.concatenate([mids - exposure_s / 2, mids + exposure_s / 2])
         )
         streak = np.linalg.norm(ends[: len(mids)] - ends[len(mids) :], axis=-1)  # (N, K)
-        paths, energies = [], []
+        paths, energies, radii = [], [], []
         for i, mid in enumerate(mids):
             longest = float(np.nanmax(streak[i])) if np.isfinite(streak[i]).any() else 0.0
             steps = _exposure_steps(longest)
             times = mid + exposure_s * (np.arange(steps) / (steps - 1) - 0.5)
             uv, light, radius = _led_light(scenario, c, room, trajectory, times)
-            path, energy = _disc_points(np.transpose(uv, (1, 0, 2)), light.T * room.sensor.exposure_ms / steps,
-                                        radius[steps // 2])  # fmt: skip
-            paths.append(path)
-            energies.append(energy)
-        images, encoding, peaks, light = render_camera(room, size, paths, energies, rng)
+            paths.append(np.transpose(uv, (1, 0, 2)))
+            energies.append(light.T * room.sensor.exposure_ms / steps)
+            radii.append(radius[steps // 2])
+        images, encoding, peaks, light = render_camera(room, size, paths, energies, rng, radii)
         uv_mid = take.uv
         behind = _sample(light, uv_mid)
         static_level = _sample(scene_level(room, size), uv_mid)

@@ -165,6 +165,7 @@ def assemble(
     rejected_views: NDArray[np.int64],
     warnings: list[str],
     clocks: ClockModel,
+    systematic: tuple[str, ...] = (),
 ) -> CalibrationResult:
     state = result.state
     max_theta = max_off_axis(result, problem)
@@ -228,6 +229,7 @@ def assemble(
         warnings=tuple(warnings),
         timing=timing_summary(rig, clocks, fixed),
         camera_covariance=result.camera_covariance,
+        systematic=systematic,
     )
 
 

@@ -10,7 +10,9 @@ The grade is the best of :data:`GRADES` whose every limit the calibration meets:
   placements re-triangulated from their own reprojections plus that noise, :func:`noise_wand_error`):
   a calibration error adds to it;
 - each camera's parameter uncertainty: focal length (% of it) and principal point (px), one standard
-  deviation from the adjustment's covariance (absent where the rig description gave them).
+  deviation from the adjustment's covariance (absent where the rig description gave them);
+- for "excellent", no systematic error the residuals do not show (``CalibrationResult.systematic``: the
+  centres of saturated LEDs pulling a camera, :mod:`~wand_calib_ros.core.judge.centre_bias`).
 """
 
 from __future__ import annotations
@@ -140,6 +142,8 @@ def judge(result: CalibrationResult, world_noise_mm: float) -> Verdict:
     grade, limited_by = POOR, tuple[str, ...]()
     for name, limits in GRADES[::-1]:  # from the lowest grade up: stop at the first one not met
         missing = _shortfalls(cameras, noise, world_ratio, limits)
+        if name == GRADES[0][0]:  # a systematic error the residuals do not show is never excellent
+            missing += list(result.systematic)
         if missing:
             limited_by = tuple(missing)
             break

@@ -208,6 +208,9 @@ class CalibrationResult:
             in the rig's order, 20 per camera in the bundle adjustment's order (CAMERA_PARAM_NAMES: k1..k5
             mm, u0, v0 px, a left rotation vector rad, the translation mm, timing, t1, t2, d1..d3); zero rows
             for fixed parameters (None: not kept, e.g. a result read from a file).
+        systematic: systematic errors the residuals do not show, in plain words (the centres of saturated LEDs
+            pulling a camera's focal length, :mod:`~wand_calib_ros.core.judge.centre_bias`): they keep the grade
+            from "excellent".
     """
 
     reference_camera: str
@@ -228,6 +231,7 @@ class CalibrationResult:
     world: WorldFrame | None = None
     quality: Verdict | None = None
     camera_covariance: FloatArray | None = None
+    systematic: tuple[str, ...] = ()
 
     def camera(self, name: str) -> CameraCalibration:
         for camera in self.cameras:

@@ -192,12 +192,15 @@ class WandObservations:
         uv: (F, C, K, 2) pixels of the wand's K markers (A, B, C, ...); NaN where a camera did not see one.
         stamps: (F, C) capture stamp of each camera's image, seconds (NaN where the camera has no
             view in that frame), or None when the observations carry no stamps.
+        saturated: (F, C, K) which points were measured on saturated spots (the detector's flag: their centres
+            may be biased, :mod:`~wand_calib_ros.core.judge.centre_bias`), or None: not known.
     """
 
     frames: NDArray[np.int64]
     camera_names: tuple[str, ...]
     uv: FloatArray
     stamps: FloatArray | None = None
+    saturated: NDArray[np.bool_] | None = None
 
     def __post_init__(self) -> None:
         frames = np.asarray(self.frames, dtype=np.int64)
@@ -216,6 +219,12 @@ class WandObservations:
                 raise ValueError(f"stamps must have shape (F, C) = {uv.shape[:2]}, got {stamps.shape}")
             stamps.setflags(write=False)
             object.__setattr__(self, "stamps", stamps)
+        if self.saturated is not None:
+            saturated = np.array(self.saturated, dtype=bool)
+            if saturated.shape != uv.shape[:3]:
+                raise ValueError(f"saturated must have shape (F, C, K) = {uv.shape[:3]}, got {saturated.shape}")
+            saturated.setflags(write=False)
+            object.__setattr__(self, "saturated", saturated)
 
     @property
     def complete(self) -> NDArray[np.bool_]:
@@ -231,17 +240,45 @@ class WandObservations:
     def select_frames(self, mask: NDArray[np.bool_] | NDArray[np.int64]) -> WandObservations:
         """A copy restricted to the frames where ``mask`` (F,) is True (or to an index of frames)."""
         stamps = None if self.stamps is None else self.stamps[mask]
-        return WandObservations(self.frames[mask], self.camera_names, self.uv[mask], stamps)
+        saturated = None if self.saturated is None else self.saturated[mask]
+        return WandObservations(self.frames[mask], self.camera_names, self.uv[mask], stamps, saturated)
 
     def select_cameras(self, names: tuple[str, ...]) -> WandObservations:
         """A copy with only the named cameras, in that order."""
         index = [self.camera_index(n) for n in names]
         stamps = None if self.stamps is None else self.stamps[:, index]
-        return WandObservations(self.frames, names, self.uv[:, index], stamps)
+        saturated = None if self.saturated is None else self.saturated[:, index]
+        return WandObservations(self.frames, names, self.uv[:, index], stamps, saturated)
 
     def with_uv(self, uv: FloatArray) -> WandObservations:
-        """The same frames, cameras and stamps with other pixels (F, C, K, 2)."""
-        return WandObservations(self.frames, self.camera_names, uv, self.stamps)
+        """The same frames, cameras and stamps with other pixels (F, C, K, 2): each point keeps its saturation flag
+        where it is where one of its view's points was (labels exchanged), else none."""
+        return WandObservations(
+            self.frames, self.camera_names, uv, self.stamps, moved_flags(self.uv, uv, self.saturated)
+        )
+
+
+def moved_flags(old: FloatArray, new: FloatArray, flags: NDArray[np.bool_] | None) -> NDArray[np.bool_] | None:
+    """(F, C, K) the flags of ``old`` (F, C, K, 2) points carried to the ``new`` points at the same place in their
+    view (within 1e-6 px; False where none was), or None: no flags."""
+    if flags is None:
+        return None
+    if old.shape != new.shape:
+        return np.zeros(new.shape[:3], dtype=bool)
+    with np.errstate(invalid="ignore"):
+        kept = np.all(np.abs(new - old) < 1e-6, axis=-1)  # (F, C, K) the point did not move
+    out = flags & kept
+    moved = np.flatnonzero((np.isfinite(new[..., 0]) & ~kept).reshape(-1, new.shape[2]).any(axis=1))
+    if moved.size:  # views whose points moved (labels exchanged, a view added): matched by place
+        views_old = old.reshape(-1, *old.shape[2:])[moved]
+        views_new = new.reshape(-1, *new.shape[2:])[moved]
+        gaps = np.linalg.norm(views_new[:, :, None, :] - views_old[:, None, :, :], axis=-1)  # (V, K, K)
+        same = np.nan_to_num(gaps, nan=np.inf) < 1e-6
+        carried = (same & flags.reshape(-1, flags.shape[2])[moved][:, None, :]).any(axis=-1)
+        out = out.reshape(-1, flags.shape[2])
+        out[moved] = carried
+        out = out.reshape(flags.shape)
+    return np.asarray(out)
 
 
 def spread_subset(n: int, size: int) -> NDArray[np.int64]:
