@@ -1,10 +1,12 @@
 """The detector in a real room: per scene, what ``wand-calib detect`` finds in rendered takes and what the
 calibration from its views is worth.
 
-For every scene of :data:`wand_calib_ros.sim.room.ROOM_SCENES` and several seeds: a wand waved for
---seconds in front of the paper's three fisheyes (the mixed fisheye and conventional pair for
-colour_jpeg), rendered, detected as ``wand-calib detect`` detects a bag (its images decoded, the
-pipeline, the labels checked across cameras), then scored against the truth:
+For every scene of :data:`wand_calib_ros.sim.room_layout.ROOM_SCENES` and several seeds: a wand waved for
+--seconds in front of the scene's rig (:data:`wand_calib_ros.sim.room_layout.ROOM_RIGS`: the paper's three
+fisheyes, in a small room for the near scenes, the mixed pair for colour_jpeg, two conventional cameras over the
+painted and glossy floors), rendered, detected as ``wand-calib detect`` detects a bag (its images decoded, the
+pipeline, the labels checked across cameras), then scored against the truth, overall and per brightness class of
+each view's brightest LED (its peak before clipping over full scale: <4x, 4-8x, 8-16x, >16x):
 
 - recall: the clearly visible views (every LED drawn, none on a lamp or a window, 6 px inside the image,
   15 px apart, 10 grey levels and 5 noise sigmas above their background) with a right view returned;

@@ -440,9 +440,55 @@ def test_a_full_disk_is_one_line_exit_2_and_leaves_no_result(
     monkeypatch.setattr(tempfile, "mkstemp", full_disk)
     output = tmp_path / "result.yaml"
     argv = ["calibrate", "--cameras", str(simulated / "cameras.yaml"), "--observations"]
-    assert main(["-q", *argv, str(simulated / "observations.csv"), "--output", str(output)]) == 2
+    infos = tmp_path / "camera_info"
+    argv += [str(simulated / "observations.csv"), "--camera-info-dir", str(infos), "--output", str(output)]
+    assert main(["-q", *argv]) == 2
     assert capsys.readouterr().err.strip() == f"wand-calib: error: cannot write {output}: No space left on device"
-    assert not output.exists()
+    assert not output.exists() and not infos.exists()  # nothing left behind, not even the folder
+
+
+def test_outputs_are_written_through_links_with_the_umask_and_to_a_pipe_directly(
+    simulated: Path, tmp_path: Path, capsys
+) -> None:  # type: ignore[no-untyped-def]
+    import os
+    import stat
+
+    elsewhere = tmp_path / "kept" / "result.yaml"
+    elsewhere.parent.mkdir()
+    elsewhere.write_text("old\n")
+    link = tmp_path / "result.yaml"
+    link.symlink_to(elsewhere)
+    argv = ["-q", "calibrate", "--cameras", str(simulated / "cameras.yaml")]
+    argv += ["--observations", str(simulated / "observations.csv")]
+    before = os.umask(0o022)
+    try:
+        assert main([*argv, "--output", str(link), "--camera-info-dir", str(tmp_path / "info")]) == 0
+    finally:
+        os.umask(before)
+    assert link.is_symlink() and "reference_camera" in elsewhere.read_text()  # the target replaced, the link kept
+    assert stat.S_IMODE(elsewhere.stat().st_mode) == 0o644  # (kept: the file was 0644 under this umask)
+    assert stat.S_IMODE(next((tmp_path / "info").iterdir()).stat().st_mode) == 0o644  # new: the umask's
+    import threading
+
+    read, write = os.pipe()
+    chunks: list[bytes] = []
+
+    def drain() -> None:  # (the pipe's reader, as the next command of a shell pipeline)
+        while chunk := os.read(read, 1 << 16):
+            chunks.append(chunk)
+
+    reader = threading.Thread(target=drain)
+    reader.start()
+    try:
+        capsys.readouterr()
+        assert main([*argv, "--output", f"/proc/self/fd/{write}"]) == 0  # what --output /dev/stdout is in a pipe
+    finally:
+        os.close(write)
+        reader.join(10)
+        os.close(read)
+    assert b"reference_camera:" in b"".join(chunks)  # the YAML, whole, in the pipe
+    captured = capsys.readouterr()
+    assert "calibrated" not in captured.out and "calibrated" in captured.err  # the summary kept out of it
 
 
 def test_a_library_write_that_fails_names_the_commands_output(

@@ -115,6 +115,7 @@ class ObservationBuffer:
                 buffer._remember(int(frame), uv, stamp, flag)
         else:
             check_writable([buffer.path])
+            buffer.path.parent.mkdir(parents=True, exist_ok=True)
             buffer._start_file()
         return buffer
 

@@ -29,6 +29,7 @@ class CollectionLock:
         """
         self.path = folder / LOCK_FILE
         check_writable([self.path])  # (a file where the folder should be is named as such)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
         try:
             folder.mkdir(parents=True, exist_ok=True)
             self._fd: int | None = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import sys
 import time
 from pathlib import Path
 
@@ -15,7 +16,7 @@ from wand_calib_ros.core.pipeline import CalibrationOptions, calibrate
 from wand_calib_ros.errors import WandCalibError
 from wand_calib_ros.io.errors import FormatError
 from wand_calib_ros.io.observations_csv import read_rig_observations
-from wand_calib_ros.io.outputs import check_writable
+from wand_calib_ros.io.outputs import check_writable, is_special
 from wand_calib_ros.io.result_yaml import (
     CameraGeometry,
     calibration_paths,
@@ -111,7 +112,9 @@ def floor_frames(text: str) -> tuple[int, ...]:
 
 
 def _print_summary(result: CalibrationResult, output: Path) -> None:
-    print(f"calibrated {len(result.cameras)} cameras (reference {result.reference_camera}) -> {output}")
+    """What was calibrated, on stdout (on stderr when the result itself goes to a terminal or a pipe)."""
+    where = sys.stderr if is_special(output) else sys.stdout
+    print(f"calibrated {len(result.cameras)} cameras (reference {result.reference_camera}) -> {output}", file=where)
     for camera in result.cameras:
         fx, fy = camera.model.focal_px
         u0, v0 = camera.model.principal_point
@@ -119,25 +122,31 @@ def _print_summary(result: CalibrationResult, output: Path) -> None:
             f"  {camera.name} ({camera.model.distortion_model}): fx {fx:.2f} fy {fy:.2f} px, principal point "
             f"({u0:.2f}, {v0:.2f}) px, RMS {camera.rms_reprojection_px:.3f} px over {camera.n_observations} points"
             + (f"; {', '.join(camera.fixed_coefficients)} fixed at 0" if camera.fixed_coefficients else "")
-            + _timing_summary(result, camera)
+            + _timing_summary(result, camera),
+            file=where,
         )
     ends = f"|{result.wand.labels[0]}{result.wand.labels[-1]}|"  # |AC| of the three-LED wand
     print(
         f"  wand {ends} {result.wand_length_mean_mm:.2f} +- {result.wand_length_std_mm:.2f} mm "
         f"(nominal {result.wand.L:.1f}), RMS error {result.wand_length_rms_mm:.3f} mm; "
-        f"{result.placements_used} placements used, {result.placements_rejected} rejected"
+        f"{result.placements_used} placements used, {result.placements_rejected} rejected",
+        file=where,
     )
-    print("  models as OpenCV/ROS have them (camera_info, result 'opencv'): fx = k1*mu, fy = k1*mv, D from k2.. / k1")
+    print(
+        "  models as OpenCV/ROS have them (camera_info, result 'opencv'): fx = k1*mu, fy = k1*mv, D from k2.. / k1",
+        file=where,
+    )
     if result.world is not None:
         world = result.world
         print(
             f"  world frame from the floor ({world.placements} placements): plane residual {world.residual_mm:.2f} mm, "
-            f"normal +- {world.normal_std_deg:.3f} deg, origin +- {world.origin_std_mm:.2f} mm"
+            f"normal +- {world.normal_std_deg:.3f} deg, origin +- {world.origin_std_mm:.2f} mm",
+            file=where,
         )
     if result.quality is not None:
-        print(f"  {result.quality.line()}")
+        print(f"  {result.quality.line()}", file=where)
     for warning in result.warnings:
-        print(f"  warning: {warning}")
+        print(f"  warning: {warning}", file=where)
 
 
 def _timing_summary(result: CalibrationResult, camera: CameraCalibration) -> str:

@@ -16,7 +16,7 @@ from wand_calib_ros.detection.wand import WandDetection
 from wand_calib_ros.errors import WandCalibError
 from wand_calib_ros.io.bags import ImageFrame
 from wand_calib_ros.io.observations_csv import write_observations
-from wand_calib_ros.io.outputs import check_writable
+from wand_calib_ros.io.outputs import check_writable, is_special, write_text
 from wand_calib_ros.io.rig_yaml import load_rig
 
 log = logging.getLogger("wand_calib_ros")
@@ -104,8 +104,6 @@ def run(args: argparse.Namespace) -> int:
     topics = camera_topics(args, rig)
     started = time.perf_counter()
     seen: dict[str, int] = {}
-    if args.debug_dir is not None:
-        args.debug_dir.mkdir(parents=True, exist_ok=True)
 
     expected = count_images(args.bag, topics)
     show_progress = not args.quiet and expected > 0
@@ -123,7 +121,9 @@ def run(args: argparse.Namespace) -> int:
             from wand_calib_ros.detection.overlay import draw_overlay
 
             picture = draw_overlay(frame.image, frame.encoding, blobs, detection, reason)
-            cv2.imwrite(str(args.debug_dir / f"{frame.camera}_{frame.stamp_ns}.png"), picture)
+            write_text(
+                args.debug_dir / f"{frame.camera}_{frame.stamp_ns}.png", cv2.imencode(".png", picture)[1].tobytes()
+            )
 
     detections = detect_recording(
         read_image_frames(args.bag, topics),
@@ -133,13 +133,18 @@ def run(args: argparse.Namespace) -> int:
         masks=masks,
     )
     observations, _ = settle_labels(rig, detections)
-    args.output.parent.mkdir(parents=True, exist_ok=True)
     write_observations(observations, args.output)
-    summary = save_what_cameras_saw(args.output, detections.reports, detections.masks)
-    print(f"detected the wand in {args.bag} -> {args.output} ({time.perf_counter() - started:.1f} s); {summary}")
+    summary = "what each camera saw is not kept beside a terminal or a pipe"
+    if not is_special(args.output):  # (nothing is written beside a terminal or a pipe)
+        summary = str(save_what_cameras_saw(args.output, detections.reports, detections.masks))
+    print(
+        f"detected the wand in {args.bag} -> {args.output} ({time.perf_counter() - started:.1f} s); {summary}",
+        file=sys.stderr if is_special(args.output) else sys.stdout,
+    )
     for name in rig.camera_names:
         report = detections.reports[name]
-        print(f"  {name}: {report.images} images ({topics[name]}), {report.views} views of the wand")
+        where = sys.stderr if is_special(args.output) else sys.stdout
+        print(f"  {name}: {report.images} images ({topics[name]}), {report.views} views of the wand", file=where)
         for message in report.messages():
-            print(f"    {message}")
+            print(f"    {message}", file=where)
     return 0

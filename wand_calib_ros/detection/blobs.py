@@ -1,14 +1,15 @@
 """Bright blobs: the spots that stand out of their local background, with sub-pixel centres.
 
-A pixel belongs to a blob when it is above its region's threshold
-(:mod:`wand_calib_ros.detection.background`: the local background plus a few times its
-noise), and is not masked (a lamp the camera learned, or a mask the user gave). Connected
-pixels are one blob; size gates reject single hot pixels and large bright areas. Each blob
-is measured in a window around it (:mod:`wand_calib_ros.detection.centres`): its centre, its
-peak above its own background, the length of its motion streak, and whether it touches the
-image border or the mask (then it may be cut and its centre is not trusted). A small blob
-that touches a much larger one is a fringe of it (JPEG ringing, demosaicing, a flare) and is
-dropped.
+A pixel belongs to a blob when it is above its threshold (the camera's static structure plus a few times
+its noise over time, :mod:`wand_calib_ros.detection.structure`; before one is learned, the local background
+plus a few times its noise, :mod:`wand_calib_ros.detection.background`), and is not masked (a mask the user
+gave, a light the camera learned). Connected pixels are one blob; size gates reject single hot pixels and
+large bright areas. Each blob is measured in a window around it, the static structure taken away
+(:mod:`wand_calib_ros.detection.centres`): its centre (a saturated spot's by its outline), its peak above its
+own background, the length of its motion streak, and whether it is cut (by the image border, a mask, a
+saturated light, or a brighter region that hid part of it: its centre is not trusted). A small blob that
+touches a much larger one, or a faint fleck in its halo, is a fringe of it (JPEG ringing, demosaicing, a
+blooming LED's halo) and is dropped.
 """
 
 from __future__ import annotations
@@ -95,7 +96,8 @@ class Blobs:
         saturated: (N,) True where a pixel reached the image's maximum value.
         at_border: (N,) True where the blob touches the image border (cut: its centre is pulled
             inwards); None: none does.
-        masked: (N,) True where the blob touches masked pixels (it may be cut); None: none does.
+        masked: (N,) True where the blob is cut by what cannot be seen: masked pixels, a saturated static light, a
+            brighter region that hid part of it (see :func:`find_blobs`); None: none is.
         lengths: (N,) length of the blob's motion streak, px; None: not measured.
         backgrounds: (N,) the background under the blob, grey levels; None: not measured.
         contrast: (N,) how far above that background the image's threshold is there; None: not measured.
@@ -112,7 +114,7 @@ class Blobs:
     contrast: FloatArray | None = None
 
     def cut(self, index: list[int]) -> bool:
-        """Whether any of the blobs ``index`` touches the image border or the mask."""
+        """Whether any of the blobs ``index`` is cut: by the image border, a mask or a saturated light."""
         border = self.at_border is not None and bool(self.at_border[index].any())
         return border or (self.masked is not None and bool(self.masked[index].any()))
 

@@ -31,6 +31,7 @@ from numpy.typing import NDArray
 from wand_calib_ros.detection.background import BOX, saturation_of
 from wand_calib_ros.detection.blobs import Blobs, distances
 from wand_calib_ros.detection.errors import MaskError
+from wand_calib_ros.io.outputs import write_text
 from wand_calib_ros.io.rig_yaml import MaskSpec
 
 FloatArray = NDArray[np.float64]
@@ -113,10 +114,15 @@ def read_mask(path: Path, size: tuple[int, int]) -> Mask:
 
 
 def write_mask(path: Path, mask: Mask) -> None:
-    """Write a mask as a PNG (white where ignored)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    if not cv2.imwrite(str(path), mask):
-        raise MaskError(f"{path}: the mask could not be written")
+    """Write a mask as a PNG (white where ignored; as every output is written, :mod:`wand_calib_ros.io.outputs`).
+
+    Raises:
+        MaskError: it could not be encoded; OutputError: not written.
+    """
+    encoded, png = cv2.imencode(".png", mask)
+    if not encoded:
+        raise MaskError(f"{path}: the mask could not be encoded as a PNG")
+    write_text(path, png.tobytes())
 
 
 def mask_of(spec: MaskSpec, size: tuple[int, int]) -> Mask:

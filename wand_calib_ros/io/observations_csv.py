@@ -26,6 +26,7 @@ from numpy.typing import NDArray
 
 from wand_calib_ros.core.model.rig import ALL_POINT_LABELS, POINT_LABELS, RigSpec, WandObservations
 from wand_calib_ros.io.errors import FormatError
+from wand_calib_ros.io.outputs import write_text
 
 COLUMNS = ("frame", "camera", "point", "u", "v")
 log = logging.getLogger(__name__)
@@ -424,12 +425,13 @@ def write_observations(observations: WandObservations, path: str | Path) -> None
     """Write every finite point of ``observations`` as CSV rows (frame, camera, A/B/C order; stamps and saturation
     flags if any)."""
     flags = observations.saturated
-    with Path(path).open("w", newline="") as handle:
-        writer = csv.writer(handle, lineterminator="\n")
-        writer.writerow(header(observations.stamps is not None, flags is not None))
-        for f, frame in enumerate(observations.frames):
-            stamps = None if observations.stamps is None else observations.stamps[f]
-            rows = observation_rows(
-                int(frame), observations.camera_names, observations.uv[f], stamps, None if flags is None else flags[f]
-            )
-            writer.writerows(rows)
+    text = io.StringIO(newline="")
+    writer = csv.writer(text, lineterminator="\n")
+    writer.writerow(header(observations.stamps is not None, flags is not None))
+    for f, frame in enumerate(observations.frames):
+        stamps = None if observations.stamps is None else observations.stamps[f]
+        rows = observation_rows(
+            int(frame), observations.camera_names, observations.uv[f], stamps, None if flags is None else flags[f]
+        )
+        writer.writerows(rows)
+    write_text(path, text.getvalue())

@@ -35,6 +35,7 @@ from wand_calib_ros.core.model.camera_model import CAMERA_MODELS, EQUIDISTANT, C
 from wand_calib_ros.core.model.known_intrinsics import known_model
 from wand_calib_ros.core.model.rig import LENS_CLASSES, CameraSpec, RigSpec, WandSpec
 from wand_calib_ros.io.errors import FormatError
+from wand_calib_ros.io.outputs import write_text
 from wand_calib_ros.io.text import read_yaml
 
 _REQUIRED = ("name", "image_size", "pixel_size_um", "nominal_focal_mm", "max_view_angle_deg")
@@ -318,7 +319,7 @@ def rig_to_dict(rig: RigSpec) -> dict[str, Any]:
 
 def save_rig(rig: RigSpec, path: str | Path) -> None:
     """Write ``cameras.yaml``."""
-    Path(path).write_text(yaml.safe_dump(rig_to_dict(rig), sort_keys=False, default_flow_style=None))
+    write_text(path, yaml.safe_dump(rig_to_dict(rig), sort_keys=False, default_flow_style=None))
 
 
 @dataclass(frozen=True)

@@ -16,6 +16,7 @@ from wand_calib_ros.core.model.camera_model import EQUIDISTANT, PLUMB_BOB, RATIO
 from wand_calib_ros.core.model.rig import RigSpec, WandObservations
 from wand_calib_ros.io.detection_summary import REASON_TEXT, read_summary, summary_path
 from wand_calib_ros.io.errors import OutputError
+from wand_calib_ros.io.outputs import write_together
 from wand_calib_ros.report.analysis import ReportData, prepare
 from wand_calib_ros.report.figures import FIGURES
 
@@ -258,7 +259,7 @@ def write_report(
     if out.exists() and not out.is_dir():
         raise OutputError(out, "it is a file; give a folder for the report")
     data = prepare(rig, observations, result_path)
-    out.mkdir(parents=True, exist_ok=True)
+    files: dict[Path, str | bytes] = {}  # written together at the end: a failed report leaves none of them
     sections = []
     for name, make in FIGURES.items():
         if name == "timing" and data.timing is None:
@@ -270,7 +271,7 @@ def write_report(
         figure.savefig(buffer, format="png", dpi=80)
         plt.close(figure)
         png = buffer.getvalue()
-        (out / f"{name}.png").write_bytes(png)
+        files[out / f"{name}.png"] = png
         encoded = base64.b64encode(png).decode("ascii")
         sections.append(
             f"<h2>{name.replace('_', ' ')}</h2><p>{html.escape(_CAPTIONS[name])}</p>"
@@ -298,6 +299,7 @@ def write_report(
 </body></html>
 """
     path = out / "index.html"
-    path.write_text(page)
+    files[path] = page
+    write_together(files)
     log.info("report written to %s", path)
     return path
