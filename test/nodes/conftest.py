@@ -6,6 +6,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -153,3 +154,41 @@ def ros() -> Iterator[Ros]:
         spinner.close()
         rclpy.shutdown(context=context)
         assert not any(thread.is_alive() for thread in threading.enumerate() if thread.name.startswith("spin "))
+
+
+def calibrates_as_kept(ros: Ros, tmp_path: Path, collector: Any) -> None:
+    """/calibrate on what the collector kept gives exactly ``wand-calib calibrate`` on its buffer file."""
+    import numpy as np
+    from rclpy.parameter import Parameter
+    from std_srvs.srv import Trigger
+
+    from wand_calib_ros import cli
+    from wand_calib_ros.io.result_yaml import read_result
+    from wand_calib_ros.nodes.calibrator import CalibratorNode
+
+    values = {
+        "cameras_file": str(tmp_path / "cameras.yaml"),
+        "output_dir": str(tmp_path / "out"),
+        "require_coverage": False,
+        "write_report": False,
+        "time_offsets": "fixed",  # independent placements: no motion to time
+    }
+    ros.add(
+        CalibratorNode(
+            context=ros.context,
+            parameter_overrides=[Parameter(k, value=v) for k, v in values.items()],
+            before_calibrate=collector.flush,
+        )
+    )
+    client = ros.helper.create_client(Trigger, "calibrate")
+    assert client.wait_for_service(timeout_sec=5)
+    response = client.call(Trigger.Request(), timeout_sec=120)
+    assert response is not None and response.success, response
+    out = tmp_path / "out"
+    offline = ["calibrate", "--time-offsets", "fixed", "--cameras", str(tmp_path / "cameras.yaml"), "--observations"]
+    assert cli.main(["-q", *offline, str(out / "observations.csv"), "--output", str(tmp_path / "offline.yaml")]) == 0
+    _, live = read_result(out / "result.yaml")
+    _, kept = read_result(tmp_path / "offline.yaml")
+    for name, camera in kept.items():
+        assert np.array_equal(live[name].model.intrinsic_vector(), camera.model.intrinsic_vector())
+        assert np.array_equal(live[name].pose.translation, camera.pose.translation)

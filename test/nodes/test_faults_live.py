@@ -12,10 +12,8 @@ from typing import Any
 import numpy as np
 import pytest
 import yaml
-from conftest import Ros, wait_until
+from conftest import Ros, calibrates_as_kept, wait_until
 
-from wand_calib_ros import cli
-from wand_calib_ros.io.result_yaml import read_result
 from wand_calib_ros.io.rig_yaml import save_rig
 from wand_calib_ros.sim.render import RenderOptions, render_recording
 from wand_calib_ros.sim.scenarios import paper_fisheye_scenario, paper_three_camera_scenario, simulate
@@ -76,36 +74,6 @@ def _play(ros: Ros, collector: CollectorNode, uv: np.ndarray, stamps: Stamps, pa
     collector.flush()
 
 
-def _calibrates_as_kept(ros: Ros, tmp_path: Path, collector: CollectorNode) -> None:
-    """/calibrate on what the collector kept gives exactly ``wand-calib calibrate`` on its buffer file."""
-    values = {
-        "cameras_file": str(tmp_path / "cameras.yaml"),
-        "output_dir": str(tmp_path / "out"),
-        "require_coverage": False,
-        "write_report": False,
-        "time_offsets": "fixed",  # independent placements: no motion to time
-    }
-    ros.add(
-        CalibratorNode(
-            context=ros.context,
-            parameter_overrides=[Parameter(k, value=v) for k, v in values.items()],
-            before_calibrate=collector.flush,
-        )
-    )
-    client = ros.helper.create_client(Trigger, "calibrate")
-    assert client.wait_for_service(timeout_sec=5)
-    response = client.call(Trigger.Request(), timeout_sec=120)
-    assert response is not None and response.success, response
-    out = tmp_path / "out"
-    offline = ["calibrate", "--time-offsets", "fixed", "--cameras", str(tmp_path / "cameras.yaml"), "--observations"]
-    assert cli.main(["-q", *offline, str(out / "observations.csv"), "--output", str(tmp_path / "offline.yaml")]) == 0
-    _, live = read_result(out / "result.yaml")
-    _, kept = read_result(tmp_path / "offline.yaml")
-    for name, camera in kept.items():
-        assert np.array_equal(live[name].model.intrinsic_vector(), camera.model.intrinsic_vector())
-        assert np.array_equal(live[name].pose.translation, camera.pose.translation)
-
-
 def _views(collector: CollectorNode) -> int:
     return int(collector.buffer.observations().complete.sum())
 
@@ -156,7 +124,7 @@ def test_stamps_that_jump_start_a_segment_and_lose_nothing(
     assert stored.stamps is not None and np.all(np.diff(stored.stamps[np.isfinite(stored.stamps[:, 0]), 0]) > 0)
     log = capfd.readouterr().err
     assert said in log and log.count("new segment") <= 3  # said once per jump (the clock step: per camera)
-    _calibrates_as_kept(ros, tmp_path, collector)
+    calibrates_as_kept(ros, tmp_path, collector)
 
 
 def test_a_restarted_driver_is_calibrated_as_the_kept_frames_are(ros: Ros, tmp_path: Path) -> None:
@@ -164,7 +132,7 @@ def test_a_restarted_driver_is_calibrated_as_the_kept_frames_are(ros: Ros, tmp_p
     uv = simulate(scenario, 0.5, np.random.default_rng(8), n=240).observations.uv
     collector = _collector(ros, tmp_path, scenario.rig)
     _play(ros, collector, uv, FAULTS["restarted driver"][0])
-    _calibrates_as_kept(ros, tmp_path, collector)
+    calibrates_as_kept(ros, tmp_path, collector)
     placements = yaml.safe_load((tmp_path / "out" / "result.yaml").read_text())["metrics"]["placements_used"]
     assert placements == int(np.all(np.isfinite(uv), axis=(2, 3)).all(axis=1).sum())  # every one after the jump too
 
@@ -195,7 +163,7 @@ def test_a_silent_camera_is_said_while_silent_and_resumes(
     seen = np.all(np.isfinite(uv), axis=(2, 3))
     seen[100:200, 1] = False
     assert _views(collector) == int(seen.sum())  # the others' views while it was silent, its own after
-    _calibrates_as_kept(ros, tmp_path, collector)
+    calibrates_as_kept(ros, tmp_path, collector)
 
 
 def test_dropped_images_are_counted_and_said(ros: Ros, tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
@@ -226,7 +194,7 @@ def test_the_same_bag_replayed_after_reset_is_stored_again(ros: Ros, tmp_path: P
     assert _views(collector) == 0
     _play(ros, collector, uv, _steady)  # its stamps start over
     assert _views(collector) == first == int(np.all(np.isfinite(uv), axis=(2, 3)).sum())
-    _calibrates_as_kept(ros, tmp_path, collector)
+    calibrates_as_kept(ros, tmp_path, collector)
 
 
 def test_images_it_cannot_use_are_said_and_the_good_ones_between_are_kept(

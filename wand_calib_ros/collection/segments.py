@@ -5,9 +5,12 @@ on a clock of its own, the host's clock was stepped, a bag was played again, a s
 ahead), the stamps before and after cannot be compared, and a synchroniser that trusts them drops
 every image after the jump as out of order or lets one camera's leap push the others' frames out.
 :class:`StampSegments` notices such a jump by comparing each image's stamp with its camera's
-previous one advanced by the time between their arrivals (the node's steady clock), and starts a
+previous one and the time between their arrivals (the node's steady clock), and starts a
 new *segment* of that camera's stamps, shifted to continue the old one on its frame grid (that
-time in whole frame periods, at least one): ``continuous = stamp + offset``. Cameras that jump by
+time in whole frame periods, at least one): ``continuous = stamp + offset``. A jump is a stamp more than
+JUMP_S behind its camera's previous one, or more than that ahead of the time that passed between their
+arrivals; a pause (nothing arrives for a while, then the stamps go on where they were: a paused bag, a
+stalled driver or network) is no jump, and its stamps stay as they are. Cameras that jump by
 the same amount together (a clock step, a replay) get exactly the same shift, so frames stay
 frames. A camera whose stamps are zero (a driver that does not stamp) is stamped with its arrival,
 on the other cameras' time. Gaps of more than DROP_GAP frame periods (and less than a silence,
@@ -43,11 +46,13 @@ class StampJump:
         camera: its name.
         kind: "back", "ahead" (its stamps against their arrivals) or "unstamped" (stamps of 0).
         jump_s: how far the stamps moved against the time between arrivals, s (0 for "unstamped").
+        shared: another camera jumped by as much a moment ago (they share one shift: a clock step, a replay).
     """
 
     camera: str
     kind: str
     jump_s: float
+    shared: bool = False
 
     def describe(self) -> str:
         """One line for the log."""
@@ -99,16 +104,21 @@ class StampSegments:
                 jump = StampJump(camera, "unstamped", 0.0)
             stamp_ns = self._rig_time(camera, arrival_ns) - state.shift_ns
         elif state.stamp_ns is not None and state.continuous_ns is not None:
-            expected = state.continuous_ns + (arrival_ns - state.arrival_ns)
+            elapsed = arrival_ns - state.arrival_ns
+            step = stamp_ns - state.stamp_ns
+            expected = state.continuous_ns + elapsed
             off = stamp_ns + state.shift_ns - expected
-            if abs(off) > JUMP_S * 1e9:
+            # back: its stamps went back beyond a reordering; ahead: they ran ahead of the time that passed. A pause
+            # (nothing arrived for a while, the stamps then go on where they were: a paused bag, a stalled
+            # driver) is neither: its stamps are the truth
+            if step < -JUMP_S * 1e9 or step > elapsed + JUMP_S * 1e9:
                 if state.period_ns is not None:  # on its own frame grid: the images between arrive in any rhythm
                     steps = max(round((expected - state.continuous_ns) / state.period_ns), 1)
                     expected = state.continuous_ns + round(steps * state.period_ns)
-                shift = self._shared_shift(expected - stamp_ns, arrival_ns)
+                shift, shared = self._shared_shift(expected - stamp_ns, arrival_ns)
                 state.shift_ns, state.segments = shift, state.segments + 1
                 state.recent.clear()
-                jump = StampJump(camera, "back" if off < 0 else "ahead", off / 1e9)
+                jump = StampJump(camera, "back" if off < 0 else "ahead", off / 1e9, shared)
         continuous = stamp_ns + state.shift_ns
         self._count_drops(state, continuous)
         state.stamp_ns, state.continuous_ns, state.arrival_ns = stamp_ns, continuous, arrival_ns
@@ -132,14 +142,14 @@ class StampSegments:
         ]
         return max(times) if times else arrival_ns
 
-    def _shared_shift(self, shift_ns: int, arrival_ns: int) -> int:
-        """The shift of a jump: another camera's of a moment ago when it is the same jump (a clock step)."""
+    def _shared_shift(self, shift_ns: int, arrival_ns: int) -> tuple[int, bool]:
+        """The shift of a jump, and whether it is another camera's of a moment ago (the same jump: a clock step)."""
         self._recent_shifts = [(t, s) for t, s in self._recent_shifts if arrival_ns - t <= SAME_JUMP_S * 1e9]
         for _, shift in self._recent_shifts:
             if abs(shift - shift_ns) <= SAME_SHIFT_S * 1e9:
-                return shift
+                return shift, True
         self._recent_shifts.append((arrival_ns, shift_ns))
-        return shift_ns
+        return shift_ns, False
 
     @staticmethod
     def _count_drops(state: _Camera, continuous_ns: int) -> None:

@@ -15,7 +15,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
-from wand_calib_ros.collection.segments import StampSegments
+from wand_calib_ros.collection.segments import SAME_JUMP_S, StampJump, StampSegments
 
 #: A camera without an image for this long (s) while another camera sends is silent.
 SILENT_S = 2.0
@@ -74,6 +74,7 @@ class StreamFaults:
         self.segments = StampSegments(cameras)
         self._state = {name: _Camera() for name in cameras}
         self._first_ns: int | None = None  # the rig's first arrival
+        self._jumps: tuple[int, list[StampJump]] | tuple[()] = ()  # a jump being gathered: (when it began, cameras')
 
     def arrived(self, camera: str, stamp_ns: int, arrival_ns: int) -> tuple[int, list[Said]]:
         """An image (or detector points) of a camera arrived: its stamp continued across jumps
@@ -91,11 +92,44 @@ class StreamFaults:
             said.append(Said("info", f"{camera}: images again after {gone:.1f} s without"))
             state.silent_since_ns = None
         continued, jump = self.segments.continuous(camera, stamp_ns, arrival_ns)
-        if jump is not None:  # (each jump once: the segments say an unstamped camera once)
+        gathered = {j.camera for j in self._jumps[1]} if self._jumps else set()
+        # said once whole: when every camera jumped with it, when a camera outside it sends on without jumping (it
+        # is those cameras' jump alone), or SAME_JUMP_S after it began
+        said += self._said_jumps(arrival_ns, now=jump is None and bool(gathered) and camera not in gathered)
+        if jump is not None and jump.kind == "unstamped":  # (the segments say an unstamped camera once)
             said.append(Said("warning", jump.describe()))
+        elif jump is not None and jump.shared and self._jumps:  # the same jump as a moment ago: one cause
+            self._jumps[1].append(jump)
+            if len(self._jumps[1]) == len(self.cameras):  # every camera: said now, once
+                said += self._said_jumps(arrival_ns, now=True)
+        elif jump is not None:  # said once the cameras that jump with it did (SAME_JUMP_S), or all of them
+            said += self._said_jumps(arrival_ns, now=True)
+            self._jumps = (arrival_ns, [jump])
+            if len(self.cameras) == 1:
+                said += self._said_jumps(arrival_ns, now=True)
         state.arrived_ns = arrival_ns
         self._first_ns = arrival_ns if self._first_ns is None else self._first_ns
         return continued, said
+
+    def _said_jumps(self, arrival_ns: int, *, now: bool = False) -> list[Said]:
+        """The jump being gathered, said once (as one cause for the cameras that jumped together) when ``now`` or
+        SAME_JUMP_S after it began; nothing when none is being gathered."""
+        if not self._jumps or (not now and arrival_ns - self._jumps[0] <= SAME_JUMP_S * 1e9):
+            return []
+        jumps = self._jumps[1]
+        self._jumps = ()
+        if len(jumps) == 1:
+            return [Said("warning", jumps[0].describe())]
+        first = jumps[0]
+        size = f"{abs(first.jump_s):.1f} s" if abs(first.jump_s) < 3600 else f"{abs(first.jump_s) / 3600:.1f} h"
+        who = "every camera's" if len(jumps) == len(self.cameras) else ", ".join(j.camera for j in jumps) + ":"
+        return [
+            Said(
+                "warning",
+                f"{who} stamps jumped {size} {'back' if first.kind == 'back' else 'ahead'} together (the host's clock "
+                "stepped, or a bag played again?): one shift for all, their frames stay frames; nothing is lost",
+            )
+        ]
 
     def unusable(self, camera: str, reason: str, text: str | None, arrival_ns: int) -> list[Said]:
         """An image of a camera the detector could not use, for ``reason`` (``text``: what is wrong, None: no
@@ -110,7 +144,7 @@ class StreamFaults:
     def check(self, now_ns: int) -> tuple[dict[str, list[str]], list[Said]]:
         """(per camera its faults now, what to say now): silence, unusable images, dropped images."""
         faults: dict[str, list[str]] = {name: [] for name in self.cameras}
-        said: list[Said] = []
+        said: list[Said] = self._said_jumps(now_ns)
         heard = [s.arrived_ns for s in self._state.values() if s.arrived_ns is not None]
         newest = max(heard) if heard else None
         others_send = newest is not None and now_ns - newest <= SILENT_S * 1e9

@@ -176,6 +176,7 @@ class CollectorNode(Node):
             with_saturation=values["input"] == "images",  # (its own detector measures the spots)
         )
         self._saturation: dict[tuple[str, int], NDArray[np.bool_]] = {}  # released views' flags, until stored
+        self.clock: Callable[[], int] = time.monotonic_ns  #: when a message arrives, ns (a steady clock)
         if self.buffer.repaired is not None:
             self.get_logger().warning(self.buffer.repaired.describe(self.buffer.path))
         self.coverage = CoverageTracker(self.rig, coverage_thresholds(values))
@@ -287,7 +288,7 @@ class CollectorNode(Node):
 
     def _on_image(self, camera: str, stamp_ns: int, pixels: NDArray[Any] | None, encoding: str) -> None:
         stream = self.streams[camera]
-        arrival = time.monotonic_ns()
+        arrival = self.clock()
         with self.lock:
             stamp_ns, said = self.faults.arrived(camera, stamp_ns, arrival)
             taking = stream.taking_mask
@@ -333,7 +334,7 @@ class CollectorNode(Node):
                 self.malformed[camera] += 1
             return
         with self.lock:
-            stamp_ns, said = self.faults.arrived(camera, messages.stamp_ns(message.header), time.monotonic_ns())
+            stamp_ns, said = self.faults.arrived(camera, messages.stamp_ns(message.header), self.clock())
             self.received[camera] += 1
             stats = self.streams[camera].stats  # the detector node labelled it: count it the same way
             if points is None:
@@ -548,7 +549,7 @@ class CollectorNode(Node):
             }
             cells = {name: self.coverage.cells[c].copy() for c, name in enumerate(self.rig.camera_names)}
             watch = self.watch
-            faults, said = self.faults.check(time.monotonic_ns())
+            faults, said = self.faults.check(self.clock())
         self._say(said)
         now = time.monotonic()
         notes = self._detection_feedback(counts)
