@@ -525,3 +525,78 @@ def test_a_distortion_free_plumb_bob_start_says_its_principal_point_is_weak(tmp_
     error = np.subtract(camera["principal_point"], truth["principal_point"])
     std = np.array([camera["std"]["u0"], camera["std"]["v0"]])
     assert np.all(np.abs(error) < 3 * std) and np.hypot(*std) > 5.0
+
+
+def _xypts(path: Path, observations_csv: Path, names: tuple[str, ...], height: int) -> None:
+    """An xypts file (bottom-left origin) of an observations CSV."""
+    obs = read_observations(observations_csv, names)
+    columns = [f"pt{p + 1}_cam{c + 1}_{a}" for c in range(len(names)) for p in range(3) for a in "XY"]
+    lines = [",".join(columns)]
+    for frame in obs.uv:
+        cells = []
+        for c in range(len(names)):
+            for p in range(3):
+                u, v = frame[c, p]
+                cells += ["NaN", "NaN"] if not np.isfinite(u) else [f"{u:.4f}", f"{height - v:.4f}"]
+        lines.append(",".join(cells))
+    path.write_text("\n".join(lines) + "\n")
+
+
+def test_every_command_writes_through_links_with_the_umask_and_refuses_or_fails_in_one_line(
+    simulated: Path, tmp_path: Path, capsys
+) -> None:  # type: ignore[no-untyped-def]
+    import os
+    import stat
+
+    cameras, observations = str(simulated / "cameras.yaml"), str(simulated / "observations.csv")
+    bag = tmp_path / "rec"
+    assert main(["-q", "render", "paper", "--frames", "45", "--seed", "3", "--out", str(bag)]) == 0
+    _xypts(tmp_path / "take_xypts.csv", simulated / "observations.csv", ("cam0", "cam1"), 480)
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+
+    def linked(name: str) -> Path:
+        """An output that is a link to a file elsewhere (which exists, mode 0640)."""
+        (elsewhere / name).write_text("old\n")
+        (elsewhere / name).chmod(0o640)
+        (tmp_path / name).symlink_to(elsewhere / name)
+        return tmp_path / name
+
+    result = tmp_path / "result.yaml"
+    runs = {
+        "calibrate": ["calibrate", "--cameras", cameras, "--observations", observations, "--output"],
+        "detect": ["detect", str(bag / "bag"), "--cameras", str(bag / "cameras.yaml"), "--output"],
+        "import": [
+            "import",
+            "--format",
+            "xypts",
+            "--points",
+            str(tmp_path / "take_xypts.csv"),
+            "--cameras",
+            cameras,
+            "--out",
+        ],
+    }
+    before = os.umask(0o022)
+    try:
+        for command, argv in runs.items():
+            output = linked(f"{command}.out")
+            assert main(["-q", *argv, str(output)]) == 0, command
+            assert output.is_symlink() and (elsewhere / output.name).read_text() != "old\n", command  # through it
+            assert stat.S_IMODE((elsewhere / output.name).stat().st_mode) == 0o640, command  # its mode kept
+            capsys.readouterr()
+            assert main(["-q", *argv, "/dev/full"]) == 2, command  # a device: written directly, never replaced
+            assert (
+                capsys.readouterr().err.strip() == "wand-calib: error: cannot write /dev/full: No space left on device"
+            )
+            assert stat.S_ISCHR(Path("/dev/full").stat().st_mode)
+        assert main(["-q", *runs["calibrate"], str(result), "--camera-info-dir", str(tmp_path / "info")]) == 0
+        exported, report = tmp_path / "exported", tmp_path / "report"
+        assert main(["-q", "export", "--result", str(result), "--format", "opencv", "--out", str(exported)]) == 0
+        report_argv = ["report", "--result", str(result), "--cameras", cameras, "--observations", observations]
+        assert main(["-q", *report_argv, "--out", str(report)]) == 0
+        made = [result, *(tmp_path / "info").iterdir(), *exported.iterdir(), *report.iterdir()]
+        made += [tmp_path / "detect.detection.yaml"] if (tmp_path / "detect.detection.yaml").exists() else []
+        assert len(made) >= 8 and {stat.S_IMODE(p.stat().st_mode) for p in made} == {0o644}  # new: the umask's
+    finally:
+        os.umask(before)
