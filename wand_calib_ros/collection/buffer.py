@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.collection.recovery import TornTail, backup_path, cut_torn_tail
+from wand_calib_ros.collection.recovery import TornTail, cut_torn_tail, move_aside
 from wand_calib_ros.core.model.rig import RigSpec, WandObservations
 from wand_calib_ros.io.errors import FormatError
 from wand_calib_ros.io.observations_csv import header, observation_rows, read_rig_observations
@@ -178,8 +178,7 @@ class ObservationBuffer:
         """
         backup = None
         if self.path.exists() and has_rows(self.path):
-            backup = backup_path(self.path, "bak")
-            os.replace(self.path, backup)
+            backup = move_aside(self.path, "bak")
         self.frames, self.uv, self.stamps, self.saturated, self.stats = [], [], [], [], BufferStats()
         self._cells = np.zeros((len(self.rig.cameras), GRID, GRID), dtype=np.int64)
         self._start_file()

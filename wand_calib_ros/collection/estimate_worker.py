@@ -22,4 +22,8 @@ def serve(connection: Connection) -> None:
             return
         if request is None:
             return
-        connection.send(calibrate_round(*request))
+        answer = calibrate_round(*request)
+        try:
+            connection.send(answer)
+        except OSError:  # the node went away while the round ran (BrokenPipeError)
+            return

@@ -32,7 +32,7 @@ class CollectionLock:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         try:
             folder.mkdir(parents=True, exist_ok=True)
-            self._fd: int | None = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            self._fd: int | None = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o666)
         except OSError as error:
             raise CollectionError(f"output_dir {folder}: cannot be written ({error.strerror})") from None
         try:

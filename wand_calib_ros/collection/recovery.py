@@ -3,7 +3,8 @@
 The buffer is appended one frame at a time. A process killed (or a machine losing power) in the
 middle of an append leaves a torn tail: a last line without its newline, sometimes NUL padding
 after it. :func:`cut_torn_tail` cuts the file back to the last complete frame and keeps the
-original aside; :func:`backup_path` names backups so that no backup ever replaces another.
+original aside; :func:`backup_path` names backups so that no backup ever replaces another, and
+:func:`move_aside` moves a file to one (through a symbolic link: its target's content, the link kept).
 """
 
 from __future__ import annotations
@@ -50,6 +51,24 @@ def backup_path(path: Path, kind: str) -> Path:
         except FileExistsError:
             continue
     raise FileExistsError(f"{path}: no free backup name for {stamp}")
+
+
+def move_aside(path: Path, kind: str) -> Path:
+    """Move the file at ``path`` to a new backup beside it (:func:`backup_path`) and return the backup.
+
+    A regular file is renamed (its permissions go with it). Through a symbolic link the link stays where
+    the user put it: its target's content is copied to the backup and the target emptied, to be written
+    again through the link.
+    """
+    backup = backup_path(path, kind)
+    if not path.is_symlink():
+        os.replace(path, backup)
+        return backup
+    shutil.copyfile(path, backup)
+    with path.open("r+b") as handle:
+        handle.truncate(0)
+        os.fsync(handle.fileno())
+    return backup
 
 
 def cut_torn_tail(path: Path) -> TornTail | None:

@@ -31,7 +31,6 @@ workflow. Only message and parameter translation lives here.
 from __future__ import annotations
 
 import functools
-import os
 import sys
 import threading
 import time
@@ -57,7 +56,7 @@ from wand_calib_ros.collection.coverage import CoverageTracker
 from wand_calib_ros.collection.estimate import MAX_PLACEMENTS, Estimate, RunningEstimate, converged
 from wand_calib_ros.collection.floor import FLOOR_FILE, FloorWindow, append_floor_frame
 from wand_calib_ros.collection.lock import CollectionLock
-from wand_calib_ros.collection.recovery import backup_path
+from wand_calib_ros.collection.recovery import move_aside
 from wand_calib_ros.collection.stream_faults import Said, StreamFaults, image_problem
 from wand_calib_ros.collection.sync import FrameSynchroniser, SyncedFrame
 from wand_calib_ros.collection.watch import BumpWatch
@@ -615,7 +614,7 @@ class CollectorNode(Node):
             for name in (FLOOR_FILE, ESTIMATES_FILE, EVENTS_FILE):  # they belong to the buffer just moved away
                 kept = self.buffer.path.with_name(name)
                 if kept.exists():
-                    os.replace(kept, backup_path(kept, "bak"))
+                    move_aside(kept, "bak")
             self.floor.lays = 0
             self.take += 1
             self.coverage = CoverageTracker(self.rig, self.coverage.thresholds)
