@@ -2,7 +2,7 @@
 
 A camera falls silent (unplugged, its driver stopped) while the others send; its images cannot be
 used (another size than the rig file's, an encoding the detector does not read, truncated data);
-its stamps jump (a restarted driver, a clock step, a bag played again: :mod:`segments`); images go
+its stamps jump (a restarted driver, a clock step, a bag played again: :mod:`timeline`); images go
 missing between the camera and the node (gaps in its stamps). :class:`StreamFaults` keeps the
 evidence per camera: the node feeds it every arrival and every unusable image, asks it once a
 second what is wrong now (the cameras' diagnostics go to WARN with these lines) and logs the lines
@@ -15,7 +15,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
-from wand_calib_ros.collection.segments import SAME_JUMP_S, StampJump, StampSegments
+from wand_calib_ros.collection.timeline import SAME_JUMP_S, Placed, StampJump, TimeLines
 
 #: A camera without an image for this long (s) while another camera sends is silent.
 SILENT_S = 2.0
@@ -71,14 +71,14 @@ class StreamFaults:
     def __init__(self, cameras: tuple[str, ...], topics: Mapping[str, str]) -> None:
         self.cameras = cameras
         self.topics = dict(topics)
-        self.segments = StampSegments(cameras)
+        self.timelines = TimeLines(cameras)  #: each camera's time line (the one place that decides it)
         self._state = {name: _Camera() for name in cameras}
         self._first_ns: int | None = None  # the rig's first arrival
         self._jumps: tuple[int, list[StampJump]] | tuple[()] = ()  # a jump being gathered: (when it began, cameras')
 
-    def arrived(self, camera: str, stamp_ns: int, arrival_ns: int) -> tuple[int, list[Said]]:
-        """An image (or detector points) of a camera arrived: its stamp continued across jumps
-        (:class:`~wand_calib_ros.collection.segments.StampSegments`), and what to say about it.
+    def arrived(self, camera: str, stamp_ns: int, arrival_ns: int) -> tuple[Placed, list[Said]]:
+        """An image (or detector points) of a camera arrived: where it stands on its camera's time line
+        (:class:`~wand_calib_ros.collection.timeline.TimeLines`), and what to say about it.
 
         Args:
             camera: the camera.
@@ -91,7 +91,8 @@ class StreamFaults:
             gone = (arrival_ns - state.silent_since_ns) / 1e9
             said.append(Said("info", f"{camera}: images again after {gone:.1f} s without"))
             state.silent_since_ns = None
-        continued, jump = self.segments.continuous(camera, stamp_ns, arrival_ns)
+        placed = self.timelines.place(camera, stamp_ns, arrival_ns)
+        jump = placed.jump
         gathered = {j.camera for j in self._jumps[1]} if self._jumps else set()
         # said once whole: when every camera jumped with it, when a camera outside it sends on without jumping (it
         # is those cameras' jump alone), or SAME_JUMP_S after it began
@@ -109,7 +110,7 @@ class StreamFaults:
                 said += self._said_jumps(arrival_ns, now=True)
         state.arrived_ns = arrival_ns
         self._first_ns = arrival_ns if self._first_ns is None else self._first_ns
-        return continued, said
+        return placed, said
 
     def _said_jumps(self, arrival_ns: int, *, now: bool = False) -> list[Said]:
         """The jump being gathered, said once (as one cause for the cameras that jumped together) when ``now`` or
@@ -162,7 +163,7 @@ class StreamFaults:
                 if now_ns - when <= PROBLEM_HOLD_S * 1e9
             }
             faults[name] += [text for _, text in state.problems.values()]
-            dropped = self.segments.dropped(name)
+            dropped = self.timelines.dropped(name)
             if dropped >= DROPS_SAID and not state.drops_said:
                 state.drops_said = True
                 said.append(
@@ -175,8 +176,8 @@ class StreamFaults:
         return faults, said
 
     def values(self, camera: str) -> dict[str, int]:
-        """Diagnostics counters of a camera's stream."""
-        return {"dropped": self.segments.dropped(camera), "stamp_segments": self.segments.segments(camera)}
+        """Diagnostics counters of a camera's stream (its time line's)."""
+        return self.timelines.values(camera)
 
     def _silence(self, name: str, state: _Camera, now_ns: int) -> str:
         if state.arrived_ns is None:

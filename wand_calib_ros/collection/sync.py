@@ -1,7 +1,8 @@
 """Grouping of per-camera wand detections into frames by nearest stamps.
 
 Detections (or "no wand") of the rig's cameras arrive one by one, each camera's in
-time order. Hardware-triggered cameras stamp their images identically; free-running
+time order: its time line (:mod:`wand_calib_ros.collection.timeline`) placed each one after the one before, and
+decided what to do with any image that was not. Hardware-triggered cameras stamp their images identically; free-running
 ones expose at their own phase and rate. The rule is the same for both: each
 camera's frame period is learned from its own stamps; the camera with the longest
 period (the slowest; the first in the rig on a tie) is the **anchor**, and each of its
@@ -15,7 +16,7 @@ A frame is emitted as soon as no later image can change it (identical stamps: wh
 every camera has reported), or ``max_delay`` after its stamp. Each frame keeps every
 view's own stamp, so the calibration places each view at its own instant.
 Per camera counters say what could not be grouped: late images (their frame was
-emitted already), images out of order and duplicated stamps.
+emitted already).
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from wand_calib_ros.collection.timeline import TimeLines
 from wand_calib_ros.core.adjust.timing import frame_period
 from wand_calib_ros.core.model.rig import WandObservations
 
@@ -65,8 +67,6 @@ class SyncStats:
     frames: int = 0
     complete: int = 0
     late: dict[str, int] = field(default_factory=dict)
-    out_of_order: dict[str, int] = field(default_factory=dict)
-    duplicates: dict[str, int] = field(default_factory=dict)
 
 
 @dataclass
@@ -121,8 +121,7 @@ class FrameSynchroniser:
 
     def __post_init__(self) -> None:
         self._streams = [_Stream() for _ in self.cameras]
-        for counter in (self.stats.late, self.stats.out_of_order, self.stats.duplicates):
-            counter.update(dict.fromkeys(self.cameras, 0))
+        self.stats.late.update(dict.fromkeys(self.cameras, 0))
 
     def period_ns(self, camera: str) -> float | None:
         """A camera's learned frame period (None until it sent three images)."""
@@ -139,9 +138,10 @@ class FrameSynchroniser:
         c = self.cameras.index(camera)
         stream = self._streams[c]
         if stream.newest is not None and stamp_ns <= stream.newest:
-            counter = self.stats.duplicates if stamp_ns == stream.newest else self.stats.out_of_order
-            counter[camera] += 1
-            return []
+            raise ValueError(
+                f"{camera}: an image stamped {stamp_ns} ns, not after its newest ({stream.newest} ns): place each "
+                "image on its camera's time line (TimeLines.place) and add only those it places next"
+            )
         stream.newest = stamp_ns
         stream.note(stamp_ns)
         stream.count += 1
@@ -377,11 +377,13 @@ def group_by_stamps(
     n_points: int = 3,
 ) -> list[SyncedFrame]:
     """The frames of a whole recording: its (camera, stamp_ns, points) detections through a
-    :class:`FrameSynchroniser` in stamp order, sorted by frame stamp."""
+    :class:`FrameSynchroniser` in stamp order, sorted by frame stamp (a camera's repeated stamp: its first)."""
     sync = FrameSynchroniser(cameras, tolerance_ns=tolerance_ns, max_delay_ns=10**18, n_points=n_points)
+    timelines = TimeLines(cameras)
     frames: list[SyncedFrame] = []
     for camera, stamp, points in sorted(detections, key=lambda d: d[1]):
-        frames += sync.add(camera, stamp, points)
+        if timelines.place(camera, stamp, None).order == "next":
+            frames += sync.add(camera, stamp, points)
     frames += sync.flush_all()
     return sorted(frames, key=lambda f: f.stamp_ns)
 

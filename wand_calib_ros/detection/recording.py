@@ -29,6 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wand_calib_ros.collection.sync import frames_to_observations, group_by_stamps
+from wand_calib_ros.collection.timeline import Order, TimeLines
 from wand_calib_ros.core.initialise.intrinsics_init import nominal_bearings
 from wand_calib_ros.core.model.bearings import BearingTable
 from wand_calib_ros.core.model.camera_model import CameraModel
@@ -46,8 +47,8 @@ from wand_calib_ros.io.bags import ImageFrame
 #: A camera's background is estimated again every this many images.
 BACKGROUND_REFRESH = 8
 #: A recording's images are put in stamp order within this much of it (s): a bag stores them as they arrived, a
-#: little out of their stamps' order, and only this much of it is held in memory. An image stamped further back
-#: than that behind its camera's newest is counted "late" and not searched.
+#: little out of their stamps' order, and only this much of it is held in memory. An image still behind its
+#: camera's newest after that is not searched (its time line says so: :mod:`wand_calib_ros.collection.timeline`).
 REORDER_S = 2.0
 #: The wand is kept out of the static structure this far (px) beyond its spots' extent and its track's gate.
 WAND_MARGIN_PX = 4.0
@@ -262,11 +263,13 @@ class CameraStream:
         self._taker = None
         return "taking_mask"
 
-    def late(self) -> str:
-        """Count an image that came after newer ones of this camera (it is not searched); its reason."""
+    def passed_over(self, order: Order) -> str:
+        """Count an image its camera's time line did not place next (behind a newer one, or its previous stamp
+        again: it is not searched); its reason."""
+        reason = "repeated_stamp" if order == "repeat" else "late"
         self.stats.images += 1
-        self.stats.rejected["late"] += 1
-        return "late"
+        self.stats.rejected[reason] += 1
+        return reason
 
     def report(self) -> HealthReport:
         """What this camera saw so far (:mod:`~wand_calib_ros.detection.health`)."""
@@ -416,15 +419,15 @@ def detect_recording(
         for c in rig.cameras
     }
     outcomes: list[tuple[str, Labelled]] = []
-    newest: dict[str, int] = {}
+    timelines = TimeLines(rig.camera_names)
     for frame in in_stamp_order(frames, int(REORDER_S * 1e9)):
         stream = streams[frame.camera]
-        if frame.stamp_ns < newest.setdefault(frame.camera, frame.stamp_ns):
-            skipped = stream.late()
+        placed = timelines.place(frame.camera, frame.stamp_ns, None)  # (a file's stamps are all there is)
+        if placed.order != "next":
+            skipped = stream.passed_over(placed.order)
             if inspect is not None:
                 inspect(frame, None, None, skipped)
             continue
-        newest[frame.camera] = frame.stamp_ns
         blobs, detection, reason = stream.detect(frame.image, frame.encoding, frame.stamp_ns)
         if inspect is not None:
             inspect(frame, blobs, detection, reason)

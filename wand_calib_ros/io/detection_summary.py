@@ -46,7 +46,8 @@ REASON_TEXT = {
     "bad_image": "an image that could not be read",
     "encoding": "an image encoding the detector does not read",
     "taking_mask": "taking the mask",
-    "late": "stamped well before images already read (the recording is out of order)",
+    "late": "stamped before an image of its camera already used (out of order)",
+    "repeated_stamp": "its camera's previous stamp again",
     "no_wand": "no wand",
 }
 

@@ -289,15 +289,22 @@ class CollectorNode(Node):
         stream = self.streams[camera]
         arrival = self.clock()
         with self.lock:
-            stamp_ns, said = self.faults.arrived(camera, stamp_ns, arrival)
+            placed, said = self.faults.arrived(camera, stamp_ns, arrival)
+            stamp_ns = placed.stamp_ns
             taking = stream.taking_mask
-            blobs, detection, reason = stream.detect(pixels, encoding, stamp_ns)
-            if reason is not None:
-                size = self.rig.camera(camera).image_size
-                problem = image_problem(reason, None if pixels is None else pixels.shape, encoding, size)
-                said += self.faults.unusable(camera, reason, problem, arrival)
             self.received[camera] += 1
-            self._offer(camera, stream.label(stamp_ns, detection, reason))
+            blobs: Blobs | None
+            detection: WandDetection | None
+            reason: str | None
+            if placed.order != "next":  # its time line passed it over: not searched, counted
+                blobs, detection, reason = None, None, stream.passed_over(placed.order)
+            else:
+                blobs, detection, reason = stream.detect(pixels, encoding, stamp_ns)
+                if reason is not None:
+                    size = self.rig.camera(camera).image_size
+                    problem = image_problem(reason, None if pixels is None else pixels.shape, encoding, size)
+                    said += self.faults.unusable(camera, reason, problem, arrival)
+                self._offer(camera, stream.label(stamp_ns, detection, reason))
             taken = stream.taken if taking and not stream.taking_mask else None
         self._say(said)
         if taken is not None:
@@ -333,14 +340,18 @@ class CollectorNode(Node):
                 self.malformed[camera] += 1
             return
         with self.lock:
-            stamp_ns, said = self.faults.arrived(camera, messages.stamp_ns(message.header), self.clock())
+            placed, said = self.faults.arrived(camera, messages.stamp_ns(message.header), self.clock())
             self.received[camera] += 1
-            stats = self.streams[camera].stats  # the detector node labelled it: count it the same way
-            if points is None:
-                stats.rejected["no_wand"] += 1
-            else:
-                stats.detected += 1
-            self._offer(camera, [Labelled(stamp_ns, points)])
+            stream = self.streams[camera]
+            if placed.order != "next":  # its time line passed it over
+                stream.passed_over(placed.order)
+            else:  # the detector node labelled it: count it the same way
+                stream.stats.images += 1
+                if points is None:
+                    stream.stats.rejected["no_wand"] += 1
+                else:
+                    stream.stats.detected += 1
+                self._offer(camera, [Labelled(placed.stamp_ns, points)])
         self._say(said)
 
     def _say(self, said: list[Said]) -> None:
@@ -534,14 +545,15 @@ class CollectorNode(Node):
             status = self.coverage.status()
             counts = self._counts()
             sync, stored = self.sync.stats, self.buffer.stats
+            behind, repeats = self.faults.timelines.totals()
             rig_values: dict[str, int | str] = {
                 "frames_stored": len(self.buffer.frames),
                 "frames_synchronised": sync.frames,
                 "frames_all_cameras": sync.complete,
                 "frames_anchored_by": "-" if self.sync.anchor is None else self.rig.camera_names[self.sync.anchor],
                 "late_messages": sum(sync.late.values()),
-                "out_of_order_messages": sum(sync.out_of_order.values()),
-                "duplicate_messages": sum(sync.duplicates.values()),
+                "out_of_order_messages": behind,
+                "duplicate_messages": repeats,
                 "skipped_still": stored.still,
                 "skipped_buffer_full": stored.full,
                 "without_wand": stored.empty,

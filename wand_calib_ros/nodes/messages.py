@@ -152,18 +152,16 @@ def frame_stamps(frame: SyncedFrame) -> NDArray[np.float64]:
 
 def timing_values(sync: FrameSynchroniser, camera: str, result: CalibrationResult | None) -> dict[str, str]:
     """Diagnostics values of a camera's timing: its learned rate, its phase against the frames' anchor
-    camera, what the synchroniser could not use, and the last calibration's time offset."""
+    camera, the images whose frame had gone, and the last calibration's time offset (the images its time line
+    passed over are its stream's values: :meth:`wand_calib_ros.collection.timeline.TimeLines.values`)."""
     values: dict[str, str] = {}
     period, phase = sync.period_ns(camera), sync.phase_ns(camera)
     if period is not None:
         values["frame_rate_hz"] = f"{1e9 / period:.2f}"
     if phase is not None:
         values["phase_ms"] = f"{phase / 1e6:+.2f}"
-    for key, counter in (("late", sync.stats.late), ("out_of_order", sync.stats.out_of_order)):
-        if counter.get(camera):
-            values[f"{key}_images"] = str(counter[camera])
-    if sync.stats.duplicates.get(camera):
-        values["duplicate_stamps"] = str(sync.stats.duplicates[camera])
+    if sync.stats.late.get(camera):
+        values["late_images"] = str(sync.stats.late[camera])
     if result is not None and result.timing is not None:
         calibrated = result.camera(camera)
         scale, unit = (1000.0, "ms") if result.timing.unit == "s" else (1.0, "frames")

@@ -1,26 +1,34 @@
-"""A live camera's stamps made continuous: restarted drivers, clock steps, replayed bags, unstamped images.
+"""Each camera's time line: where an image stands in time, decided once for the detector, the synchroniser and
+the buffer.
 
-A camera's header stamps should advance as its images arrive. When they do not (its driver restarted
-on a clock of its own, the host's clock was stepped, a bag was played again, a stamp leapt hours
-ahead), the stamps before and after cannot be compared, and a synchroniser that trusts them drops
-every image after the jump as out of order or lets one camera's leap push the others' frames out.
-:class:`StampSegments` notices such a jump by comparing each image's stamp with its camera's
-previous one and the time between their arrivals (the node's steady clock), and starts a
-new *segment* of that camera's stamps, shifted to continue the old one on its frame grid (that
-time in whole frame periods, at least one): ``continuous = stamp + offset``. A jump is a stamp more than
-JUMP_S behind its camera's previous one, or more than that ahead of the time that passed between their
-arrivals; a pause (nothing arrives for a while, then the stamps go on where they were: a paused bag, a
-stalled driver or network) is no jump, and its stamps stay as they are. Cameras that jump by
-the same amount together (a clock step, a replay) get exactly the same shift, so frames stay
-frames. A camera whose stamps are zero (a driver that does not stamp) is stamped with its arrival,
-on the other cameras' time. Gaps of more than DROP_GAP frame periods (and less than a silence,
-SILENCE_S) in a camera's stamps are counted as dropped images.
+From an image's header stamp and its arrival (the node's steady clock; None for a recording read from a file,
+whose stamps are all there is), :meth:`TimeLines.place` decides
+
+- its stamp on the camera's continuous time line. A camera's stamps should advance as its images arrive. When
+  they do not (its driver restarted on a clock of its own, the host's clock was stepped, a bag was played again,
+  a stamp leapt hours ahead), the stamps before and after cannot be compared: a *jump* starts a new segment of
+  that camera's stamps, shifted to continue the old one on its frame grid (the time that passed, in whole frame
+  periods, at least one): ``continuous = stamp + offset``. A jump is a stamp more than JUMP_S behind its
+  camera's previous one, or more than that ahead of the time that passed between their arrivals. A *pause*
+  (nothing arrives for a while, then the stamps go on where they were: a paused bag, a stalled driver or
+  network) is no jump: its stamps are the truth. Cameras that jump by the same amount together (a clock step, a
+  replay) get exactly the same shift, so frames stay frames. A camera whose stamps are zero (a driver that does
+  not stamp) is stamped with its arrival, on the other cameras' time.
+- its order: ``next`` (newer than every image of its camera placed so far), ``repeat`` (the same stamp again)
+  or ``behind`` (older than one placed already). Only ``next`` images are searched, labelled, grouped into
+  frames and stored; the others are counted here and nowhere else decides again. An image that cannot be
+  used (another size, a truncated one) still has a true stamp and is placed like the others: a stretch of them
+  is neither a pause nor a jump, and makes no good image after it late.
+
+Gaps of more than DROP_GAP frame periods (and less than a silence, SILENCE_S) in a camera's stamps are counted
+as dropped images.
 """
 
 from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 
@@ -67,6 +75,25 @@ class StampJump:
         )
 
 
+#: Where an image stands against its camera's images placed before it.
+Order = Literal["next", "repeat", "behind"]
+
+
+@dataclass(frozen=True)
+class Placed:
+    """An image placed on its camera's time line.
+
+    Attributes:
+        stamp_ns: its stamp on the camera's continuous time line, ns (the header stamp where no jump shifted it).
+        order: "next" (use it), "repeat" (its camera's newest stamp again) or "behind" (older than its newest).
+        jump: the jump that started a new segment with it, if any.
+    """
+
+    stamp_ns: int
+    order: Order
+    jump: StampJump | None = None
+
+
 @dataclass
 class _Camera:
     stamp_ns: int | None = None  # its newest stamp as it came
@@ -78,25 +105,69 @@ class _Camera:
     dropped: int = 0
     segments: int = 1
     unstamped: bool = False
+    newest_ns: int | None = None  # its newest continuous stamp placed "next"
+    behind: int = 0
+    repeats: int = 0
 
 
-class StampSegments:
-    """Per camera, its stamps continued across jumps (see the module docstring)."""
+class TimeLines:
+    """The rig's cameras' time lines (see the module docstring)."""
 
     def __init__(self, cameras: tuple[str, ...]) -> None:
         self.cameras = cameras
         self._state = {name: _Camera() for name in cameras}
         self._recent_shifts: list[tuple[int, int]] = []  # (arrival ns, shift ns) of the latest jumps
 
-    def continuous(self, camera: str, stamp_ns: int, arrival_ns: int) -> tuple[int, StampJump | None]:
-        """A camera's image's stamp continued (ns), and the jump that started a new segment with it, if any.
+    def place(self, camera: str, stamp_ns: int, arrival_ns: int | None) -> Placed:
+        """Where a camera's image stands in time (see the module docstring).
 
         Args:
             camera: the camera.
-            stamp_ns: its header stamp.
-            arrival_ns: when it arrived, on a steady clock (ns).
+            stamp_ns: its header stamp, ns.
+            arrival_ns: when it arrived, on a steady clock (ns); None for a recording read from a file (its stamps
+                are taken as they are: only their order is decided).
         """
         state = self._state[camera]
+        continuous, jump = (
+            (stamp_ns, None) if arrival_ns is None else self._continuous(state, camera, stamp_ns, arrival_ns)
+        )
+        if state.newest_ns is not None and continuous <= state.newest_ns:  # (it moves nothing: no drops, no pause)
+            if continuous == state.newest_ns:
+                state.repeats += 1
+                return Placed(continuous, "repeat", jump)
+            state.behind += 1
+            return Placed(continuous, "behind", jump)
+        self._count_drops(state, continuous)
+        state.newest_ns = state.continuous_ns = continuous
+        if arrival_ns is not None:
+            state.stamp_ns, state.arrival_ns = continuous - state.shift_ns, arrival_ns
+        return Placed(continuous, "next", jump)
+
+    def dropped(self, camera: str) -> int:
+        """Images missing in a camera's stamps so far (gaps of more than DROP_GAP periods)."""
+        return self._state[camera].dropped
+
+    def segments(self, camera: str) -> int:
+        """How many segments a camera's stamps came in (1: no jump)."""
+        return self._state[camera].segments
+
+    def values(self, camera: str) -> dict[str, int]:
+        """Diagnostics counters of a camera's time line (drops, segments; images behind and repeated ones where
+        there were any)."""
+        state = self._state[camera]
+        values = {"dropped": state.dropped, "stamp_segments": state.segments}
+        if state.behind:
+            values["out_of_order_images"] = state.behind
+        if state.repeats:
+            values["duplicate_stamps"] = state.repeats
+        return values
+
+    def totals(self) -> tuple[int, int]:
+        """(images behind, repeated stamps) over the rig."""
+        return sum(s.behind for s in self._state.values()), sum(s.repeats for s in self._state.values())
+
+    def _continuous(self, state: _Camera, camera: str, stamp_ns: int, arrival_ns: int) -> tuple[int, StampJump | None]:
+        """A camera's image's stamp continued (ns), and the jump that started a new segment with it, if any."""
         jump: StampJump | None = None
         if stamp_ns <= 0:
             if not state.unstamped:
@@ -119,18 +190,7 @@ class StampSegments:
                 state.shift_ns, state.segments = shift, state.segments + 1
                 state.recent.clear()
                 jump = StampJump(camera, "back" if off < 0 else "ahead", off / 1e9, shared)
-        continuous = stamp_ns + state.shift_ns
-        self._count_drops(state, continuous)
-        state.stamp_ns, state.continuous_ns, state.arrival_ns = stamp_ns, continuous, arrival_ns
-        return continuous, jump
-
-    def dropped(self, camera: str) -> int:
-        """Images missing in a camera's stamps so far (gaps of more than DROP_GAP periods)."""
-        return self._state[camera].dropped
-
-    def segments(self, camera: str) -> int:
-        """How many segments a camera's stamps came in (1: no jump)."""
-        return self._state[camera].segments
+        return stamp_ns + state.shift_ns, jump
 
     def _rig_time(self, camera: str, arrival_ns: int) -> int:
         """The stamp an image arriving now would have on the other cameras' time (their newest stamp advanced
