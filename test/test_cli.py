@@ -528,7 +528,7 @@ def test_a_distortion_free_plumb_bob_start_says_its_principal_point_is_weak(tmp_
 
 
 def _xypts(path: Path, observations_csv: Path, names: tuple[str, ...], height: int) -> None:
-    """An xypts file (bottom-left origin) of an observations CSV."""
+    """A DLTdv 7 points file (bottom-left origin, 1-based pixels) of an observations CSV."""
     obs = read_observations(observations_csv, names)
     columns = [f"pt{p + 1}_cam{c + 1}_{a}" for c in range(len(names)) for p in range(3) for a in "XY"]
     lines = [",".join(columns)]
@@ -537,7 +537,7 @@ def _xypts(path: Path, observations_csv: Path, names: tuple[str, ...], height: i
         for c in range(len(names)):
             for p in range(3):
                 u, v = frame[c, p]
-                cells += ["NaN", "NaN"] if not np.isfinite(u) else [f"{u:.4f}", f"{height - v:.4f}"]
+                cells += ["NaN", "NaN"] if not np.isfinite(u) else [f"{u + 1:.4f}", f"{height - v:.4f}"]
         lines.append(",".join(cells))
     path.write_text("\n".join(lines) + "\n")
 
@@ -570,6 +570,8 @@ def test_every_command_writes_through_links_with_the_umask_and_refuses_or_fails_
             "import",
             "--format",
             "xypts",
+            "--origin",
+            "bottom-left",
             "--points",
             str(tmp_path / "take_xypts.csv"),
             "--cameras",

@@ -1,4 +1,4 @@
-"""Other tools' wand point files: an easyWand / Argus / DLTdv ``xypts.csv`` of a two-marker wand."""
+"""Other tools' files (Argus, DLTdv, easyWand, caliscope, pyOpenLPT, aniposelib) as each tool writes them, imported."""
 
 from __future__ import annotations
 
@@ -8,10 +8,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import tool_files
 import yaml
 
 from wand_calib_ros.cli import main
-from wand_calib_ros.core.model.rig import WandSpec
+from wand_calib_ros.core.model.rig import WandObservations, WandSpec
 from wand_calib_ros.io.errors import FormatError
 from wand_calib_ros.io.imports.anipose import read_anipose
 from wand_calib_ros.io.imports.xypts import read_xypts
@@ -22,28 +23,12 @@ from wand_calib_ros.sim.scenarios import SCENARIOS, paper_three_camera_scenario,
 TWO = WandSpec((0.0, 600.0))
 
 
-def _write_xypts(path: Path, uv: np.ndarray, heights: list[int], unseen: str = "NaN") -> None:
-    """A point file as Argus writes its paired points: pt1 of every camera, then pt2; y up from the bottom;
-    ``unseen`` in the cells of markers not seen (DLTdv leaves them empty)."""
-    _, n_cameras, n_points, _ = uv.shape
-    header = [f"pt{p + 1}_cam{c + 1}_{axis}" for p in range(n_points) for c in range(n_cameras) for axis in "xy"]
-    lines = [",".join(header)]
-    for frame in uv:
-        cells = []
-        for p in range(n_points):
-            for c in range(n_cameras):
-                x, y = frame[c, p]
-                cells += [unseen, unseen] if not np.isfinite(x) else [f"{x:.6f}", f"{heights[c] - y:.6f}"]
-        lines.append(",".join(cells))
-    path.write_text("\n".join(lines) + "\n")
-
-
 def test_an_argus_point_file_imports_exactly_and_calibrates(tmp_path: Path) -> None:
     scenario = replace(paper_three_camera_scenario(), wand=TWO)
     data = simulate(scenario, 0.5, np.random.default_rng(3))
     save_rig(scenario.rig, tmp_path / "cameras.yaml")
     heights = [spec.image_size[1] for spec in scenario.rig.cameras]
-    _write_xypts(tmp_path / "wand-xypts.csv", data.observations.uv, heights)
+    tool_files.argus_clicker_points(tmp_path / "wand-xypts.csv", data.observations.uv, heights, ("wandA", "wandB"))
     out = tmp_path / "observations.csv"
     argv = ["--points", str(tmp_path / "wand-xypts.csv"), "--cameras", str(tmp_path / "cameras.yaml")]
     assert main(["-q", "import", "--format", "xypts", *argv, "--out", str(out)]) == 0
@@ -70,10 +55,13 @@ def test_a_sparse_two_marker_take_with_empty_cells_keeps_its_frames_and_calibrat
         replace(spec, intrinsics=c.model) for spec, c in zip(scenario.rig.cameras, scenario.cameras, strict=True)
     )
     save_rig(replace(scenario.rig, cameras=cameras), tmp_path / "cameras.yaml")
-    _write_xypts(tmp_path / "xypts.csv", uv, [spec.image_size[1] for spec in scenario.rig.cameras], unseen="")
+    tool_files.dltdv_points(
+        tmp_path / "xypts.csv", uv, [spec.image_size[1] for spec in scenario.rig.cameras], version=7
+    )
+    (tmp_path / "xypts.csv").write_text((tmp_path / "xypts.csv").read_text().replace("NaN", ""))  # empty cells
     out = tmp_path / "observations.csv"
     argv = ["--points", str(tmp_path / "xypts.csv"), "--cameras", str(tmp_path / "cameras.yaml"), "--out", str(out)]
-    assert main(["-q", "import", "--format", "xypts", *argv]) == 0
+    assert main(["-q", "import", "--format", "xypts", "--origin", "bottom-left", *argv]) == 0
     read = read_observations(out, scenario.rig.camera_names, labels=scenario.wand.labels)
     seen = np.flatnonzero(np.isfinite(uv).any(axis=(1, 2, 3)))
     assert np.array_equal(read.frames, seen)  # frame id = row index, empty rows counted
@@ -90,9 +78,10 @@ def test_a_sparse_two_marker_take_with_empty_cells_keeps_its_frames_and_calibrat
     [
         ("pt1_cam1_x,pt1_cam1_y\n1,2\n", "1 cameras in the file, 3 in the rig description"),
         ("pt0_cam0_x,pt0_cam0_y\n1,2\n", "column 1 is 'pt0_cam0_x': markers and cameras count from 1"),
-        ("frame,pt1_cam1_x\n", "column 1 is 'frame', not pt<P>_cam<C>_x or _y"),
+        ("frame,pt1_cam1_x\n", "column 1 is 'frame', not pt<P>_cam<C>_x (DLTdv, Argus) or <track>_cam_<N>_x"),
+        ("Track 1_cam_0_x,Track 1_cam_0_y\n", "column 1 is 'Track 1_cam_0_x': Argus's cameras count from 1"),
         (None, "'high' is not a number (write NaN where a marker was not seen)"),
-        (None, "pt2_cam3 has x or y only"),
+        (None, "marker 2 in camera 3 has x or y only"),
     ],
 )
 def test_a_point_file_that_cannot_be_read_names_the_problem(tmp_path: Path, text: str | None, message: str) -> None:
@@ -193,54 +182,124 @@ def _given_rig(scenario):  # type: ignore[no-untyped-def]
     return replace(scenario.rig, cameras=cameras)
 
 
-def _write_argus_profile(path: Path, scenario) -> None:  # type: ignore[no-untyped-def]
-    """A camera profile as Argus writes its ``-clicker-profile.txt`` (pandas, spaces, no header): camera
-    number, f, width and height as twice the principal point, cx, cy, aspect ratio, r2, r4, t1, t2, r6."""
-    from wand_calib_ros.core.model.camera_model import to_opencv
-
-    lines = []
-    for number, camera in enumerate(scenario.cameras, start=1):
-        opencv = to_opencv(camera.model)
-        (fx, _, cx), (_, fy, cy), _ = opencv.camera_matrix
-        values = [fx, 2 * cx, 2 * cy, cx, cy, fy / fx, *opencv.distortion]
-        lines.append(" ".join([str(number), *(repr(float(v)) for v in values)]))
-    path.write_text("\n".join(lines) + "\n")
-
-
-def test_an_argus_camera_profile_and_its_points_in_one_command_calibrate_as_the_truths_intrinsics(
-    tmp_path: Path, capsys
-) -> None:  # type: ignore[no-untyped-def]
+def _projects_as(rig_file: Path, scenario) -> None:  # type: ignore[no-untyped-def]
+    """The rig file's given intrinsics (held) project as the truth's, to 1e-9 px."""
     from wand_calib_ros.core.model.camera_model import project
-    from wand_calib_ros.core.pipeline import calibrate
-    from wand_calib_ros.io.result_yaml import read_result
     from wand_calib_ros.io.rig_yaml import load_rig
 
-    scenario = SCENARIOS["action2"]()
-    data = simulate(scenario, 1.0, np.random.default_rng(11))
-    save_rig(scenario.rig, tmp_path / "cameras.yaml")
-    _write_argus_profile(tmp_path / "profile.txt", scenario)
-    _write_xypts(tmp_path / "wand-xypts.csv", data.observations.uv, [s.image_size[1] for s in scenario.rig.cameras])
-    argv = ["import", "--format", "xypts", "--points", str(tmp_path / "wand-xypts.csv"), "--cameras",
-            str(tmp_path / "cameras.yaml"), "--out", str(tmp_path / "obs.csv"), "--intrinsics",
-            str(tmp_path / "profile.txt"), "--rig-out", str(tmp_path / "given.yaml")]  # fmt: skip
-    assert main(argv) == 0
-    assert "cam1 -> cam0 (plumb_bob), cam2 -> cam1 (plumb_bob)" in capsys.readouterr().out  # in order
-    alone = ["import", "--format", "argus-profile", "--points", str(tmp_path / "profile.txt"), "--cameras",
-             str(tmp_path / "cameras.yaml"), "--out", str(tmp_path / "alone.yaml")]  # fmt: skip
-    assert main(alone) == 0  # the intrinsics alone: the same rig file
-    assert (tmp_path / "alone.yaml").read_text() == (tmp_path / "given.yaml").read_text()
-    given = load_rig(tmp_path / "given.yaml")
     points = np.random.default_rng(0).uniform([-2000, -1000, 5000], [2000, 1000, 11000], (50, 3))
-    for spec, camera in zip(given.cameras, scenario.cameras, strict=True):
+    for spec, camera in zip(load_rig(rig_file).cameras, scenario.cameras, strict=True):
         assert spec.intrinsics is not None and spec.intrinsics_fixed
         in_camera = camera.pose.apply(points)
         assert np.allclose(project(spec.intrinsics, in_camera), project(camera.model, in_camera), atol=1e-9)
-    assert main(["-q", "calibrate", "--cameras", str(tmp_path / "given.yaml"), "--observations",
-                 str(tmp_path / "obs.csv"), "--output", str(tmp_path / "result.yaml")]) == 0  # fmt: skip
-    imported = read_result(tmp_path / "result.yaml")[1]["cam1"].pose
-    direct = calibrate(_given_rig(scenario), data.observations).camera("cam1").pose
-    assert np.allclose(imported.rotation, direct.rotation, atol=1e-6)  # the import loses nothing
-    assert np.allclose(imported.translation, direct.translation, atol=1e-3)
+
+
+def _calibrates_as_given_directly(tmp_path: Path, rig_file: Path, observations: Path, direct_rig, direct) -> None:  # type: ignore[no-untyped-def]
+    """The imported files calibrate (the command) as the same data given in memory: the import loses nothing."""
+    from wand_calib_ros.core.pipeline import calibrate
+    from wand_calib_ros.io.result_yaml import read_result
+
+    assert main(["-q", "calibrate", "--cameras", str(rig_file), "--observations", str(observations), "--output",
+                 str(tmp_path / "result.yaml")]) == 0  # fmt: skip
+    result = calibrate(direct_rig, direct)
+    for name, camera in read_result(tmp_path / "result.yaml")[1].items():
+        assert np.allclose(camera.pose.rotation, result.camera(name).pose.rotation, atol=1e-6)
+        assert np.allclose(camera.pose.translation, result.camera(name).pose.translation, atol=1e-3)
+
+
+def test_argus_clicker_points_with_its_profiles_import_in_its_pixel_frame_and_calibrate_as_given_directly(
+    tmp_path: Path, capsys
+) -> None:  # type: ignore[no-untyped-def]
+    # Argus's Clicker: a track per marker, columns sorted by name, bottom left, y up, pixel edges at whole
+    # numbers; its profiles in the same frame (the principal point 7 px off the middle row, p1 not zero: a
+    # profile taken in another frame would show).
+    scenario = SCENARIOS["action2"]()
+    data = simulate(scenario, 1.0, np.random.default_rng(11))
+    heights = [s.image_size[1] for s in scenario.rig.cameras]
+    models = [camera.model for camera in scenario.cameras]
+    save_rig(scenario.rig, tmp_path / "cameras.yaml")
+    tool_files.argus_clicker_points(tmp_path / "take-xypts.csv", data.observations.uv, heights, ("Track 1", "Track 2"))
+    assert (tmp_path / "take-xypts.csv").read_text().startswith("Track 1_cam_1_x,Track 1_cam_1_y,Track 1_cam_2_x,")
+    tool_files.argus_clicker_profile(tmp_path / "take-clicker-profile.txt", models)
+    tool_files.argus_sba_profile(tmp_path / "take-sba-profile.txt", models, np.random.default_rng(1))
+    argv = ["import", "--format", "xypts", "--points", str(tmp_path / "take-xypts.csv"), "--cameras",
+            str(tmp_path / "cameras.yaml"), "--out", str(tmp_path / "obs.csv"), "--intrinsics",
+            str(tmp_path / "take-clicker-profile.txt"), "--rig-out", str(tmp_path / "given.yaml")]  # fmt: skip
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "cam1 -> cam0 (plumb_bob), cam2 -> cam1 (plumb_bob)" in out  # in order
+    assert "Argus Clicker's points (<track>_cam_<N>_x): origin bottom-left (as the file says), the first pixel's " \
+        "centre at (0.5, 0.5)" in out  # fmt: skip
+    # exactly the points a hand conversion gives: u = x - 0.5, v = height - 0.5 - y
+    written = np.genfromtxt(tmp_path / "take-xypts.csv", delimiter=",", skip_header=1).reshape(-1, 2, 2, 2)
+    by_hand = np.stack([written[..., 0] - 0.5, 1519.5 - written[..., 1]], axis=-1).transpose(0, 2, 1, 3)  # track-major
+    imported = read_observations(tmp_path / "obs.csv", scenario.rig.camera_names, labels=scenario.wand.labels)
+    seen = np.any(np.isfinite(by_hand), axis=(1, 2, 3))
+    assert np.allclose(imported.uv, by_hand[seen], atol=1e-6, equal_nan=True)
+    assert np.allclose(imported.uv, data.observations.uv[seen], atol=1e-6, equal_nan=True)
+    _projects_as(tmp_path / "given.yaml", scenario)
+    for name in ("take-clicker-profile.txt", "take-sba-profile.txt"):  # the intrinsics alone: the same rig file
+        alone = ["import", "--format", "argus-profile", "--points", str(tmp_path / name), "--cameras",
+                 str(tmp_path / "cameras.yaml"), "--out", str(tmp_path / "alone.yaml")]  # fmt: skip
+        assert main(alone) == 0
+        assert (tmp_path / "alone.yaml").read_text() == (tmp_path / "given.yaml").read_text(), name
+    _calibrates_as_given_directly(tmp_path, tmp_path / "given.yaml", tmp_path / "obs.csv", _given_rig(scenario),
+                                  data.observations)  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("writer", "origin"),
+    [("dltdv 8", "top-left"), ("dltdv 7", "bottom-left"), ("argus", "top-left"), ("argus flip", "bottom-left")],
+)
+def test_dltdv_and_argus_paired_points_import_exactly_from_the_origin_given(
+    writer: str, origin: str, tmp_path: Path, capsys
+) -> None:  # type: ignore[no-untyped-def]
+    scenario = replace(paper_three_camera_scenario(), wand=TWO)
+    uv = simulate(scenario, 0.5, np.random.default_rng(3)).observations.uv
+    heights = [spec.image_size[1] for spec in scenario.rig.cameras]
+    save_rig(scenario.rig, tmp_path / "cameras.yaml")
+    if writer.startswith("dltdv"):
+        tool_files.dltdv_points(tmp_path / "xypts.csv", uv, heights, version=int(writer[-1]))
+    else:
+        tool_files.argus_paired_points(tmp_path / "xypts.csv", uv, heights, flip_y=writer.endswith("flip"))
+    base = ["import", "--format", "xypts", "--points", str(tmp_path / "xypts.csv"), "--cameras",
+            str(tmp_path / "cameras.yaml"), "--out", str(tmp_path / "obs.csv")]  # fmt: skip
+    assert main(base) == 2  # the file does not say its origin: asked for
+    err = capsys.readouterr().err.strip()
+    assert "do not say their pixel origin: give --origin top-left" in err and "\n" not in err
+    assert main(["-q", *base, "--origin", origin]) == 0
+    written = np.genfromtxt(tmp_path / "xypts.csv", delimiter=",", skip_header=1).reshape(-1, 2, 3, 2)
+    base_x = 1.0 if writer.startswith("dltdv") else 0.0
+    h = np.array(heights, dtype=float)[None, None, :]
+    v = written[..., 1] - base_x if origin == "top-left" else h - written[..., 1]  # DLTdv 7 and Argus's flip: h - y
+    by_hand = np.stack([written[..., 0] - base_x, v], axis=-1).transpose(0, 2, 1, 3)
+    imported = read_observations(tmp_path / "obs.csv", scenario.rig.camera_names, labels=TWO.labels)
+    seen = np.any(np.isfinite(by_hand), axis=(1, 2, 3))
+    assert np.allclose(imported.uv, by_hand[seen], atol=1e-6, equal_nan=True)
+    assert np.allclose(imported.uv, uv[seen], atol=1e-6, equal_nan=True)
+
+
+def test_the_origin_a_point_file_does_not_say_is_decided_from_the_fit_with_board_intrinsics(
+    tmp_path: Path, capsys
+) -> None:  # type: ignore[no-untyped-def]
+    # DLTdv files of either version with a board calibration's intrinsics (OpenCV's frame): the wrong origin
+    # mirrors the points but not the lens, and the calibration with the intrinsics held refuses it.
+    scenario = SCENARIOS["conventional"](pinhole=True)
+    uv = simulate(scenario, 0.5, np.random.default_rng(5)).observations.uv
+    heights = [spec.image_size[1] for spec in scenario.rig.cameras]
+    save_rig(scenario.rig, tmp_path / "cameras.yaml")
+    (tmp_path / "camera_array.toml").write_text(_camera_array_toml(scenario))
+    for version, origin in ((8, "top-left"), (7, "bottom-left")):
+        tool_files.dltdv_points(tmp_path / "xypts.csv", uv, heights, version=version)
+        argv = ["import", "--format", "xypts", "--points", str(tmp_path / "xypts.csv"), "--cameras",
+                str(tmp_path / "cameras.yaml"), "--out", str(tmp_path / "obs.csv"), "--intrinsics",
+                str(tmp_path / "camera_array.toml"), "--rig-out", str(tmp_path / "given.yaml")]  # fmt: skip
+        assert main(argv) == 0
+        out = capsys.readouterr().out
+        assert f"do not say their origin: {origin} calibrates with camera_array.toml held" in out
+        imported = read_observations(tmp_path / "obs.csv", scenario.rig.camera_names, labels=scenario.wand.labels)
+        seen = np.any(np.isfinite(uv), axis=(1, 2, 3))
+        assert np.allclose(imported.uv, uv[seen], atol=1e-6, equal_nan=True)
 
 
 @pytest.mark.parametrize(
@@ -260,50 +319,66 @@ def test_a_camera_profile_that_cannot_be_read_names_the_row(line: str, message: 
         read_camera_profile(tmp_path / "profile.txt")
 
 
-def _wand_points_table(uv: np.ndarray) -> np.ndarray:
-    """(F, 4C) easyWand's wand points: the first marker's x, y in every camera, then the second's."""
-    return uv.transpose(0, 2, 1, 3).reshape(len(uv), -1)
-
-
-def test_easywand5_and_easywand6_data_files_import_exactly(tmp_path: Path) -> None:
-    import h5py
-    from scipy.io import savemat
-
+def test_easywand_data_files_import_their_points_and_intrinsics_and_calibrate_as_given_directly(
+    tmp_path: Path, capsys
+) -> None:  # type: ignore[no-untyped-def]
     from wand_calib_ros.io.imports.easywand import read_easywand
 
-    scenario = replace(paper_three_camera_scenario(), wand=TWO)
-    data = simulate(scenario, 0.5, np.random.default_rng(6))
+    scenario = SCENARIOS["action2"]()  # plumb_bob lenses, p1 not zero, the principal point off the middle row
+    data = simulate(scenario, 1.0, np.random.default_rng(6))
     uv = data.observations.uv
-    heights = np.array([s.image_size[1] for s in scenario.rig.cameras], dtype=float)
-    widths = np.array([s.image_size[0] for s in scenario.rig.cameras], dtype=float)
-    # easyWand 5: a MATLAB 5.0 struct, DLTdv's bottom-left pixels
-    lower_left = uv.copy()
-    lower_left[..., 1] = heights[None, :, None] - uv[..., 1]
-    fields = {"wandPts": _wand_points_table(lower_left), "imageWidth": widths, "imageHeight": heights, "nCams": 3.0}
-    savemat(tmp_path / "take_easyWandData.mat", {"easyWandData": fields})
-    five = read_easywand(tmp_path / "take_easyWandData.mat", scenario.rig)
+    heights = [s.image_size[1] for s in scenario.rig.cameras]
+    models = [camera.model for camera in scenario.cameras]
+    save_rig(scenario.rig, tmp_path / "cameras.yaml")
     seen = np.any(np.isfinite(uv), axis=(1, 2, 3))
-    assert np.array_equal(five.frames, np.flatnonzero(seen))
-    assert np.allclose(five.uv, uv[seen], atol=1e-9, equal_nan=True)
-    # easyWand 6: MATLAB 7.3 (HDF5, arrays column-major), rows of the points file in ID, top-left pixels
+    # easyWand 5 holding its profile: its points and principal points DLTdv's (1-based), the origin not written
+    for lower_left in (False, True):
+        xy = tool_files.matlab_xy(uv, heights, lower_left=lower_left)
+        tool_files.easywand5(tmp_path / "take_easyWandData.mat", xy, models, lower_left=lower_left)
+        five = read_easywand(tmp_path / "take_easyWandData.mat", scenario.rig)
+        assert five.pixels.origin is None and five.intrinsics is not None
+        assert np.array_equal(five.frames, np.flatnonzero(seen))
+        assert np.allclose(five.xy, xy[seen], atol=1e-9, equal_nan=True)
+        origin = ["--origin", "bottom-left"] if lower_left else []
+        argv = ["import", "--format", "easywand", "--points", str(tmp_path / "take_easyWandData.mat"), "--cameras",
+                str(tmp_path / "cameras.yaml"), "--out", str(tmp_path / "obs.csv"), "--rig-out",
+                str(tmp_path / "given.yaml"), *origin]  # fmt: skip
+        assert main(argv) == 0  # one command: the points and the profile easyWand held
+        out = capsys.readouterr().out
+        if not lower_left:
+            assert "either origin fits alike, one the other's mirror image, so took top-left" in out
+        imported = read_observations(tmp_path / "obs.csv", scenario.rig.camera_names, labels=scenario.wand.labels)
+        assert np.allclose(imported.uv, uv[seen], atol=1e-6, equal_nan=True)  # 1-based, flipped where so
+        _projects_as(tmp_path / "given.yaml", scenario)
+    _calibrates_as_given_directly(tmp_path, tmp_path / "given.yaml", tmp_path / "obs.csv", _given_rig(scenario),
+                                  data.observations)  # fmt: skip
+    # easyWand 6: MATLAB 7.3, its origin flag, rows of the points file in ID, its intrinsics a struct array
     rows = np.flatnonzero(seen)
-    path = tmp_path / "take_easyWand6Data.mat"
-    with h5py.File(path, "w", userblock_size=512) as mat:
-        wand = mat.create_group("ew6Save/data/wandPts")
-        for group in (mat["ew6Save"], mat["ew6Save/data"], wand):
-            group.attrs["MATLAB_class"] = np.bytes_("struct")
-        wand.create_dataset("data", data=_wand_points_table(uv[seen]).T).attrs["MATLAB_class"] = np.bytes_("double")
-        wand.create_dataset("ID", data=(rows + 1.0)[None, :]).attrs["MATLAB_class"] = np.bytes_("double")
-        flag = mat["ew6Save/data"].create_dataset("imageOriginLowerLeft", data=np.zeros((1, 1)))
-        flag.attrs["MATLAB_class"] = np.bytes_("double")
-    with path.open("r+b") as stream:  # MATLAB's text header in the user block
-        stream.write(b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: Fri Dec  4 12:00:00 2026 HDF5 schema 1.00 .")
-    six = read_easywand(path, scenario.rig)
-    assert np.array_equal(six.frames, rows)
-    assert np.allclose(six.uv, uv[seen], atol=1e-9, equal_nan=True)
+    for lower_left in (False, True):
+        xy = tool_files.matlab_xy(uv[seen], heights, lower_left=lower_left)
+        tool_files.easywand6(tmp_path / "take_easyWand6Data.mat", xy, rows, models, lower_left=lower_left)
+        six = read_easywand(tmp_path / "take_easyWand6Data.mat", scenario.rig)
+        assert six.pixels.origin == ("bottom-left" if lower_left else "top-left")
+        assert np.array_equal(six.frames, rows)
+        argv = ["import", "--format", "easywand", "--points", str(tmp_path / "take_easyWand6Data.mat"), "--cameras",
+                str(tmp_path / "cameras.yaml"), "--out", str(tmp_path / "obs.csv"), "--rig-out",
+                str(tmp_path / "given.yaml")]  # fmt: skip
+        assert main(argv) == 0
+        assert "as the file says" in capsys.readouterr().out
+        imported = read_observations(tmp_path / "obs.csv", scenario.rig.camera_names, labels=scenario.wand.labels)
+        assert np.array_equal(imported.frames, rows)
+        assert np.allclose(imported.uv, uv[seen], atol=1e-6, equal_nan=True)
+        _projects_as(tmp_path / "given.yaml", scenario)
+    # without --rig-out the points alone, and the intrinsics are named
+    argv = ["import", "--format", "easywand", "--points", str(tmp_path / "take_easyWand6Data.mat"), "--cameras",
+            str(tmp_path / "cameras.yaml"), "--out", str(tmp_path / "obs.csv")]  # fmt: skip
+    assert main(argv) == 0
+    assert "carries the cameras' intrinsics: --rig-out FILE writes them into a rig file" in capsys.readouterr().out
     # a file for other cameras is one line naming what differs
-    savemat(tmp_path / "four.mat", {"easyWandData": {**fields, "wandPts": np.zeros((3, 16))}})
-    with pytest.raises(FormatError, match="its wand points have 16 columns; 2 markers in 3 cameras take 12"):
+    from scipy.io import savemat
+
+    savemat(tmp_path / "four.mat", {"easyWandData": {"wandPts": np.zeros((3, 16))}})
+    with pytest.raises(FormatError, match="its wand points have 16 columns; 2 markers in 2 cameras take 8"):
         read_easywand(tmp_path / "four.mat", scenario.rig)
 
 
@@ -390,6 +465,32 @@ def test_pyopenlpt_wand_points_import_without_the_rows_its_filter_set_aside(tmp_
     (tmp_path / "three.csv").write_text("\n".join(lines[:1] + [line for line in lines[1:] if ",2," not in line[:8]]))
     with pytest.raises(FormatError, match=r"three.csv: 2 cameras \(0, 1\) in the table, 3 in the rig description"):
         read_openlpt_points(tmp_path / "three.csv", scenario.rig)
+
+
+def test_pyopenlpt_export_wand_data_imports_the_filtered_pairs_its_calibration_uses_and_calibrates_as_given(
+    tmp_path: Path, capsys
+) -> None:  # type: ignore[no-untyped-def]
+    scenario = replace(paper_three_camera_scenario(), wand=TWO)  # small ball A, large ball B
+    data = simulate(scenario, 0.3, np.random.default_rng(9))
+    uv = data.observations.uv.copy()
+    uv[np.random.default_rng(1).random(uv.shape[:2]) < 0.05, 1] = np.nan  # the large ball not found: one ball
+    save_rig(scenario.rig, tmp_path / "cameras.yaml")
+    raw_rows, single = tool_files.openlpt_wand_data(tmp_path / "wand_points.csv", uv, np.random.default_rng(2))
+    assert single > 0 and (tmp_path / "wand_points.csv").read_text().startswith("Frame,Camera,Status,PointIdx,X,Y")
+    argv = ["import", "--format", "openlpt", "--points", str(tmp_path / "wand_points.csv"), "--cameras",
+            str(tmp_path / "cameras.yaml"), "--out", str(tmp_path / "obs.csv")]  # fmt: skip
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert f"{raw_rows} rows its own calibration does not use left out, {single} views with one marker left out" in out
+    # by hand: the filtered rows as written (3 decimals), a view with one ball left out
+    by_hand = np.round(uv, 3)
+    by_hand[np.isfinite(uv[..., 0]).sum(axis=2) == 1] = np.nan
+    kept = np.any(np.isfinite(by_hand), axis=(1, 2, 3))
+    imported = read_observations(tmp_path / "obs.csv", scenario.rig.camera_names, labels=TWO.labels)
+    assert np.array_equal(imported.frames, np.flatnonzero(kept))
+    assert np.allclose(imported.uv, by_hand[kept], atol=1e-6, equal_nan=True)
+    direct = WandObservations(np.flatnonzero(kept), scenario.rig.camera_names, by_hand[kept])
+    _calibrates_as_given_directly(tmp_path, tmp_path / "cameras.yaml", tmp_path / "obs.csv", scenario.rig, direct)
 
 
 def test_import_options_and_tables_that_cannot_be_used_are_one_line(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]

@@ -24,7 +24,8 @@ class GivenIntrinsics:
         distortion: D in ``distortion_model``'s order.
         distortion_model: ``equidistant``, ``plumb_bob`` or ``rational_polynomial``.
         size_tolerance: how far (fraction) the file's image size may be from the rig's (0: exactly; a
-            camera profile writes twice the principal point instead of the size).
+            camera profile writes twice the principal point instead of the size; inf: the file does not write
+            it, ``image_size`` is then twice the principal point).
     """
 
     name: str

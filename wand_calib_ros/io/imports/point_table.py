@@ -37,11 +37,14 @@ class PointTable:
         observations: its points, cameras and markers as the rig describes them.
         skipped: rows the table itself marks as not to use (``keep`` said no).
         camera_ids: the table's camera id of each rig camera.
+        one_marker_views: camera views left out because they show one of the wand's markers only (where the
+            tool calibrates from whole views).
     """
 
     observations: WandObservations
     skipped: int
     camera_ids: tuple[int, ...]
+    one_marker_views: int = 0
 
 
 def read_point_table(

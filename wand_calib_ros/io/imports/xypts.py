@@ -1,11 +1,18 @@
-"""easyWand / Argus / DLTdv point files (``*xypts.csv``): the wand's markers per frame and camera.
+"""Point files of Argus, DLTdv and easyWand (``*-xypts.csv``): the wand's markers per frame and camera.
 
-One header row names the columns ``pt<P>_cam<C>_x`` and ``pt<P>_cam<C>_y`` (P = marker, C = camera,
-1-based; DLTdv writes ``X``/``Y``); every further row is one frame (frame id = row index from 0),
-NaN (or an empty cell) where a camera did not see a marker. Pixels have the origin at the image's
-bottom left with y up (Argus flips y from top-left tools as y = height - y; DLTdv likewise):
-v = height - y in the OpenCV convention this package uses; ``origin="top-left"`` takes them as they
-are. Camera C is the rig description's C-th camera.
+One header row, one row per frame (frame id = row index from 0), NaN (or an empty cell) where a camera did
+not see a marker; commas, or tabs (Argus's ``-xypts.tsv``). The header tells the writer:
+
+- ``<track>_cam_<N>_x`` / ``_y``: Argus's Clicker (pandas, its columns sorted by name, so ``cam_10`` comes
+  before ``cam_2``): a track per marker (the tracks in the order they first appear are the wand's markers in
+  order), bottom-left origin with y up and pixel edges at whole numbers
+  (:data:`~wand_calib_ros.io.imports.pixels.ARGUS_CLICKER`).
+- ``pt<P>_cam<C>_X`` / ``_Y``: DLTdv: MATLAB's 1-based pixels, the origin not written (DLTdv 8: top left,
+  up to 7: bottom left).
+- ``pt<P>_cam<C>_x`` / ``_y``: Argus's paired points (its ChArUco and wand exports): 0-based pixels, top left
+  or, exported with its y flip, y = height - v; the origin not written.
+
+P and C count from 1; camera C (or N) is the rig description's C-th camera.
 """
 
 from __future__ import annotations
@@ -16,44 +23,34 @@ import re
 from pathlib import Path
 
 import numpy as np
-from numpy.typing import NDArray
 
-from wand_calib_ros.core.model.rig import RigSpec, WandObservations
+from wand_calib_ros.core.model.rig import RigSpec
 from wand_calib_ros.io.errors import FormatError
+from wand_calib_ros.io.imports.pixels import ARGUS_CLICKER, MATLAB, PixelFrame, WrittenPoints
 from wand_calib_ros.io.text import finite_number, read_text
 
-_COLUMN = re.compile(r"^pt(\d+)_cam(\d+)_([xy])$", re.IGNORECASE)
-#: Pixel origins the files may use.
-ORIGINS = ("bottom-left", "top-left")
+_NUMBERED = re.compile(r"^pt(\d+)_cam(\d+)_([xyXY])$")
+_TRACKS = re.compile(r"^(.+)_cam_(\d+)_([xy])$")
+#: Argus's paired points: 0-based pixels; from the bottom its y flip writes height - v (first centre at 1).
+ARGUS_PAIRED = PixelFrame(None, (0.0, 0.0), first_from_bottom=1.0)
 
 
-def read_xypts(path: str | Path, rig: RigSpec, *, origin: str = "bottom-left") -> WandObservations:
-    """The observations of a point file, cameras and markers as the rig describes them.
+def read_xypts(path: str | Path, rig: RigSpec) -> WrittenPoints:
+    """The points of a point file as written, cameras and markers as the rig describes them.
 
     Raises:
         FormatError: naming the file, the row or column and the problem.
     """
     path = Path(path)
-    if origin not in ORIGINS:
-        raise ValueError(f"origin must be one of {ORIGINS}")
     text = read_text(path, "a point file")
+    lines = text.splitlines()
+    delimiter = "\t" if lines and "\t" in lines[0] and "," not in lines[0] else ","
     # a row of empty cells is a frame in which nothing was seen (it keeps the later frames' ids); only
     # blank lines are not rows
-    rows = [row for row in csv.reader(text.splitlines()) if row]
+    rows = [row for row in csv.reader(lines, delimiter=delimiter) if row]
     if not rows:
-        raise FormatError(path, "empty file; expected a header pt1_cam1_x,pt1_cam1_y,...")
-    columns = []
-    for index, name in enumerate(rows[0]):
-        found = _COLUMN.match(name.strip())
-        if found is None:
-            raise FormatError(path, f"column {index + 1} is {name!r}, not pt<P>_cam<C>_x or _y", row=1)
-        if int(found[1]) == 0 or int(found[2]) == 0:
-            raise FormatError(
-                path,
-                f"column {index + 1} is {name!r}: markers and cameras count from 1 (pt1_cam1_x is the first)",
-                row=1,
-            )
-        columns.append((int(found[1]) - 1, int(found[2]) - 1, found[3].lower() == "y"))
+        raise FormatError(path, "empty file; expected a header pt1_cam1_x,pt1_cam1_y,... or <track>_cam_1_x,...")
+    columns, pixels, writer = _header(path, [name.strip() for name in rows[0]])
     n_points = max(p for p, _, _ in columns) + 1
     n_cameras = max(c for _, c, _ in columns) + 1
     if n_cameras != len(rig.cameras):
@@ -63,32 +60,56 @@ def read_xypts(path: str | Path, rig: RigSpec, *, origin: str = "bottom-left") -
     if n_points != rig.wand.n_points:
         raise FormatError(path, f"{n_points} markers per frame, the rig's wand has {rig.wand.n_points}")
     if len(set(columns)) != len(columns) or len(columns) != 2 * n_points * n_cameras:
-        raise FormatError(path, "every pt<P>_cam<C> needs one _x and one _y column", row=1)
-    uv = np.full((len(rows) - 1, n_cameras, n_points, 2), np.nan)
+        raise FormatError(path, "every marker and camera needs one x and one y column", row=1)
+    xy = np.full((len(rows) - 1, n_cameras, n_points, 2), np.nan)
     for number, row in enumerate(rows[1:], start=2):
         if len(row) != len(columns):
             raise FormatError(path, f"{len(row)} cells where the header has {len(columns)}", row=number)
         for cell, (p, c, is_y) in zip(row, columns, strict=True):
-            uv[number - 2, c, p, int(is_y)] = _value(path, number, cell)
-    if origin == "bottom-left":
-        uv = from_bottom_left(uv, rig)
-    seen_partly = np.isfinite(uv[..., 0]) != np.isfinite(uv[..., 1])
+            xy[number - 2, c, p, int(is_y)] = _value(path, number, cell)
+    seen_partly = np.isfinite(xy[..., 0]) != np.isfinite(xy[..., 1])
     if seen_partly.any():
         f, c, p = (int(i[0]) for i in np.nonzero(seen_partly))
-        raise FormatError(path, f"pt{p + 1}_cam{c + 1} has x or y only", row=f + 2)
-    seen = np.any(np.isfinite(uv), axis=(1, 2, 3))
+        raise FormatError(path, f"marker {p + 1} in camera {c + 1} has x or y only", row=f + 2)
+    seen = np.any(np.isfinite(xy), axis=(1, 2, 3))
     if not seen.any():
         raise FormatError(path, "no marker is seen in any frame")
-    return WandObservations(np.flatnonzero(seen), rig.camera_names, uv[seen])
+    return WrittenPoints(np.flatnonzero(seen), xy[seen], pixels, writer)
 
 
-def from_bottom_left(uv: NDArray[np.float64], rig: RigSpec) -> NDArray[np.float64]:
-    """(F, C, K, 2) pixels with the origin at the bottom left, y up, in OpenCV's convention: v = height - y
-    (each camera's height, the rig's camera order)."""
-    heights = np.array([spec.image_size[1] for spec in rig.cameras], dtype=np.float64)
-    out = np.array(uv, dtype=np.float64)
-    out[..., 1] = heights[None, :, None] - out[..., 1]
-    return out
+def _header(path: Path, names: list[str]) -> tuple[list[tuple[int, int, bool]], PixelFrame, str]:
+    """Each column's (marker, camera, is y), 0-based, the writer's pixel frame and its name."""
+    if names and all(_NUMBERED.match(name) for name in names):
+        found = [_NUMBERED.match(name) for name in names]
+        columns = []
+        for index, match in enumerate(found):
+            assert match is not None
+            if int(match[1]) == 0 or int(match[2]) == 0:
+                raise FormatError(
+                    path,
+                    f"column {index + 1} is {names[index]!r}: markers and cameras count from 1 (pt1_cam1_x is the "
+                    "first)",
+                    row=1,
+                )
+            columns.append((int(match[1]) - 1, int(match[2]) - 1, match[3].lower() == "y"))
+        if all(match is not None and match[3].isupper() for match in found):
+            return columns, MATLAB, "DLTdv's points (pt<P>_cam<C>_X)"
+        return columns, ARGUS_PAIRED, "Argus's paired points (pt<P>_cam<C>_x)"
+    tracks: list[str] = []
+    columns = []
+    for index, name in enumerate(names):
+        match = _TRACKS.match(name)
+        if match is None:
+            raise FormatError(
+                path, f"column {index + 1} is {name!r}, not pt<P>_cam<C>_x (DLTdv, Argus) or <track>_cam_<N>_x "
+                "(Argus's Clicker)", row=1,
+            )  # fmt: skip
+        if int(match[2]) == 0:
+            raise FormatError(path, f"column {index + 1} is {name!r}: Argus's cameras count from 1", row=1)
+        if match[1] not in tracks:
+            tracks.append(match[1])
+        columns.append((tracks.index(match[1]), int(match[2]) - 1, match[3] == "y"))
+    return columns, ARGUS_CLICKER, "Argus Clicker's points (<track>_cam_<N>_x)"
 
 
 def _value(path: Path, row: int, cell: str) -> float:
