@@ -141,7 +141,7 @@ def calibrate(
             start_uv=start_uv,
             saturated=saturated,
         )
-        return replace(result, warnings=(*result.warnings, *check_result(rig, result))), views
+        return replace(result, warnings=(*result.warnings, *check_result(rig, result, views))), views
 
     if options.start is not None:
         result, uv = solve(_warm(rig, reference, options.start))

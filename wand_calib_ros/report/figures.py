@@ -158,11 +158,15 @@ def distortion_curves(data: ReportData) -> Figure:
 
 
 def wand_lengths(data: ReportData) -> Figure:
-    """Histogram of |AC| - L of the linearly triangulated placements."""
+    """Histogram of the first-to-last length (|AC| of the three-LED wand) - L of the linearly triangulated
+    placements."""
     figure, axis = plt.subplots(figsize=(6, 3.6))
     errors = data.ac_lengths - data.rig.wand.L
     axis.hist(errors, bins=50, color="tab:purple")
-    axis.set_title(f"|AC| - L: mean {np.mean(errors):+.2f} mm, std {np.std(errors):.2f} mm ({errors.size} placements)")
+    ends = f"|{data.rig.wand.labels[0]}{data.rig.wand.labels[-1]}|"
+    axis.set_title(
+        f"{ends} - L: mean {np.mean(errors):+.2f} mm, std {np.std(errors):.2f} mm ({errors.size} placements)"
+    )
     axis.set_xlabel("mm")
     figure.tight_layout()
     return figure

@@ -68,7 +68,8 @@ def test_an_absurd_nominal_focal_is_named_with_the_focal_that_fits() -> None:
 def test_results_with_a_wrong_focal_a_bad_camera_or_a_non_rigid_wand_are_refused() -> None:
     scenario, data, _ = scenario_data("mixed", 0)
     result = calibrate(scenario.rig, data.observations)
-    check_result(scenario.rig, result)  # the real result passes
+    uv = data.observations.uv
+    check_result(scenario.rig, result, uv)  # the real result passes
     cam1 = result.camera("cam1")
 
     def with_cam1(**changes: object) -> object:
@@ -77,8 +78,19 @@ def test_results_with_a_wrong_focal_a_bad_camera_or_a_non_rigid_wand_are_refused
 
     far = cam1.model.with_intrinsic_vector(np.r_[cam1.model.k * 3.0, cam1.model.principal_point])
     with pytest.raises(PlausibilityError, match=r"camera 'cam1': the calibration puts its focal at 12\.\d mm"):
-        check_result(scenario.rig, with_cam1(model=far))  # type: ignore[arg-type]
+        check_result(scenario.rig, with_cam1(model=far), uv)  # type: ignore[arg-type]
     with pytest.raises(PlausibilityError, match=r"camera 'cam1': its reprojection RMS is 7\.50 px"):
-        check_result(scenario.rig, with_cam1(rms_reprojection_px=7.5))  # type: ignore[arg-type]
-    with pytest.raises(PlausibilityError, match=r"wand: \|AC\| comes out 60 mm RMS away from 600 mm \(10 %\)"):
-        check_result(scenario.rig, replace(result, wand_length_rms_mm=60.0))
+        check_result(scenario.rig, with_cam1(rms_reprojection_px=7.5), uv)  # type: ignore[arg-type]
+    with pytest.raises(PlausibilityError, match=r"wand: \|AC\| comes out 60 mm RMS away from 600 mm \(10 %, \d+x what"):
+        check_result(scenario.rig, replace(result, wand_length_rms_mm=60.0), uv)
+
+
+@pytest.mark.parametrize(("name", "seed"), [("paper", 0), ("paper", 1), ("mixed", 2), ("ring6", 3)])
+def test_a_segment_given_10_percent_off_is_refused_naming_where_the_images_put_the_marker(name: str, seed: int) -> None:
+    # The adjustment holds the wrong segment by bending the cameras (its pixel noise grows, the wand's overall
+    # length still fits): the freely triangulated B shows where it is.
+    scenario, data, _ = scenario_data(name, seed, noise=0.3)
+    assert scenario.rig.wand.positions_mm == (0.0, 400.0, 600.0)
+    refused = r"wand: the images put B 40[01]\.\d mm from A \(\+-0\.\d, \d+ placements\), the rig description 440 mm: "
+    with pytest.raises(PlausibilityError, match=refused + "a segment length is wrong"):
+        calibrate(_with_wand(scenario.rig, 440.0, 160.0), data.observations)

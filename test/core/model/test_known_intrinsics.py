@@ -175,3 +175,39 @@ def test_a_small_far_wand_with_given_intrinsics_reaches_the_truths_adjustment() 
     for key in ("cam1 E_r", "cam1 E_t", "D_RMS"):
         assert rms([e[key] for e in ours]) <= 1.2 * rms([e[key] for e in floor]), key
     assert 0.5 <= rms(z) <= 1.6
+
+
+def _wand_score(models, poses, uv: np.ndarray) -> float:  # type: ignore[no-untyped-def]
+    """Argus's and easyWand's wand score: 100 x std / mean of the freely triangulated first-to-last length."""
+    from wand_calib_ros.core.adjust.placements import triangulate_placements
+
+    points = triangulate_placements(tuple(models), tuple(poses), uv)
+    length = np.linalg.norm(points[:, -1] - points[:, 0], axis=-1)
+    length = length[np.isfinite(length)]
+    return float(100.0 * np.std(length) / np.mean(length))
+
+
+def test_a_small_wand_clicked_by_hand_calibrates_as_the_truths_adjustment_and_says_what_limits_it() -> None:
+    """The Argus field take: two action cameras with their profile held, a 300 mm two-marker wand 20-130 px long
+    in one and 25-45 px in the other, clicked by hand (2-3 px). Its length comes out 8-13 % off whatever the
+    calibration, since that is what such clicks give at that image size: over 8 seeds it calibrates (no "not
+    rigid"), its wand score within 1.2x of the adjustment started from the truth, its standard deviations
+    covering its errors, and a warning names the wand's image length as the limit."""
+    from rigs import truth_bundle, z_scores
+
+    ours, floor, z = [], [], []
+    for seed in range(8):
+        noise = (2.0, 2.5, 3.0)[seed % 3]
+        scenario, data, _ = scenario_data("action2", seed, noise=noise)
+        result = calibrate(_given(scenario), data.observations)
+        assert 100 * result.wand_length_rms_mm / scenario.rig.wand.L > 5.0  # beyond the old fixed gate
+        assert any("px long in" in w and "which limits the accuracy" in w for w in result.warnings)
+        names = scenario.rig.camera_names
+        uv = data.observations.uv
+        ours.append(_wand_score([result.camera(n).model for n in names], [result.camera(n).pose for n in names], uv))
+        truth = truth_bundle(scenario, data, held=True)
+        floor.append(_wand_score(truth.state.models, truth.state.poses, uv))
+        scores = z_scores(result, scenario)
+        z.extend(scores["rotation"] + scores["translation"])
+    assert rms(ours) <= 1.2 * rms(floor)
+    assert 0.5 <= rms(z) <= 1.6

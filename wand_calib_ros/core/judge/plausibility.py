@@ -46,8 +46,19 @@ FOCAL_RANGE = (0.5, 2.0)
 #: MIN_BAD_RMS_PX) was not calibrated: its model or its views are wrong.
 RMS_FACTOR = 4.0
 MIN_BAD_RMS_PX = 1.0
-#: The wand's |AC| RMS error, as a fraction of its length, beyond which the scene is not rigid.
+#: The wand's length error (RMS of the first-to-last marker distance) is refused as a scene that is not rigid
+#: only beyond this fraction of its length and WAND_NOISE_FACTOR times what the pixel noise alone causes on the
+#: same placements (:func:`~wand_calib_ros.core.judge.quality.noise_wand_error`): a wand a few tens of pixels long
+#: measures its length to a few percent, however rigid the scene.
 WAND_ERROR_FRACTION = 0.05
+WAND_NOISE_FACTOR = 3.0
+#: A marker between the ends must sit where the rig description puts it: the median of its position along the
+#: freely triangulated wand (a fraction of the wand's length) may differ from the description's by
+#: SEGMENT_SIGMAS of its standard error and SEGMENT_TOLERANCE at most (a segment 3 % off moves it 1-2 % of the
+#: wand's length, 100 standard errors on a simulated take); judged over SEGMENT_PLACEMENTS placements at least.
+SEGMENT_SIGMAS = 6.0
+SEGMENT_TOLERANCE = 0.005
+SEGMENT_PLACEMENTS = 20
 #: A calibration from fewer placements than this that fails the wand check may have started badly (said).
 SHORT_TAKE = 100
 #: Given intrinsics held fixed are the user's knowledge. The views lean away from them when freeing the focal
@@ -128,14 +139,14 @@ def check_views(rig: RigSpec, observations: WandObservations) -> None:
         distance = float(np.median(focal_px * wand.L / length))  # mm, for a wand seen side-on
         if distance < MIN_DISTANCE_FOCALS * spec.nominal_focal_mm:
             raise PlausibilityError(
-                f"camera '{spec.name}': with |AC| = {wand.L:g} mm the wand would be about {distance:.3g} mm from "
-                f"the lens (its nominal focal is {spec.nominal_focal_mm:g} mm): no lens images that; are {names} "
+                f"camera '{spec.name}': with {_ends(wand)} = {wand.L:g} mm the wand would be about {distance:.3g} mm "
+                f"from the lens (its nominal focal is {spec.nominal_focal_mm:g} mm): no lens images that; are {names} "
                 f"in metres or cm? write them in mm (e.g. {metres} for metres)"
             )
         if distance > MAX_DISTANCE_MM:
             raise PlausibilityError(
-                f"camera '{spec.name}': with |AC| = {wand.L:g} mm the wand would be about {distance / 1e6:.3g} km "
-                f"from the lens: are {names} in micrometres? write them in mm"
+                f"camera '{spec.name}': with {_ends(wand)} = {wand.L:g} mm the wand would be about "
+                f"{distance / 1e6:.3g} km from the lens: are {names} in micrometres? write them in mm"
             )
 
 
@@ -171,15 +182,19 @@ def _distinct_views(uv: FloatArray, measured: NDArray[np.bool_]) -> int:
     return int(np.unique(keys).size)
 
 
-def check_result(rig: RigSpec, result: CalibrationResult) -> list[str]:
+def check_result(rig: RigSpec, result: CalibrationResult, views: FloatArray) -> list[str]:
     """A calibration's focal lengths, image errors and wand lengths must be those of a real rig.
+
+    Its wand too, from ``views`` ((F, C, K, 2) the views it used, the rig's camera order): the markers between
+    the ends where the description puts them (:func:`check_segments`) and the wand's length error within what
+    the pixel noise causes on a wand of that image length (:data:`WAND_NOISE_FACTOR`).
 
     A narrow camera's focal (a field under NARROW_FIELD_DEG) beyond FOCAL_RANGE of its nominal one is
     said, not refused, where the views determine it (to MAX_FOCAL_STD): long lenses are often used with
     extenders and zooms their data sheet does not name.
 
     Returns:
-        Warnings (a narrow camera's focal far from its nominal one).
+        Warnings (a narrow camera's focal far from its nominal one; a wand whose image length limits the accuracy).
 
     Raises:
         PlausibilityError: naming the camera (or the wand) and the likely cause.
@@ -214,24 +229,100 @@ def check_result(rig: RigSpec, result: CalibrationResult) -> list[str]:
                 f"cameras' median is {others:.2f} px: its model or its views are wrong (check its entry in the rig "
                 "description and which images its views come from)"
             )
-    if result.wand_length_rms_mm > WAND_ERROR_FRACTION * rig.wand.L:
-        held = [spec.name for spec in rig.cameras if spec.holds_intrinsics]
-        given = (
-            f", or the intrinsics given fixed for {', '.join(held)} (give them as a start: fixed: false)"
-            if held
-            else ""
-        )
-        short = (
-            f"; or the take is too short to hold a start ({result.placements_used} placements used): wave longer"
-            if result.placements_used < SHORT_TAKE
-            else ""
-        )
-        raise PlausibilityError(
-            f"wand: |AC| comes out {result.wand_length_rms_mm:.3g} mm RMS away from {rig.wand.L:g} mm "
-            f"({100 * result.wand_length_rms_mm / rig.wand.L:.0f} %): the scene is not rigid; check L1, L2 "
-            f"and that each camera's views are of the same wand at the same time{given}{short}"
-        )
-    return warnings
+    check_segments(rig, result, views)
+    return warnings + _wand_length(rig, result, views)
+
+
+def _ends(wand: WandSpec) -> str:
+    """The wand's first-to-last distance by its markers' names (|AB| for two markers, |AC| for three)."""
+    return f"|{wand.labels[0]}{wand.labels[-1]}|"
+
+
+def _wand_length(rig: RigSpec, result: CalibrationResult, views: FloatArray) -> list[str]:
+    """The wand-length gate (:data:`WAND_ERROR_FRACTION`, :data:`WAND_NOISE_FACTOR`), and a warning where the
+    wand's image length is what limits the accuracy.
+
+    Raises:
+        PlausibilityError: the length error is beyond both.
+    """
+    from wand_calib_ros.core.judge.quality import noise_wand_error
+
+    L, error = rig.wand.L, result.wand_length_rms_mm
+    if error <= WAND_ERROR_FRACTION * L:
+        return []
+    noise = noise_wand_error(result, rig.camera_names, views)
+    first_last = np.linalg.norm(views[:, :, -1] - views[:, :, 0], axis=-1)  # (F, C) px
+    seen = np.isfinite(first_last).any(axis=0)
+    lengths = np.full(len(rig.cameras), np.nan)
+    lengths[seen] = np.nanmedian(first_last[:, seen], axis=0)
+    shortest = int(np.nanargmin(lengths))
+    size = f"{_ends(rig.wand)} is {lengths[shortest]:.0f} px long in {rig.camera_names[shortest]}'s images (median)"
+    if not error > WAND_NOISE_FACTOR * noise:
+        return [
+            f"wand: {_ends(rig.wand)} comes out {error:.3g} mm RMS away from {L:g} mm ({100 * error / L:.1f} %), "
+            f"what {result.sigma_px:.2g} px of pixel noise gives ({noise:.3g} mm): {size}, which limits the "
+            "accuracy; a longer wand or one waved closer to the cameras measures better"
+        ]
+    held = [spec.name for spec in rig.cameras if spec.holds_intrinsics]
+    given = (
+        f", or the intrinsics given fixed for {', '.join(held)} (give them as a start: fixed: false)" if held else ""
+    )
+    short = (
+        f"; or the take is too short to hold a start ({result.placements_used} placements used): wave longer"
+        if result.placements_used < SHORT_TAKE
+        else ""
+    )
+    raise PlausibilityError(
+        f"wand: {_ends(rig.wand)} comes out {error:.3g} mm RMS away from {L:g} mm ({100 * error / L:.0f} %, "
+        f"{error / noise:.0f}x what the pixel noise causes): the scene is not rigid; check the wand's lengths and "
+        f"that each camera's views are of the same wand at the same time{given}{short}"
+    )
+
+
+def check_segments(rig: RigSpec, result: CalibrationResult, views: FloatArray) -> None:
+    """Each marker between the wand's ends must sit where the rig description puts it.
+
+    The placements seen whole are triangulated freely with the calibration (no wand constraint), and each
+    inner marker's position along its wand (the projection of its distance from the first marker on the
+    first-to-last direction) compared with the description's (:data:`SEGMENT_SIGMAS`,
+    :data:`SEGMENT_TOLERANCE`). A segment length given wrong is held by the adjustment, which bends the
+    cameras and inflates the residuals to fit it; the images still place the marker where it is.
+
+    Args:
+        views: (F, C, K, 2) the views the calibration used, cameras in the rig's order.
+
+    Raises:
+        PlausibilityError: naming the marker, where the images put it and where the description does.
+    """
+    from wand_calib_ros.core.adjust.placements import triangulate_placements
+
+    wand = rig.wand
+    if wand.n_points < 3:
+        return
+    names = rig.camera_names
+    models = tuple(result.camera(name).model for name in names)
+    poses = tuple(result.camera(name).pose for name in names)
+    points = triangulate_placements(models, poses, views)
+    points = points[np.all(np.isfinite(points), axis=(1, 2))]
+    if len(points) < SEGMENT_PLACEMENTS:
+        return
+    axis = points[:, -1] - points[:, 0]
+    along = np.einsum("pkd,pd->pk", points[:, 1:-1] - points[:, :1], axis) / np.sum(axis * axis, axis=1)[:, None]
+    median = np.median(along, axis=0)
+    spread = 1.4826 * np.median(np.abs(along - median), axis=0)
+    standard_error = 1.2533 * spread / np.sqrt(len(points))
+    expected = np.asarray(wand.positions_mm[1:-1]) / wand.L
+    off = np.abs(median - expected)
+    bad = off > np.maximum(SEGMENT_SIGMAS * standard_error, SEGMENT_TOLERANCE)
+    if not bad.any():
+        return
+    k = int(np.argmax(np.where(bad, off / np.maximum(standard_error, 1e-12), -np.inf)))
+    label, first = wand.labels[k + 1], wand.labels[0]
+    raise PlausibilityError(
+        f"wand: the images put {label} {median[k] * wand.L:.1f} mm from {first} (+-{standard_error[k] * wand.L:.1f}, "
+        f"{len(points)} placements), the rig description {expected[k] * wand.L:g} mm: a segment length is wrong "
+        f"(the calibration bent to hold it: pixel noise {result.sigma_px:.2g} px); measure the wand's segments again"
+    )
 
 
 def check_given_intrinsics(
