@@ -32,8 +32,8 @@ from typing import Any
 
 #: (module, function, stage): the functions timed, in the order a calibration reaches them.
 STAGES = (
-    ("wand_calib_ros.commands.calibrate", "load_rig", "read cameras.yaml"),
-    ("wand_calib_ros.commands.calibrate", "read_rig_observations", "read the CSV"),
+    ("wand_calib_ros.io.rig_yaml", "load_rig", "read cameras.yaml"),
+    ("wand_calib_ros.io.observations_csv", "read_rig_observations", "read the CSV"),
     ("wand_calib_ros.core.pipeline", "check_views", "plausibility of the views"),
     ("wand_calib_ros.core.pipeline", "timing_input", "timing input"),
     ("wand_calib_ros.core.pipeline", "build_vision_graph", "vision graph"),
@@ -48,7 +48,7 @@ STAGES = (
     ("wand_calib_ros.core.pipeline", "check_result", "plausibility of the result"),
     ("wand_calib_ros.core.pipeline", "noise_wand_error", "quality verdict"),
     ("wand_calib_ros.core.pipeline", "clock_offsets", "clock offsets from residuals"),
-    ("wand_calib_ros.commands.calibrate", "write_calibration", "write result.yaml"),
+    ("wand_calib_ros.io.result_yaml", "write_calibration", "write result.yaml"),
 )
 #: Counted inside the stages: (module, function, label).
 INNER = (

@@ -602,3 +602,24 @@ def test_every_command_writes_through_links_with_the_umask_and_refuses_or_fails_
         assert len(made) >= 8 and {stat.S_IMODE(p.stat().st_mode) for p in made} == {0o644}  # new: the umask's
     finally:
         os.umask(before)
+
+
+def test_help_and_argument_errors_answer_before_any_heavy_import() -> None:
+    """``wand-calib --help``, a command's ``--help`` and an argument error import no solver, image, bag, plot or
+    YAML library (each command imports what it uses when it runs): a fresh interpreter's modules after each."""
+    import subprocess
+    import sys
+
+    probe = (
+        "import sys\n"
+        "from wand_calib_ros.cli import main\n"
+        "for argv in (['--help'], ['calibrate', '--help'], ['import', '--help'], ['calibrate', '--cameras']):\n"
+        "    try:\n"
+        "        main(argv)\n"
+        "    except SystemExit:\n"
+        "        pass\n"
+        "heavy = {'scipy', 'cv2', 'rosbags', 'matplotlib', 'yaml', 'pandas', 'h5py', 'PIL'}\n"
+        "print(sorted({name.split('.')[0] for name in sys.modules} & heavy))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
+    assert done.stdout.strip().splitlines()[-1] == "[]"

@@ -9,21 +9,10 @@ import time
 from pathlib import Path
 
 from wand_calib_ros.collection.floor import read_floor_frames
-from wand_calib_ros.core.adjust.timing import TIMING_MODES
-from wand_calib_ros.core.initialise.pairwise import PairOptions
-from wand_calib_ros.core.model.result import CalibrationResult, CameraCalibration
-from wand_calib_ros.core.pipeline import CalibrationOptions, calibrate
+from wand_calib_ros.core.model.result import TIMING_MODES, CalibrationResult, CameraCalibration
 from wand_calib_ros.errors import WandCalibError
 from wand_calib_ros.io.errors import FormatError
-from wand_calib_ros.io.observations_csv import read_rig_observations
 from wand_calib_ros.io.outputs import check_writable, is_special
-from wand_calib_ros.io.result_yaml import (
-    CameraGeometry,
-    calibration_paths,
-    write_calibration,
-)
-from wand_calib_ros.io.rig_yaml import load_rig
-from wand_calib_ros.sim.truth import compare_with_truth
 
 log = logging.getLogger("wand_calib_ros")
 
@@ -168,6 +157,13 @@ def _timing_summary(result: CalibrationResult, camera: CameraCalibration) -> str
 
 
 def run(args: argparse.Namespace) -> int:
+    from wand_calib_ros.core.initialise.pairwise import PairOptions
+    from wand_calib_ros.core.pipeline import CalibrationOptions, calibrate
+    from wand_calib_ros.io.observations_csv import read_rig_observations
+    from wand_calib_ros.io.result_yaml import CameraGeometry, calibration_paths, write_calibration
+    from wand_calib_ros.io.rig_yaml import load_rig
+    from wand_calib_ros.sim.truth import compare_with_truth
+
     started = time.perf_counter()
     rig = load_rig(args.cameras)
     observations = read_rig_observations(args.observations, rig)

@@ -7,17 +7,16 @@ import logging
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import cv2
-
-from wand_calib_ros.core.model.rig import RigSpec
-from wand_calib_ros.detection.blobs import Blobs
-from wand_calib_ros.detection.wand import WandDetection
 from wand_calib_ros.errors import WandCalibError
-from wand_calib_ros.io.bags import ImageFrame
-from wand_calib_ros.io.observations_csv import write_observations
 from wand_calib_ros.io.outputs import check_writable, is_special, write_text
-from wand_calib_ros.io.rig_yaml import load_rig
+
+if TYPE_CHECKING:
+    from wand_calib_ros.core.model.rig import RigSpec
+    from wand_calib_ros.detection.blobs import Blobs
+    from wand_calib_ros.detection.wand import WandDetection
+    from wand_calib_ros.io.bags import ImageFrame
 
 log = logging.getLogger("wand_calib_ros")
 
@@ -88,12 +87,15 @@ def _image_topics(pattern: str, names: tuple[str, ...]) -> dict[str, str]:
 
 
 def run(args: argparse.Namespace) -> int:
+    import cv2
+
     from wand_calib_ros.detection.consistency import settle_labels
     from wand_calib_ros.detection.health import save_what_cameras_saw
     from wand_calib_ros.detection.masks import mask_of
     from wand_calib_ros.detection.recording import detect_recording
     from wand_calib_ros.io.bags import count_images, read_image_frames
-    from wand_calib_ros.io.rig_yaml import load_camera_masks
+    from wand_calib_ros.io.observations_csv import write_observations
+    from wand_calib_ros.io.rig_yaml import load_camera_masks, load_rig
 
     if args.sync_tolerance_ms < 0 or args.debug_every < 1:
         raise WandCalibError("--sync-tolerance-ms must be 0 or more and --debug-every at least 1")

@@ -6,7 +6,6 @@ import argparse
 from pathlib import Path
 
 from wand_calib_ros.io.export import FORMATS as EXPORT_FORMATS
-from wand_calib_ros.io.result_yaml import read_result
 
 HELP = "write a result in another tool's format"
 
@@ -28,7 +27,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from wand_calib_ros.io.export import WORLD_FORMATS, export
     from wand_calib_ros.io.export.cameras import ExportedCamera
-    from wand_calib_ros.io.result_yaml import read_world_poses
+    from wand_calib_ros.io.result_yaml import read_result, read_world_poses
 
     reference, geometry = read_result(args.result)
     order = [reference, *(name for name in geometry if name != reference)]  # the reference first

@@ -14,7 +14,6 @@ from wand_calib_ros.io.imports.given import GivenIntrinsics
 from wand_calib_ros.io.imports.pixels import ARGUS_CLICKER, OPENCV, PixelFrame, WrittenPoints
 from wand_calib_ros.io.observations_csv import write_observations
 from wand_calib_ros.io.outputs import check_writable
-from wand_calib_ros.io.rig_yaml import load_rig
 
 if TYPE_CHECKING:
     from wand_calib_ros.core.model.camera_model import CameraModel
@@ -73,6 +72,7 @@ def run(args: argparse.Namespace) -> int:
     from wand_calib_ros.errors import WandCalibError
     from wand_calib_ros.io.imports.intrinsics import read_given
     from wand_calib_ros.io.outputs import write_together
+    from wand_calib_ros.io.rig_yaml import load_rig
 
     if args.format in INTRINSICS_FORMATS:
         rig = load_rig(args.cameras)

@@ -8,7 +8,6 @@ from pathlib import Path
 
 from wand_calib_ros.commands.detect import camera_topics, topic_arguments
 from wand_calib_ros.errors import WandCalibError
-from wand_calib_ros.io.rig_yaml import load_rig
 
 HELP = "take each camera's mask (lamps, windows) from a stretch of a bag with the wand out of sight"
 
@@ -28,6 +27,7 @@ def run(args: argparse.Namespace) -> int:
     from wand_calib_ros.detection.errors import ImageError
     from wand_calib_ros.detection.masks import MaskTaker, mask_fraction, write_mask
     from wand_calib_ros.io.bags import read_image_frames
+    from wand_calib_ros.io.rig_yaml import load_rig
 
     if not (args.start >= 0 and args.seconds > 0):
         raise WandCalibError("--start must be 0 or more and --seconds positive")

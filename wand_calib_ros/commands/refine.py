@@ -9,11 +9,6 @@ from wand_calib_ros.errors import WandCalibError
 from wand_calib_ros.io.errors import FormatError
 from wand_calib_ros.io.observations_csv import read_rig_observations
 from wand_calib_ros.io.outputs import check_writable
-from wand_calib_ros.io.result_yaml import (
-    read_result,
-    write_yaml,
-)
-from wand_calib_ros.io.rig_yaml import load_rig
 
 HELP = "re-estimate cameras that moved since a calibration, from new views"
 
@@ -32,7 +27,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from wand_calib_ros.core.after.repair import judge_moved, repair_moved
-    from wand_calib_ros.io.result_yaml import with_cameras_replaced
+    from wand_calib_ros.io.result_yaml import read_result, with_cameras_replaced, write_yaml
+    from wand_calib_ros.io.rig_yaml import load_rig
     from wand_calib_ros.io.text import read_yaml
 
     rig = load_rig(args.cameras)

@@ -11,12 +11,6 @@ import numpy as np
 from wand_calib_ros.commands.takes import take_arguments, take_options, timed_take, wand_positions
 from wand_calib_ros.errors import WandCalibError
 from wand_calib_ros.io.observations_csv import write_observations
-from wand_calib_ros.io.result_yaml import (
-    camera_entry,
-    write_yaml,
-)
-from wand_calib_ros.io.rig_yaml import save_rig
-from wand_calib_ros.sim.clocks import film, take_trajectory, truth_timing
 from wand_calib_ros.sim.room_layout import ROOM_SCENES
 from wand_calib_ros.sim.scenarios import SCENARIOS
 
@@ -55,6 +49,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from wand_calib_ros.io.bags import BagFrame, write_image_bag
+    from wand_calib_ros.io.result_yaml import camera_entry, write_yaml
+    from wand_calib_ros.io.rig_yaml import save_rig
+    from wand_calib_ros.sim.clocks import film, take_trajectory, truth_timing
     from wand_calib_ros.sim.render import RenderOptions, render_recording, render_take
 
     if args.frames < 1:

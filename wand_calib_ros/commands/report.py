@@ -6,7 +6,6 @@ import argparse
 from pathlib import Path
 
 from wand_calib_ros.io.observations_csv import read_rig_observations
-from wand_calib_ros.io.rig_yaml import load_rig
 
 HELP = "write an HTML calibration report with figures"
 
@@ -20,6 +19,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from wand_calib_ros.io.rig_yaml import load_rig
     from wand_calib_ros.report.html import write_report  # matplotlib only when a report is asked for
 
     rig = load_rig(args.cameras)

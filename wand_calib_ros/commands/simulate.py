@@ -12,12 +12,6 @@ import numpy as np
 from wand_calib_ros.commands.takes import take_arguments, take_options, wand_positions
 from wand_calib_ros.errors import WandCalibError
 from wand_calib_ros.io.observations_csv import write_observations
-from wand_calib_ros.io.result_yaml import (
-    camera_entry,
-    write_yaml,
-)
-from wand_calib_ros.io.rig_yaml import save_rig
-from wand_calib_ros.sim.clocks import film, observe, take_trajectory, truth_timing
 from wand_calib_ros.sim.outliers import corrupt
 from wand_calib_ros.sim.scenarios import SCENARIOS, image_placements, sample_placements, simulate
 
@@ -81,6 +75,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from wand_calib_ros.io.result_yaml import camera_entry, write_yaml
+    from wand_calib_ros.io.rig_yaml import save_rig
+    from wand_calib_ros.sim.clocks import film, observe, take_trajectory, truth_timing
+
     factory = SCENARIOS[args.scenario]
     kwargs: dict[str, object] = {}
     if args.true_focal is not None or args.principal_point is not None:

@@ -6,7 +6,6 @@ import argparse
 from pathlib import Path
 
 from wand_calib_ros.errors import WandCalibError
-from wand_calib_ros.sim.sweeps import paper_sweeps
 
 HELP = "reproduce the paper's Figs. 4-6 (CSV and PNG)"
 
@@ -20,6 +19,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from wand_calib_ros.sim.sweeps import paper_sweeps
+
     if args.runs < 1:
         raise WandCalibError("--runs must be positive")
     for path in paper_sweeps(args.out, runs=args.runs, seed=args.seed, quick=args.quick):

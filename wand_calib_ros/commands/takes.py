@@ -4,10 +4,13 @@
 from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING
 
 from wand_calib_ros.core.model.rig import WandSpec
 from wand_calib_ros.errors import WandCalibError
-from wand_calib_ros.sim.clocks import TakeOptions
+
+if TYPE_CHECKING:
+    from wand_calib_ros.sim.clocks import TakeOptions
 
 
 def take_arguments(parser: argparse.ArgumentParser, when: str) -> None:
@@ -31,6 +34,13 @@ def take_arguments(parser: argparse.ArgumentParser, when: str) -> None:
 
 
 def take_options(args: argparse.Namespace, duration_s: float) -> TakeOptions:
+    """The clocks ``take_arguments`` describe, for a take of ``duration_s``.
+
+    Raises:
+        WandCalibError: a rate, speed or delay out of range, named.
+    """
+    from wand_calib_ros.sim.clocks import TakeOptions
+
     values = (args.max_latency_ms, args.max_phase_frames, args.jitter_ms, args.readout_ms)
     if not all(v >= 0 for v in values) or not all(f > 0 for f in args.fps) or not args.speed > 0:
         raise WandCalibError("--fps and --speed must be positive; latencies, phases, jitter and readout >= 0")

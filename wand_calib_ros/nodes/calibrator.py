@@ -56,9 +56,8 @@ from wand_calib_ros.collection.buffer import BUFFER_FILE, has_rows
 from wand_calib_ros.collection.floor import FLOOR_FILE, read_floor_frames
 from wand_calib_ros.collection.job import CalibrationFiles, refine_calibration, run_calibration, summary
 from wand_calib_ros.collection.recovery import backup_path
-from wand_calib_ros.core.adjust.timing import TIMING_MODES
 from wand_calib_ros.core.after.rig_scene import rig_scene
-from wand_calib_ros.core.model.result import CalibrationResult
+from wand_calib_ros.core.model.result import TIMING_MODES, CalibrationResult
 from wand_calib_ros.core.model.rig import WandObservations
 from wand_calib_ros.core.pipeline import CalibrationOptions
 from wand_calib_ros.errors import WandCalibError

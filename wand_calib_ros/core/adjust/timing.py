@@ -33,14 +33,12 @@ from wand_calib_ros.core.adjust.bundle_adjustment import (
 )
 from wand_calib_ros.core.adjust.chi_square import chi_square_quantile
 from wand_calib_ros.core.errors import TimingError
-from wand_calib_ros.core.model.result import CalibrationResult
+from wand_calib_ros.core.model.result import TIMING_MODES, CalibrationResult
 from wand_calib_ros.core.model.rig import RigSpec, WandObservations
 
 FloatArray = NDArray[np.float64]
 log = logging.getLogger(__name__)
 
-#: How time offsets and readout times are treated: decided by the data, always estimated, or held fixed.
-TIMING_MODES = ("auto", "estimate", "fixed")
 #: Neighbours on each side of a placement that its motion is fitted to, and the local polynomial's degree.
 MOTION_NEIGHBOURS = 5
 MOTION_DEGREE = 3

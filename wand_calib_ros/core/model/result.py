@@ -90,6 +90,10 @@ class LensTrial:
     failure: str | None = None
 
 
+#: How time offsets and readout times are treated: decided by the data, always estimated, or held fixed.
+TIMING_MODES = ("auto", "estimate", "fixed")
+
+
 @dataclass(frozen=True)
 class TimingSummary:
     """How the calibration treated when each camera saw the wand.

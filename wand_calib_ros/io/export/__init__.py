@@ -18,7 +18,6 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from wand_calib_ros.io.export import anipose, camera_info, dlt, kalibr, opencv
 from wand_calib_ros.io.export.cameras import ExportedCamera
 from wand_calib_ros.io.outputs import write_together
 
@@ -33,7 +32,9 @@ Writer = Callable[[Sequence[ExportedCamera]], dict[str, str]]
 
 
 def formats() -> dict[str, Writer]:
-    """Every format by name."""
+    """Every format by name (their modules imported here: a command that only names them stays light)."""
+    from wand_calib_ros.io.export import anipose, camera_info, dlt, kalibr, opencv
+
     return {
         "opencv": opencv.documents,
         "anipose": anipose.documents,
