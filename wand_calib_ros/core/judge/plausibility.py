@@ -257,7 +257,7 @@ def _wand_length(rig: RigSpec, result: CalibrationResult, views: FloatArray) -> 
     lengths[seen] = np.nanmedian(first_last[:, seen], axis=0)
     shortest = int(np.nanargmin(lengths))
     size = f"{_ends(rig.wand)} is {lengths[shortest]:.0f} px long in {rig.camera_names[shortest]}'s images (median)"
-    if not error > WAND_NOISE_FACTOR * noise:
+    if np.isfinite(noise) and not error > WAND_NOISE_FACTOR * noise:
         return [
             f"wand: {_ends(rig.wand)} comes out {error:.3g} mm RMS away from {L:g} mm ({100 * error / L:.1f} %), "
             f"what {result.sigma_px:.2g} px of pixel noise gives ({noise:.3g} mm): {size}, which limits the "
@@ -272,9 +272,10 @@ def _wand_length(rig: RigSpec, result: CalibrationResult, views: FloatArray) -> 
         if result.placements_used < SHORT_TAKE
         else ""
     )
+    beyond = f", {error / noise:.0f}x what the pixel noise causes" if np.isfinite(noise) and noise > 0 else ""
     raise PlausibilityError(
-        f"wand: {_ends(rig.wand)} comes out {error:.3g} mm RMS away from {L:g} mm ({100 * error / L:.0f} %, "
-        f"{error / noise:.0f}x what the pixel noise causes): the scene is not rigid; check the wand's lengths and "
+        f"wand: {_ends(rig.wand)} comes out {error:.3g} mm RMS away from {L:g} mm ({100 * error / L:.0f} %{beyond}): "
+        "the scene is not rigid; check the wand's lengths and "
         f"that each camera's views are of the same wand at the same time{given}{short}"
     )
 
