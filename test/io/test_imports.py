@@ -277,6 +277,8 @@ def test_dltdv_and_argus_paired_points_import_exactly_from_the_origin_given(
     seen = np.any(np.isfinite(by_hand), axis=(1, 2, 3))
     assert np.allclose(imported.uv, by_hand[seen], atol=1e-6, equal_nan=True)
     assert np.allclose(imported.uv, uv[seen], atol=1e-6, equal_nan=True)
+    direct = WandObservations(np.flatnonzero(seen), scenario.rig.camera_names, uv[seen])
+    _calibrates_as_given_directly(tmp_path, tmp_path / "cameras.yaml", tmp_path / "obs.csv", scenario.rig, direct)
 
 
 def test_the_origin_a_point_file_does_not_say_is_decided_from_the_fit_with_board_intrinsics(
@@ -437,8 +439,8 @@ def test_a_caliscope_session_imports_in_one_command_and_calibrates_with_its_intr
         assert spec.intrinsics is not None and not spec.intrinsics_fixed
         assert np.allclose(spec.intrinsics.principal_point, camera.model.principal_point, atol=1e-9)
         assert np.isclose(spec.intrinsics.k[0], camera.model.k[0], rtol=1e-12)
-    assert main(["-q", "calibrate", "--cameras", str(tmp_path / "given.yaml"), "--observations",
-                 str(tmp_path / "obs.csv"), "--output", str(tmp_path / "result.yaml")]) == 0  # fmt: skip
+    direct = WandObservations(np.flatnonzero(seen), scenario.rig.camera_names, uv[seen])
+    _calibrates_as_given_directly(tmp_path, tmp_path / "given.yaml", tmp_path / "obs.csv", given, direct)
     # caliscope's older column names
     (tmp_path / "old.csv").write_text(_caliscope_points(uv, camera="port", point="point_id"))
     old = read_caliscope_points(tmp_path / "old.csv", scenario.rig).observations
