@@ -112,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
         write_together({args.rig_out: rig_text[0]})
         print(f"{rig_text[1]} -> {args.rig_out}")
     elif written.intrinsics is not None:
-        print(f"{written.writer} carries the cameras' intrinsics: --rig-out FILE writes them into a rig file")
+        print(f"{args.points.name} carries the cameras' intrinsics: --rig-out FILE writes them into a rig file")
     return 0
 
 

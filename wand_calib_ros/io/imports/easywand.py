@@ -49,10 +49,10 @@ def read_easywand(path: str | Path, rig: RigSpec) -> WrittenPoints:
     n_cameras = len(rig.cameras)
     if header.startswith(b"MATLAB 7.3"):
         table, frames, lower_left, sizes, intrinsics = _easywand6(path, n_cameras)
-        writer = "easyWand 6's data file"
+        writer = "easyWand 6's wand points"
     elif header.startswith(b"MATLAB 5.0"):
         table, frames, lower_left, sizes, intrinsics = _easywand5(path, n_cameras)
-        writer = "easyWand 5's data file"
+        writer = "easyWand 5's wand points"
     else:
         raise FormatError(path, "not a MATLAB data file (easyWand's <name>_easyWandData.mat or _easyWand6Data.mat)")
     if table.ndim != 2 or table.shape[1] != 2 * rig.wand.n_points * n_cameras:
