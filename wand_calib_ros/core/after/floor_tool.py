@@ -17,7 +17,6 @@ import itertools
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import linear_sum_assignment
 
 from wand_calib_ros.core.adjust.placements import triangulate_placements
 from wand_calib_ros.core.model.camera_model import CameraModel, project
@@ -77,6 +76,8 @@ def label_tool_views(
         (F, C, K, 2) the views with point k the tool's marker k; NaN for views that could not be labelled
         (fewer than two cameras saw every marker in the frame, or a point far from every marker).
     """
+    from scipy.optimize import linear_sum_assignment  # (scipy.optimize takes 0.3 s to import: only with a tool)
+
     n_frames, n_cameras, n = uv.shape[:3]
     out = np.full_like(uv, np.nan)
     if n > MAX_UNLABELLED_MARKERS:
