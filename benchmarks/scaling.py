@@ -51,7 +51,7 @@ DEFAULT_CASES = (
 ERRORS = ("focal px", "principal point px", "E_r deg", "E_t")
 
 
-def _calibrate(folder: Path, output: Path, package: Path | None) -> tuple[float, float]:
+def calibrate_process(folder: Path, output: Path, package: Path | None) -> tuple[float, float]:
     """Seconds and peak RSS (MB) of one ``wand-calib calibrate`` process (``package``: another checkout)."""
     env = dict(os.environ)
     if package is not None:
@@ -111,13 +111,13 @@ def main() -> None:
                     stdout=subprocess.DEVNULL,
                 )
                 rows = sum(1 for _ in (folder / "observations.csv").open()) - 1
-                runs = [_calibrate(folder, folder / "result.yaml", None) for _ in range(args.repeats)]
+                runs = [calibrate_process(folder, folder / "result.yaml", None) for _ in range(args.repeats)]
                 times += [seconds for seconds, _ in runs]
                 peaks += [peak for _, peak in runs]
                 mine.append(_errors(folder / "result.yaml", folder / "truth.yaml"))
                 n_cameras = mine[-1]["focal px"].size
                 if args.baseline is not None:
-                    _calibrate(folder, folder / "baseline.yaml", args.baseline)
+                    calibrate_process(folder, folder / "baseline.yaml", args.baseline)
                     theirs.append(_errors(folder / "baseline.yaml", folder / "truth.yaml"))
         ours = _rms(mine)
         errors = ", ".join(f"{key} {np.sqrt(np.mean(ours[key] ** 2)):.4g}" for key in ERRORS)

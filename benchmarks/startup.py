@@ -22,7 +22,7 @@ TARGET_S = 0.2
 TARGET_RATIO = 2.0
 
 
-def _median_s(argv: list[str], repeats: int) -> float:
+def median_seconds(argv: list[str], repeats: int) -> float:
     times = []
     for _ in range(repeats):
         began = time.perf_counter()
@@ -38,11 +38,11 @@ def main() -> None:
     compileall.compile_dir(ROOT / "wand_calib_ros", quiet=1)
     script = Path(sys.executable).parent / "wand-calib"  # the installed command, as a user starts it
     cli = [str(script)] if script.exists() else [sys.executable, "-m", "wand_calib_ros.cli"]
-    floor = _median_s([sys.executable, "-c", "import numpy"], args.repeats)
+    floor = median_seconds([sys.executable, "-c", "import numpy"], args.repeats)
     rows = {
-        "wand-calib --help": _median_s([*cli, "--help"], args.repeats),
-        "wand-calib calibrate --help": _median_s([*cli, "calibrate", "--help"], args.repeats),
-        "wand-calib calibrate (argument error)": _median_s([*cli, "calibrate"], args.repeats),
+        "wand-calib --help": median_seconds([*cli, "--help"], args.repeats),
+        "wand-calib calibrate --help": median_seconds([*cli, "calibrate", "--help"], args.repeats),
+        "wand-calib calibrate (argument error)": median_seconds([*cli, "calibrate"], args.repeats),
     }
     print(f"floor: python -c 'import numpy'  {floor:.3f} s (median of {args.repeats})")
     for label, seconds in rows.items():
