@@ -114,9 +114,8 @@ def _print_summary(result: CalibrationResult, output: Path) -> None:
             + _timing_summary(result, camera),
             file=where,
         )
-    ends = f"|{result.wand.labels[0]}{result.wand.labels[-1]}|"  # |AC| of the three-LED wand
     print(
-        f"  wand {ends} {result.wand_length_mean_mm:.2f} +- {result.wand_length_std_mm:.2f} mm "
+        f"  wand {result.wand.ends} {result.wand_length_mean_mm:.2f} +- {result.wand_length_std_mm:.2f} mm "
         f"(nominal {result.wand.L:.1f}), RMS error {result.wand_length_rms_mm:.3f} mm, wand score "
         f"{100 * result.wand_length_std_mm / result.wand_length_mean_mm:.3g} % (100 std / mean, as Argus and easyWand "
         f"give it); {result.placements_used} placements used, {result.placements_rejected} rejected",

@@ -163,9 +163,9 @@ def wand_lengths(data: ReportData) -> Figure:
     figure, axis = plt.subplots(figsize=(6, 3.6))
     errors = data.ac_lengths - data.rig.wand.L
     axis.hist(errors, bins=50, color="tab:purple")
-    ends = f"|{data.rig.wand.labels[0]}{data.rig.wand.labels[-1]}|"
     axis.set_title(
-        f"{ends} - L: mean {np.mean(errors):+.2f} mm, std {np.std(errors):.2f} mm ({errors.size} placements)"
+        f"{data.rig.wand.ends} - L: mean {np.mean(errors):+.2f} mm, std {np.std(errors):.2f} mm "
+        f"({errors.size} placements)"
     )
     axis.set_xlabel("mm")
     figure.tight_layout()

@@ -109,6 +109,11 @@ def check_rig(rig: RigSpec) -> None:
             )
 
 
+def end_to_end_px(uv: FloatArray) -> FloatArray:
+    """(F, C) the first-to-last image length (px) of (F, C, K, 2) views (NaN where an end is missing)."""
+    return np.asarray(np.linalg.norm(uv[:, :, -1] - uv[:, :, 0], axis=-1), dtype=np.float64)
+
+
 def image_lengths(uv: FloatArray) -> tuple[FloatArray, FloatArray]:
     """(|AB|, |BC|) image lengths (px) of (..., 3, 2) views (NaN where a point is missing)."""
     segments = np.linalg.norm(np.diff(uv, axis=-2), axis=-1)  # (..., 2)
@@ -126,7 +131,7 @@ def check_views(rig: RigSpec, observations: WandObservations) -> None:
     wand = rig.wand
     if wand.n_points == 3:
         _check_segment_ratio(wand, observations.uv)
-    ends = np.linalg.norm(observations.uv[:, :, -1] - observations.uv[:, :, 0], axis=-1)  # (F, C) px
+    ends = end_to_end_px(observations.uv)
     names = "L1 and L2" if wand.n_points == 3 else "the marker positions"
     lengths = (wand.L1, wand.L2) if wand.n_points == 3 else wand.positions_mm
     metres = " and ".join(f"{1000 * v:g}" for v in lengths)
@@ -139,13 +144,13 @@ def check_views(rig: RigSpec, observations: WandObservations) -> None:
         distance = float(np.median(focal_px * wand.L / length))  # mm, for a wand seen side-on
         if distance < MIN_DISTANCE_FOCALS * spec.nominal_focal_mm:
             raise PlausibilityError(
-                f"camera '{spec.name}': with {_ends(wand)} = {wand.L:g} mm the wand would be about {distance:.3g} mm "
+                f"camera '{spec.name}': with {wand.ends} = {wand.L:g} mm the wand would be about {distance:.3g} mm "
                 f"from the lens (its nominal focal is {spec.nominal_focal_mm:g} mm): no lens images that; are {names} "
                 f"in metres or cm? write them in mm (e.g. {metres} for metres)"
             )
         if distance > MAX_DISTANCE_MM:
             raise PlausibilityError(
-                f"camera '{spec.name}': with {_ends(wand)} = {wand.L:g} mm the wand would be about "
+                f"camera '{spec.name}': with {wand.ends} = {wand.L:g} mm the wand would be about "
                 f"{distance / 1e6:.3g} km from the lens: are {names} in micrometres? write them in mm"
             )
 
@@ -233,11 +238,6 @@ def check_result(rig: RigSpec, result: CalibrationResult, views: FloatArray) -> 
     return warnings + _wand_length(rig, result, views)
 
 
-def _ends(wand: WandSpec) -> str:
-    """The wand's first-to-last distance by its markers' names (|AB| for two markers, |AC| for three)."""
-    return f"|{wand.labels[0]}{wand.labels[-1]}|"
-
-
 def _wand_length(rig: RigSpec, result: CalibrationResult, views: FloatArray) -> list[str]:
     """The wand-length gate (:data:`WAND_ERROR_FRACTION`, :data:`WAND_NOISE_FACTOR`), and a warning where the
     wand's image length is what limits the accuracy.
@@ -251,15 +251,15 @@ def _wand_length(rig: RigSpec, result: CalibrationResult, views: FloatArray) -> 
     if error <= WAND_ERROR_FRACTION * L:
         return []
     noise = noise_wand_error(result, rig.camera_names, views)
-    first_last = np.linalg.norm(views[:, :, -1] - views[:, :, 0], axis=-1)  # (F, C) px
+    first_last = end_to_end_px(views)
     seen = np.isfinite(first_last).any(axis=0)
     lengths = np.full(len(rig.cameras), np.nan)
     lengths[seen] = np.nanmedian(first_last[:, seen], axis=0)
     shortest = int(np.nanargmin(lengths))
-    size = f"{_ends(rig.wand)} is {lengths[shortest]:.0f} px long in {rig.camera_names[shortest]}'s images (median)"
+    size = f"{rig.wand.ends} is {lengths[shortest]:.0f} px long in {rig.camera_names[shortest]}'s images (median)"
     if np.isfinite(noise) and not error > WAND_NOISE_FACTOR * noise:
         return [
-            f"wand: {_ends(rig.wand)} comes out {error:.3g} mm RMS away from {L:g} mm ({100 * error / L:.1f} %), "
+            f"wand: {rig.wand.ends} comes out {error:.3g} mm RMS away from {L:g} mm ({100 * error / L:.1f} %), "
             f"what {result.sigma_px:.2g} px of pixel noise gives ({noise:.3g} mm): {size}, which limits the "
             "accuracy; a longer wand or one waved closer to the cameras measures better"
         ]
@@ -274,7 +274,7 @@ def _wand_length(rig: RigSpec, result: CalibrationResult, views: FloatArray) -> 
     )
     beyond = f", {error / noise:.0f}x what the pixel noise causes" if np.isfinite(noise) and noise > 0 else ""
     raise PlausibilityError(
-        f"wand: {_ends(rig.wand)} comes out {error:.3g} mm RMS away from {L:g} mm ({100 * error / L:.0f} %{beyond}): "
+        f"wand: {rig.wand.ends} comes out {error:.3g} mm RMS away from {L:g} mm ({100 * error / L:.0f} %{beyond}): "
         "the scene is not rigid; check the wand's lengths and "
         f"that each camera's views are of the same wand at the same time{given}{short}"
     )

@@ -64,6 +64,12 @@ class WandSpec:
         return self.positions_mm[-1]
 
     @property
+    def ends(self) -> str:
+        """The first-to-last distance by the markers' names, as messages write it: |AB| for two markers, |AC|
+        for three."""
+        return f"|{self.labels[0]}{self.labels[-1]}|"
+
+    @property
     def L1(self) -> float:
         """|AB| in mm (the first segment)."""
         return self.positions_mm[1]
