@@ -26,6 +26,7 @@ from wand_calib_ros.nodes.collector import CollectorNode  # noqa: E402
 from wand_calib_ros.nodes.messages import array_to_image  # noqa: E402
 
 FRAMES = 240
+HALF = FRAMES // 2
 #: Each part of a take keeps at least this share of the frames a clean take keeps (the issue's bar).
 KEPT = 0.95
 
@@ -124,20 +125,27 @@ def _by_frame(recording: Recording) -> list[list[tuple[str, int, np.ndarray]]]:
     return frames
 
 
+def _first_half_played(
+    ros: Ros, tmp_path: Path, recording: Recording
+) -> tuple[CollectorNode, Arrivals, list[list[tuple[str, int, np.ndarray]]], list[int]]:
+    """A collector that has taken the recording's first HALF frames as its cameras send them: the collector, its
+    arrival clock, the frames still to send and the first half's stamps (cam0's)."""
+    collector, arrivals = _collector(ros, tmp_path)
+    frames = _by_frame(recording)
+    _play(ros, collector, arrivals, [image for frame in frames[:HALF] for image in frame])
+    return collector, arrivals, frames[HALF:], [frame[0][1] for frame in frames[:HALF]]
+
+
 @pytest.mark.parametrize("pause_s", [5, 30])
 def test_a_paused_stream_loses_nothing_and_is_not_called_a_jump(
     ros: Ros, tmp_path: Path, recording: Recording, pause_s: int, capfd: pytest.CaptureFixture[str]
 ) -> None:
-    collector, arrivals = _collector(ros, tmp_path)
-    frames = _by_frame(recording)
-    half = FRAMES // 2
-    _play(ros, collector, arrivals, [image for frame in frames[:half] for image in frame])
+    collector, arrivals, rest, first = _first_half_played(ros, tmp_path, recording)
     arrivals.pause_ns += pause_s * 10**9  # the bag paused: nothing arrives for pause_s, its stamps then go on
-    _play(ros, collector, arrivals, [image for frame in frames[half:] for image in frame])
-    first = [frame[0][1] for frame in frames[:half]]
-    second = [frame[0][1] for frame in frames[half:]]
-    assert _stored_frames(collector, first) >= KEPT * _clean_count(recording, range(10, half))
-    assert _stored_frames(collector, second) >= KEPT * _clean_count(recording, range(half + 10, FRAMES))
+    _play(ros, collector, arrivals, [image for frame in rest for image in frame])
+    second = [frame[0][1] for frame in rest]
+    assert _stored_frames(collector, first) >= KEPT * _clean_count(recording, range(10, HALF))
+    assert _stored_frames(collector, second) >= KEPT * _clean_count(recording, range(HALF + 10, FRAMES))
     log = capfd.readouterr().err
     assert "jumped" not in log and "new segment" not in log
     calibrates_as_kept(ros, tmp_path, collector)
@@ -147,17 +155,13 @@ def test_a_paused_stream_loses_nothing_and_is_not_called_a_jump(
 def test_a_clock_step_under_every_camera_is_one_shift_for_all(
     ros: Ros, tmp_path: Path, recording: Recording, step_s: int, capfd: pytest.CaptureFixture[str]
 ) -> None:
-    collector, arrivals = _collector(ros, tmp_path)
-    frames = _by_frame(recording)
-    half = FRAMES // 2
-    _play(ros, collector, arrivals, [image for frame in frames[:half] for image in frame])
-    stepped = [(camera, stamp + step_s * 10**9, pixels) for frame in frames[half:] for camera, stamp, pixels in frame]
+    collector, arrivals, rest, first = _first_half_played(ros, tmp_path, recording)
+    stepped = [(camera, stamp + step_s * 10**9, pixels) for frame in rest for camera, stamp, pixels in frame]
     _play(ros, collector, arrivals, stepped[1:])  # (the step falls between cam0's and cam1's image of a frame)
-    first = [frame[0][1] for frame in frames[:half]]
-    assert _stored_frames(collector, first) >= KEPT * _clean_count(recording, range(10, half))
+    assert _stored_frames(collector, first) >= KEPT * _clean_count(recording, range(10, HALF))
     stored = collector.buffer.observations()
     whole = int(stored.complete.all(axis=1).sum()) - _stored_frames(collector, first)
-    assert whole >= KEPT * _clean_count(recording, range(half + 10, FRAMES))
+    assert whole >= KEPT * _clean_count(recording, range(HALF + 10, FRAMES))
     log = capfd.readouterr().err
     way = "back" if step_s < 0 else "ahead"
     assert log.count("jumped") == 1 and f"every camera's stamps jumped 30.0 s {way} together" in log  # said once

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from wand_calib_ros.core.model.result import CalibrationResult
 from wand_calib_ros.core.model.rig import WandObservations
 from wand_calib_ros.core.pipeline import calibrate
 from wand_calib_ros.sim.scenarios import SCENARIOS, SimulatedData, simulate
@@ -41,13 +42,19 @@ def _outward(observations: WandObservations, flags: np.ndarray, shift_px: float)
     return WandObservations(observations.frames, observations.camera_names, uv, observations.stamps, flags)
 
 
+def _calibrated(seed: int, fraction: float, shift_px: float) -> CalibrationResult:
+    """The small room's take calibrated with ``fraction`` of each camera's points flagged saturated (the nearest)
+    and moved ``shift_px`` outward."""
+    scenario = SCENARIOS["small_room"]()
+    data = simulate(scenario, NOISE_PX, np.random.default_rng(seed))
+    flags = _saturated(data, fraction)
+    return calibrate(scenario.rig, _outward(data.observations, flags, shift_px))
+
+
 @pytest.mark.parametrize("fraction", [0.5, 0.9])
 def test_saturated_centres_biased_outward_are_named_and_the_result_is_not_excellent(fraction: float) -> None:
-    scenario = SCENARIOS["small_room"]()
     for seed in SEEDS:
-        data = simulate(scenario, NOISE_PX, np.random.default_rng(seed))
-        flags = _saturated(data, fraction)
-        result = calibrate(scenario.rig, _outward(data.observations, flags, BIAS_PX))
+        result = _calibrated(seed, fraction, BIAS_PX)
         assert result.systematic, seed
         assert result.quality is not None and result.quality.grade != "excellent"
         named = " ".join(result.systematic)
@@ -57,9 +64,6 @@ def test_saturated_centres_biased_outward_are_named_and_the_result_is_not_excell
 
 @pytest.mark.parametrize("fraction", [0.5, 0.9])
 def test_unbiased_saturated_centres_are_not_named(fraction: float) -> None:
-    scenario = SCENARIOS["small_room"]()
     for seed in SEEDS:
-        data = simulate(scenario, NOISE_PX, np.random.default_rng(seed))
-        flags = _saturated(data, fraction)
-        result = calibrate(scenario.rig, _outward(data.observations, flags, 0.0))
+        result = _calibrated(seed, fraction, 0.0)
         assert result.systematic == (), (seed, result.systematic)
