@@ -5,18 +5,14 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-from wand_calib_ros.core.model.rig import CameraSpec, RigSpec, WandObservations
+from wand_calib_ros.core.model.rig import RigSpec, WandObservations
 from wand_calib_ros.io.imports.given import GivenIntrinsics
 from wand_calib_ros.io.imports.pixels import ARGUS_CLICKER, OPENCV, PixelFrame, WrittenPoints
 from wand_calib_ros.io.observations_csv import write_observations
 from wand_calib_ros.io.outputs import check_writable
-
-if TYPE_CHECKING:
-    from wand_calib_ros.core.model.camera_model import CameraModel
 
 HELP = "read another tool's wand points into an observations CSV (and its intrinsics into the rig file)"
 
@@ -78,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
         rig = load_rig(args.cameras)
         # a profile alone: Argus's Clicker frame unless told top-left (OpenCV's); aniposelib's TOML: OpenCV's
         frame = ARGUS_CLICKER if args.format == "argus-profile" and args.origin != "top-left" else OPENCV
-        text, summary = _given_rig(args.points, args.cameras, rig, read_given(args.points), frame, args)
+        text, summary, _ = _given_rig(args.points, args.cameras, rig, read_given(args.points), frame, args)
         check_writable([args.out])
         write_together({args.out: text})
         print(f"{summary} -> {args.out}")
@@ -176,12 +172,10 @@ def _origin(
             f"alike, one the other's mirror image, so took top-left (DLTdv 8's; --origin bottom-left for DLTdv up "
             f"to 7), {frame.first[0]:g}-based"
         )
-    from wand_calib_ros.io.imports.given import matched
     from wand_calib_ros.io.imports.origin import fit_origins
 
-    models = [
-        _model(camera, spec) for camera, spec in zip(matched(given[0], rig, given[1])[0], rig.cameras, strict=True)
-    ]
+    held = _given_rig(given[0], args.cameras, rig, given[1], OPENCV, args)[2]  # the rig file's own reading of them
+    models = [spec.intrinsics for spec in held.cameras if spec.intrinsics is not None]
     fit = fit_origins(written, rig, models)
     if fit.chosen is None:
         raise WandCalibError(f"{ask}; calibrated with {given[0].name} held, both fit alike ({fit.in_words()})")
@@ -192,27 +186,12 @@ def _origin(
     )
 
 
-def _model(camera: GivenIntrinsics, spec: CameraSpec) -> CameraModel:
-    """The camera model of given intrinsics (OpenCV's frame) for a rig camera."""
-    from wand_calib_ros.core.model.known_intrinsics import known_model
-
-    return known_model(
-        camera.distortion_model,
-        np.array(camera.camera_matrix),
-        np.array(camera.distortion),
-        np.asarray(spec.m),
-        spec.image_size,
-        name=spec.name,
-        camera_model=spec.camera_model,
-    )
-
-
 def _given_rig(
     source: Path, cameras: Path, rig: RigSpec, given: list[GivenIntrinsics], frame: PixelFrame, args: argparse.Namespace
-) -> tuple[str, str]:
+) -> tuple[str, str, RigSpec]:
     """The rig file ``cameras`` with each camera's intrinsics from ``given`` (matched by name, else by order,
-    taken from the pixel ``frame`` they are written in) as text, checked to read as a rig file where it is
-    written, and what was matched, in words."""
+    taken from the pixel ``frame`` they are written in) as text, what was matched, in words, and the rig that
+    text describes (read as a rig file where it is written)."""
     import yaml
 
     from wand_calib_ros.io.imports.given import matched, with_given
@@ -228,7 +207,7 @@ def _given_rig(
         for camera, spec in zip(chosen, rig.cameras, strict=True)
     ]
     text = yaml_text(with_given(read_yaml(cameras), chosen, fixed=not args.as_start))
-    parse_rig(yaml.safe_load(text), out)  # what is written is a rig file this package reads where it is written
+    held = parse_rig(yaml.safe_load(text), out)  # a rig file this package reads where it is written
     pairs = ", ".join(f"{c.name} -> {s.name} ({c.distortion_model})" for c, s in zip(chosen, rig.cameras, strict=True))
     kind = "as a start" if args.as_start else "held fixed"
-    return text, f"imported the intrinsics of {len(chosen)} cameras {how}, {kind}: {pairs}"
+    return text, f"imported the intrinsics of {len(chosen)} cameras {how}, {kind}: {pairs}", held
