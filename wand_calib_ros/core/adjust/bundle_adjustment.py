@@ -576,12 +576,13 @@ def _evaluate(
     layout: BlockLayout,
     carried: IntArray,
     loss_scale: float | None,
+    reuse: NormalEquations | None = None,
 ) -> tuple[FloatArray, NormalEquations]:
     """(M, 2) residuals at ``state`` and the normal equations of the (Huber-weighted) problem there,
-    chunk by chunk."""
+    chunk by chunk (into the arrays of ``reuse``, normal equations of ``layout`` no longer needed, if given)."""
     unknowns = _Unknowns.of(state)
     res = np.empty((problem.n_observations, 2))
-    normal = empty_normal_equations(layout)
+    normal = empty_normal_equations(layout, reuse)
     cameras = layout.width > 0
     for chunk in layout.chunks:
         part, jc, jp = _linearise_rows(
@@ -788,12 +789,12 @@ def bundle_adjust(
                 chosen = _apply_step(state, delta_c, back_substitute(delta_c, v_inv, gauss_newton, layout), carried)
             except ModelError:  # the linearised solution leaves the camera model: only the fixed ones move
                 chosen = None
-            del gauss_newton, normal  # before the next ones are summed: the peak memory holds one W
+            del gauss_newton  # its W is ``normal``'s, whose arrays the chosen start's are summed into
             if chosen is not None:
-                res, normal = _evaluate(chosen, problem, layout, carried, loss_scale)
+                res, normal = _evaluate(chosen, problem, layout, carried, loss_scale, normal)
             if chosen is None or not np.all(np.isfinite(res)):  # (or puts a point behind a pinhole camera)
                 chosen = _apply_step(state, moved, no_step, carried)
-                res, normal = _evaluate(chosen, problem, layout, carried, loss_scale)
+                res, normal = _evaluate(chosen, problem, layout, carried, loss_scale, normal)
             state = chosen
             cost = robust_cost(res, loss_scale) if np.all(np.isfinite(res)) else np.inf
             if not np.isfinite(cost):
@@ -801,6 +802,7 @@ def bundle_adjust(
         else:
             del gauss_newton  # it shares W with ``normal``, which the first accepted step replaces
     iterations, converged = 0, False
+    spare: NormalEquations | None = None  # the arrays of normal equations no longer needed, for the next ones
     final: CameraSystem | None = None  # the undamped reduced system at the final state, once known
     while iterations < max_iterations and not converged:
         iterations += 1
@@ -836,13 +838,14 @@ def bundle_adjust(
                 trusted = False
                 continue
             # The normal equations come with the trial residuals: steps are rarely rejected near a solution.
-            new_res, new_normal = _evaluate(candidate, problem, layout, carried, loss_scale)
+            new_res, new_normal = _evaluate(candidate, problem, layout, carried, loss_scale, spare)
+            spare = None
             new_cost = robust_cost(new_res, loss_scale) if np.all(np.isfinite(new_res)) else np.inf
             if not new_cost < cost:  # before damping every step: the placements the step made worse held
                 held = _hold_worse_placements(state, candidate, problem, new_res, loss_scale, cost)
                 if held is not None:
                     candidate = held
-                    new_res, new_normal = _evaluate(candidate, problem, layout, carried, loss_scale)
+                    new_res, new_normal = _evaluate(candidate, problem, layout, carried, loss_scale, new_normal)
                     new_cost = robust_cost(new_res, loss_scale) if np.all(np.isfinite(new_res)) else np.inf
             if new_cost < cost:
                 accepted = True
@@ -860,12 +863,13 @@ def bundle_adjust(
                 # had a badly started 64-camera robust pass ping-pong between two dampings for 80
                 # iterations (now 30)
                 gain = (cost - new_cost) / max(predicted, 1e-300)
-                state, cost, res, normal = candidate, new_cost, new_res, new_normal
+                state, cost, res, normal, spare = candidate, new_cost, new_res, new_normal, normal
                 lam, growth = max(lam * max(0.1, 1.0 - (2.0 * gain - 1.0) ** 3), 1e-12), 2.0
                 trusted = gain > TRUSTED_GAIN and relative_decrease < NEAR
                 converged = relative_decrease < tolerance
                 break
             # rejected: after an undamped try, lam itself; after a damped one, lam grown (doubling growth)
+            spare = new_normal
             lam, growth = (lam, growth) if used == 0.0 else (lam * growth, 2.0 * growth)
             trusted = False
         if not accepted:
