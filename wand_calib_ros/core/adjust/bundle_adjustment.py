@@ -763,6 +763,7 @@ def bundle_adjust(
         columns.size if cameras else 0,
     )
     lam, growth, trusted = 1e-6, 2.0, False
+    known: tuple[NormalEquations, FloatArray, FloatArray, FloatArray] | None = None  # the state's undamped system
     res, normal = _evaluate(state, problem, layout, carried, loss_scale)
     if not np.all(np.isfinite(res)):
         raise CalibrationFailedError("the bundle adjustment starts from non-finite reprojections")
@@ -799,8 +800,9 @@ def bundle_adjust(
             cost = robust_cost(res, loss_scale) if np.all(np.isfinite(res)) else np.inf
             if not np.isfinite(cost):
                 raise CalibrationFailedError("the bundle adjustment's chosen start has non-finite reprojections")
-        else:
-            del gauss_newton  # it shares W with ``normal``, which the first accepted step replaces
+        else:  # the order stands: the start's Gauss-Newton system is the first iteration's first try
+            known, trusted = (gauss_newton, s, rhs, v_inv), True
+            del gauss_newton
     iterations, converged = 0, False
     spare: NormalEquations | None = None  # the arrays of normal equations no longer needed, for the next ones
     final: CameraSystem | None = None  # the undamped reduced system at the final state, once known
@@ -811,9 +813,13 @@ def bundle_adjust(
             # Near a solution the first try is Gauss-Newton's step: its system is the one the
             # covariance needs, kept should it end the adjustment.
             used = 0.0 if attempt == 0 and trusted else lam
-            step = undamped(normal) if used == 0.0 else damped(normal, used)
+            if used == 0.0 and known is not None:
+                step, s, rhs, v_inv = known
+            else:
+                step = undamped(normal) if used == 0.0 else damped(normal, used)
+                if cameras:
+                    s, rhs, v_inv = reduced_system(step, layout)
             if cameras:
-                s, rhs, v_inv = reduced_system(step, layout)
                 delta_c = solve_free(s, rhs, free_flat).reshape(n_cameras, columns.size)
                 delta_p = back_substitute(delta_c, v_inv, step, layout)
                 # the decrease the linearised problem promises: delta^T g + lambda delta^T D delta
@@ -864,6 +870,7 @@ def bundle_adjust(
                 # iterations (now 30)
                 gain = (cost - new_cost) / max(predicted, 1e-300)
                 state, cost, res, normal, spare = candidate, new_cost, new_res, new_normal, normal
+                known = None
                 lam, growth = max(lam * max(0.1, 1.0 - (2.0 * gain - 1.0) ** 3), 1e-12), 2.0
                 trusted = gain > TRUSTED_GAIN and relative_decrease < NEAR
                 converged = relative_decrease < tolerance
@@ -876,7 +883,7 @@ def bundle_adjust(
             converged = True  # no decrease possible: at a minimum to machine precision
     sigma = _sigma(res, loss_scale, dof)
     if cameras and final is None:  # the normal equations are always those of the final state
-        s, rhs, _ = reduced_system(undamped(normal), layout)
+        s, rhs, _ = known[1:] if known is not None else reduced_system(undamped(normal), layout)
         final = CameraSystem(columns, s, rhs)
     covariance = final.covariance(free, sigma) if final is not None else np.zeros((n_cameras * N_CAMERA_PARAMS,) * 2)
     return BundleResult(state, res, iterations, converged, camera_std(covariance), covariance, sigma, (m, p), final)
