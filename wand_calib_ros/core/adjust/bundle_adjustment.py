@@ -803,12 +803,11 @@ def bundle_adjust(
             del gauss_newton  # its W is ``normal``'s, whose arrays the chosen start's are summed into
             if chosen is not None:
                 res, normal = _evaluate(chosen, problem, layout, carried, loss_scale, normal)
-            chosen_step = chosen is not None and bool(np.all(np.isfinite(res)))
-            if not chosen_step:  # (or puts a point behind a pinhole camera)
-                chosen = _apply_step(state, moved, no_step, carried)
+            if chosen is None or not np.all(np.isfinite(res)):  # (or puts a point behind a pinhole camera)
+                chosen, delta_c = _apply_step(state, moved, no_step, carried), moved
                 res, normal = _evaluate(chosen, problem, layout, carried, loss_scale, normal)
             state = chosen
-            flat = (delta_c if chosen_step else moved).reshape(-1)
+            flat = delta_c.reshape(-1)
             previous = float(flat @ s @ flat) / (cost / dof)  # the move's length, chi-square units
             cost = robust_cost(res, loss_scale) if np.all(np.isfinite(res)) else np.inf
             if not np.isfinite(cost):
