@@ -737,8 +737,9 @@ def bundle_adjust(
             (:data:`CAMERAS_SETTLED`; passes that only decide outliers or a test settle at
             :data:`DECIDING_SETTLED`).
         last_step: end with a step not linearised again, when the convergence so far says the step after it
-            would be worth less than ``settled``: its cameras' worth w times the ratio of w to the previous
-            step's (the rate at which the steps shrink; Gauss-Newton's shrink faster still). The step is
+            would end the adjustment: its cameras' worth w times the ratio of w to the previous step's (the
+            rate at which the steps shrink; Gauss-Newton's shrink faster still) below ``settled``, or the
+            decrease it promises times its ratio to the previous one's below ``tolerance``. The step is
             Gauss-Newton's, taken once its residuals (a fraction of the cost of a linearisation) show a
             lower cost; the covariance comes from the system it was computed on, its gradient moved along
             the step. Mocap16's final adjustment: steps worth 1,075 and 0.056 chi-square units (the second
@@ -774,6 +775,13 @@ def bundle_adjust(
     lam, growth, trusted = 1e-6, 2.0, False
     known: _Reduced | None = None  # the state's undamped system, once reduced
     previous = 0.0  # the cameras' part of the last step taken, chi-square units (0: none yet)
+    promised = 0.0  # the decrease the last step taken promised (0: none yet)
+
+    def successor_ends(worth: float, predicted: float) -> bool:
+        """Whether the step after one worth ``worth`` (chi-square units) promising ``predicted`` would end the
+        adjustment, at the rate the steps shrink."""
+        return last_step and (worth * worth < settled * previous or predicted * predicted < tolerance * cost * promised)
+
     res, normal = _evaluate(state, problem, layout, carried, loss_scale)
     if not np.all(np.isfinite(res)):
         raise CalibrationFailedError("the bundle adjustment starts from non-finite reprojections")
@@ -812,6 +820,7 @@ def bundle_adjust(
             cost = robust_cost(res, loss_scale) if np.all(np.isfinite(res)) else np.inf
             if not np.isfinite(cost):
                 raise CalibrationFailedError("the bundle adjustment's chosen start has non-finite reprojections")
+            trusted = True  # from the linearised solution, Gauss-Newton's step first
         else:  # the order stands: the start's Gauss-Newton system is the first iteration's first try
             known, trusted = (gauss_newton, s, rhs, v_inv), True
             del gauss_newton
@@ -836,22 +845,22 @@ def bundle_adjust(
                 accepted = converged = True
                 final = CameraSystem(columns, s, rhs) if cameras and used == 0.0 else None
                 break
-            if attempt == 0 and last_step and worth * worth < settled * previous:  # its successor is settled
+            if attempt == 0 and successor_ends(worth, predicted):
                 if used != 0.0:  # (a damped step is shorter: Gauss-Newton's is checked too)
                     used = 0.0
                     s, rhs, delta_c, delta_p, predicted, known = _solve_step(
                         normal, layout, free_flat, used, known, columns.size
                     )
-                    worth = float(delta_c.reshape(-1) @ rhs) / (cost / dof)
+                    worth = float(delta_c.reshape(-1) @ rhs) / (cost / dof) if cameras else np.inf
                 last = (
                     _last_step(state, delta_c, delta_p, carried, problem, loss_scale, cost)
-                    if worth * worth < settled * previous
+                    if successor_ends(worth, predicted)
                     else None
                 )
                 if last is not None:
                     state, res, cost = last
                     # the system where the step was computed, its gradient moved along the step (linearly)
-                    final = CameraSystem(columns, s, rhs - s @ delta_c.reshape(-1))
+                    final = CameraSystem(columns, s, rhs - s @ delta_c.reshape(-1)) if cameras else None
                     accepted = converged = True
                     break
             try:
@@ -887,7 +896,7 @@ def bundle_adjust(
                 # iterations (now 30)
                 gain = (cost - new_cost) / max(predicted, 1e-300)
                 state, cost, res, normal, spare = candidate, new_cost, new_res, new_normal, normal
-                known, previous = None, worth
+                known, previous, promised = None, worth, predicted
                 lam, growth = max(lam * max(0.1, 1.0 - (2.0 * gain - 1.0) ** 3), 1e-12), 2.0
                 trusted = gain > TRUSTED_GAIN and relative_decrease < NEAR
                 converged = relative_decrease < tolerance
