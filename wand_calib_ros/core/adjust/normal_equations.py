@@ -222,9 +222,10 @@ def _schur_chunks(
     block_chunk = chunk_of_rank[rank[block_placement]]
     order = np.argsort(block_chunk, kind="stable")
     bounds = np.searchsorted(block_chunk[order], np.arange(chunk + 2))
-    # each block's camera among its chunk's cameras: distinct (chunk, camera) keys, ascending
-    keys, local = np.unique(block_chunk[order] * n_cameras + block_camera[order], return_inverse=True)
-    key_bounds = np.searchsorted(keys // n_cameras, np.arange(chunk + 2))
+    # each block's camera among its chunk's cameras (ascending): a running count over the cameras seen per chunk
+    present = np.zeros((chunk + 1, n_cameras), dtype=bool)
+    present[block_chunk, block_camera] = True
+    local = np.cumsum(present, axis=1) - 1
     chunks = []
     for i in range(chunk + 1):
         blocks = order[bounds[i] : bounds[i + 1]]
@@ -233,8 +234,8 @@ def _schur_chunks(
                 by_rank[first_rank[i] : first_rank[i + 1]],
                 blocks,
                 rank[block_placement[blocks]] - first_rank[i],
-                local[bounds[i] : bounds[i + 1]] - key_bounds[i],
-                keys[key_bounds[i] : key_bounds[i + 1]] % n_cameras,
+                local[i, block_camera[blocks]],
+                np.flatnonzero(present[i]),
             )
         )
     return tuple(chunks)
