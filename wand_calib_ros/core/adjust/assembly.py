@@ -143,10 +143,11 @@ def max_off_axis(result: BundleResult, problem: BundleProblem) -> FloatArray:
     """(C,) largest off-axis angle (rad) each camera observes at the solution (0 for a camera without views)."""
     state = result.state
     points = state.points(problem.wand)[problem.placement, problem.point]
-    rotations = np.stack([pose.rotation for pose in state.poses])[problem.camera]
-    translations = np.stack([pose.translation for pose in state.poses])[problem.camera]
-    in_cam = np.einsum("mij,mj->mi", rotations, points) + translations
-    angles = np.arctan2(np.hypot(in_cam[:, 0], in_cam[:, 1]), in_cam[:, 2])
+    # the angle between each camera's optical axis (the third row of R) and the ray from its centre to the point
+    axes = np.stack([pose.rotation[2] for pose in state.poses])[problem.camera]
+    rays = points - np.stack([pose.center for pose in state.poses])[problem.camera]
+    along = np.sum(axes * rays, axis=1)
+    angles = np.arctan2(np.linalg.norm(rays - along[:, None] * axes, axis=1), along)
     out = np.zeros(problem.n_cameras)
     np.maximum.at(out, problem.camera, angles)
     return out
@@ -176,8 +177,8 @@ def assemble(
     squares = np.bincount(problem.camera, np.sum(result.residuals**2, axis=1), minlength=n_cameras)
     with np.errstate(invalid="ignore", divide="ignore"):
         rms_px = np.sqrt(squares / (2 * counts))  # over u and v; NaN for a camera without points
-    blocks = np.unique(problem.placement * n_cameras + problem.camera)  # (placement, camera) pairs seen
-    view_counts = np.bincount(blocks % n_cameras, minlength=n_cameras)
+    key = problem.placement * n_cameras + problem.camera  # (placement, camera) pairs seen: runs of the sorted problem
+    view_counts = np.bincount(problem.camera[np.r_[True, key[1:] != key[:-1]]], minlength=n_cameras)
     cameras = []
     for c, spec in enumerate(rig.cameras):
         std = {name: float(result.camera_std[c, i]) for i, name in enumerate(CAMERA_PARAM_NAMES) if reported[c, i]}
