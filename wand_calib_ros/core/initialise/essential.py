@@ -48,9 +48,10 @@ def epipolar_angles(essential: FloatArray, m0: FloatArray, m1: FloatArray) -> Fl
     """Symmetric angular epipolar error (rad) of (N, 3) bearing pairs, valid on the whole sphere.
 
     The larger of the angles between m1 and the epipolar plane with normal
-    E m0 and between m0 and the plane with normal E^T m1.
+    E m0 and between m0 and the plane with normal E^T m1. ``essential`` (3, 3) gives (N,) angles,
+    a stack (S, 3, 3) of them (S, N).
     """
-    n1 = m0 @ essential.T
+    n1 = m0 @ np.swapaxes(essential, -1, -2)
     n0 = m1 @ essential
     algebraic = np.abs(np.sum(m1 * n1, axis=-1))
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -127,11 +128,13 @@ def ransac_essential(
     while iteration < min(needed, max_iterations):
         iteration += 1
         sample = rng.choice(n, 5, replace=False)
-        for e in minimal_solutions(m0[sample], m1[sample]):
-            errors = epipolar_angles(e, m0, m1)
-            inlier = errors < threshold_rad
-            count = int(inlier.sum())
-            score = float(np.sum(np.minimum(errors, threshold_rad) ** 2))  # MSAC tie-break
+        solutions = minimal_solutions(m0[sample], m1[sample])
+        if not solutions:
+            continue
+        errors = epipolar_angles(np.stack(solutions), m0, m1)  # (S, N): every solution of the sample at once
+        counts = np.sum(errors < threshold_rad, axis=1)
+        scores = np.sum(np.minimum(errors, threshold_rad) ** 2, axis=1)  # MSAC tie-break
+        for e, count, score in zip(solutions, counts.tolist(), scores.tolist(), strict=True):
             if count > best_count or (count == best_count and score < best_score):
                 best_e, best_count, best_score = e, count, score
                 ratio = count / n

@@ -111,13 +111,18 @@ def check_rig(rig: RigSpec) -> None:
 
 def end_to_end_px(uv: FloatArray) -> FloatArray:
     """(F, C) the first-to-last image length (px) of (F, C, K, 2) views (NaN where an end is missing)."""
-    return np.asarray(np.linalg.norm(uv[:, :, -1] - uv[:, :, 0], axis=-1), dtype=np.float64)
+    return _distance(uv[:, :, 0], uv[:, :, -1])
 
 
 def image_lengths(uv: FloatArray) -> tuple[FloatArray, FloatArray]:
     """(|AB|, |BC|) image lengths (px) of (..., 3, 2) views (NaN where a point is missing)."""
-    segments = np.linalg.norm(np.diff(uv, axis=-2), axis=-1)  # (..., 2)
-    return segments[..., 0], segments[..., 1]
+    return _distance(uv[..., 0, :], uv[..., 1, :]), _distance(uv[..., 1, :], uv[..., 2, :])
+
+
+def _distance(first: FloatArray, second: FloatArray) -> FloatArray:
+    """(...) the distance of (..., 2) points (component by component: the dense views of a large rig are mostly
+    NaN, and their differences as whole arrays cost as much as the rest of the checks)."""
+    return np.asarray(np.hypot(second[..., 0] - first[..., 0], second[..., 1] - first[..., 1]), dtype=np.float64)
 
 
 def check_views(rig: RigSpec, observations: WandObservations) -> None:
