@@ -35,15 +35,16 @@ def triangulate_placements(models: tuple[CameraModel, ...], poses: tuple[Pose, .
         (P, K, 3) the markers in the reference frame (NaN where fewer than two views).
     """
     n_placements, n_cameras, n_markers = uv.shape[:3]
-    point, rays, centres = [], [], []
-    for c in range(n_cameras):  # only the pixels seen: a camera sees a fraction of the placements
-        placement, marker = np.nonzero(np.isfinite(uv[:, c, :, 0]) & np.isfinite(uv[:, c, :, 1]))
-        rotation = poses[c].rotation
-        point.append(placement * n_markers + marker)
-        rays.append(unproject(models[c], uv[placement, c, marker]) @ rotation)  # R^T m
-        centres.append(np.broadcast_to(poses[c].center, (placement.size, 3)))
-    points = triangulate_rays(np.concatenate(point), n_placements * n_markers, np.concatenate(rays),
-                              np.concatenate(centres))  # fmt: skip
+    seen = np.isfinite(uv[..., 0] + uv[..., 1])  # (P, C, K)
+    # only the pixels seen (a camera sees a fraction of the placements), camera by camera: one run each
+    camera, placement, marker = np.nonzero(seen.transpose(1, 0, 2))
+    bounds = np.searchsorted(camera, np.arange(n_cameras + 1))
+    rays = np.empty((camera.size, 3))
+    for c in np.flatnonzero(np.diff(bounds)):
+        run = slice(bounds[c], bounds[c + 1])
+        rays[run] = unproject(models[c], uv[placement[run], c, marker[run]]) @ poses[c].rotation  # R^T m
+    centres = np.stack([pose.center for pose in poses])
+    points = triangulate_rays(placement * n_markers + marker, n_placements * n_markers, rays, centres, camera)
     return points.reshape(n_placements, uv.shape[2], 3)
 
 

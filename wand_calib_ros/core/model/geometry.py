@@ -175,25 +175,31 @@ def triangulate(bearings: FloatArray, rotations: FloatArray, translations: Float
     return triangulate_rays(point, m.shape[0], rays, centres[view])
 
 
-def triangulate_rays(point: IntArray, n_points: int, rays: FloatArray, centres: FloatArray) -> FloatArray:
+def triangulate_rays(
+    point: IntArray, n_points: int, rays: FloatArray, centres: FloatArray, view: IntArray | None = None
+) -> FloatArray:
     """The points closest to their rays (the normal equations of :func:`triangulate`), from flat arrays.
 
     Args:
         point: (M,) which point each ray belongs to (0 <= point < n_points).
         n_points: number of points.
         rays: (M, 3) unit ray directions in the reference frame (w = R^T m).
-        centres: (M, 3) the rays' origins, the camera centres, mm.
+        centres: (M, 3) the rays' origins, the camera centres, mm; with ``view``, (V, 3) the centres of the views.
+        view: (M,) each ray's view (an index into ``centres``), or None.
 
     Returns:
         (n_points, 3) the points, mm; NaN where fewer than two rays or (nearly) parallel ones.
     """
-    return solve_ray_sums(*ray_sums(point, n_points, rays, centres))
+    return solve_ray_sums(*ray_sums(point, n_points, rays, centres, view))
 
 
 def ray_sums(
-    point: IntArray, n_points: int, rays: FloatArray, centres: FloatArray
+    point: IntArray, n_points: int, rays: FloatArray, centres: FloatArray, view: IntArray | None = None
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Each point's normal equations ``sum_v (I - w w^T) X = sum_v (I - w w^T) c`` (see :func:`triangulate_rays`).
+    """Each point's normal equations ``sum_v (I - w w^T) X = sum_v (I - w w^T) c`` (see :func:`triangulate_rays`,
+    whose arguments these are).
+
+    Written component by component on (M,) arrays: no (M, 3) temporary beyond the rays themselves.
 
     Returns:
         (n_points,) rays per point, (n_points, 3, 3) the left-hand sides and (n_points, 3) the right-hand sides.
@@ -201,12 +207,14 @@ def ray_sums(
     count = np.bincount(point, minlength=n_points).astype(np.float64)
     # lhs = count * I - sum w w^T ; rhs = sum c - sum w (w . c): sums over each point's rays
     lhs = np.empty((n_points, 3, 3))
+    w = rays.T
     for i in range(3):
         for j in range(i, 3):
-            summed = np.bincount(point, rays[:, i] * rays[:, j], minlength=n_points)
+            summed = np.bincount(point, w[i] * w[j], minlength=n_points)
             lhs[:, i, j] = lhs[:, j, i] = (count if i == j else 0.0) - summed
-    along = rays * np.sum(rays * centres, axis=1)[:, None]  # w (w . c)
-    rhs = np.stack([np.bincount(point, centres[:, i] - along[:, i], minlength=n_points) for i in range(3)], axis=1)
+    c = centres.T if view is None else centres.T[:, view]  # (3, M)
+    along = w[0] * c[0] + w[1] * c[1] + w[2] * c[2]  # w . c
+    rhs = np.stack([np.bincount(point, c[i] - w[i] * along, minlength=n_points) for i in range(3)], axis=1)
     return count, lhs, rhs.astype(np.float64)
 
 
