@@ -94,15 +94,16 @@ def gate_views(uv: FloatArray, residuals: FloatArray, threshold_px: float) -> tu
         threshold_px: largest 2D residual a view may have.
 
     Returns:
-        The pixels with rejected views set to NaN, and the (P, C) mask of rejected views.
+        The pixels with rejected views set to NaN (``uv`` itself when none is), and the (P, C) mask of rejected
+        views.
     """
-    placement, camera, _ = np.nonzero(np.all(np.isfinite(uv), axis=-1))  # sorted by placement, then camera
+    placement, camera, _ = np.nonzero(np.isfinite(uv[..., 0] + uv[..., 1]))  # sorted by placement, then camera
     worst = np.zeros(uv.shape[:2])
     if placement.size:  # each view's largest residual: a maximum over its run of points
         first = np.flatnonzero(np.r_[True, (placement[1:] != placement[:-1]) | (camera[1:] != camera[:-1])])
         worst[placement[first], camera[first]] = np.maximum.reduceat(np.linalg.norm(residuals, axis=1), first)
     rejected = worst > threshold_px
-    return np.where(rejected[..., None, None], np.nan, uv), rejected
+    return (np.where(rejected[..., None, None], np.nan, uv) if rejected.any() else uv), rejected
 
 
 def enough_views(uv: FloatArray) -> NDArray[np.bool_]:
