@@ -109,7 +109,8 @@ def calibrate(
     if options.max_placements is not None and usable.size > options.max_placements:
         log.info("using %d of %d placements (max_placements)", options.max_placements, usable.size)
         usable = usable[spread_subset(usable.size, options.max_placements)]
-    uv = obs.uv[usable]  # partial views stay: the bundle adjustment uses every point seen
+    # partial views stay: the bundle adjustment uses every point seen (every frame usable: no copy of the views)
+    uv = obs.uv if usable.size == complete.shape[0] else obs.uv[usable]
     # (a two-marker wand's views are relabelled below: their flags would not follow)
     saturated = None if obs.saturated is None or rig.wand.n_points == 2 else obs.saturated[usable]
     log.info("%d of %d frames show the whole wand to at least two cameras", usable.size, complete.shape[0])

@@ -184,6 +184,7 @@ def refine_calibration(
         log.info("%d more placements fit the solution: admitted", admitted.sum())
         used = np.concatenate([used, aside[admitted]])
         uv_used = np.concatenate([uv_used, admitted_uv])
+    del admitted_uv  # (its views are in ``uv_used`` now: the final adjustment's memory is the dense views' once)
     if admitted.any() or clocks.modelled:  # with timing, the refreshed motion changes the problem
         state = BundleState(
             result.state.models,
