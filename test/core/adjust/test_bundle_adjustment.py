@@ -120,12 +120,15 @@ def test_jacobians_match_finite_differences(lenses: str) -> None:
         assert np.allclose(jp[finite, :, j], numeric[finite], atol=1e-5)
 
 
-def test_sparse_normal_equations_and_schur_complement_match_the_dense_jacobian(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+@pytest.mark.parametrize("threaded", [False, True])
+def test_sparse_normal_equations_and_schur_complement_match_the_dense_jacobian(monkeypatch, threaded: bool) -> None:  # type: ignore[no-untyped-def]
     # Three cameras, each view missing with probability 0.3 (placements seen by two or three), some
     # single markers missing (views of one or two points), Huber weights on some residuals, a timing
-    # column, chunks of about 64 observations: the sums chunk by chunk and the chunked Schur
-    # complement against J^T W J and its dense elimination.
+    # column, chunks of about 64 observations: the sums chunk by chunk (by one thread, or shared by
+    # two) and the chunked Schur complement against J^T W J and its dense elimination.
     monkeypatch.setattr("wand_calib_ros.core.adjust.normal_equations.CHUNK_OBSERVATIONS", 64)
+    monkeypatch.setattr("wand_calib_ros.core.adjust.bundle_adjustment.THREADED_CHUNKS", 2 if threaded else 10**9)
+    monkeypatch.setattr("wand_calib_ros.core.adjust.bundle_adjustment._cores", lambda: 2)
     scenario, data, state, _ = _setup(1.0, 300, 4, n_cameras=3)
     uv = data.observations.uv.copy()
     rng = np.random.default_rng(5)

@@ -29,7 +29,9 @@ computed once per adjustment).
 from __future__ import annotations
 
 import logging
+import os
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,6 +42,7 @@ from wand_calib_ros.core.adjust.normal_equations import (
     N_PLACEMENT_PARAMS,
     BlockLayout,
     NormalEquations,
+    ObservationChunk,
     accumulate,
     back_substitute,
     block_layout,
@@ -570,6 +573,12 @@ def _linearise(
     return np.concatenate(res), np.concatenate(jc), np.concatenate(jp)
 
 
+#: An evaluation of at least this many chunks is shared by two threads when the process may use two cores: numpy
+#: releases the interpreter lock in its loops, and the chunks' sums are disjoint but for the cameras' (U and their
+#: gradient, each thread's own, added at the end). Mocap16's 452k observations: 0.25 -> 0.18 s per evaluation.
+THREADED_CHUNKS = 16
+
+
 def _evaluate(
     state: BundleState,
     problem: BundleProblem,
@@ -584,15 +593,36 @@ def _evaluate(
     res = np.empty((problem.n_observations, 2))
     normal = empty_normal_equations(layout, reuse)
     cameras = layout.width > 0
-    for chunk in layout.chunks:
-        part, jc, jp = _linearise_rows(
-            unknowns, problem, chunk.first, chunk.stop, jacobians=True, cameras=cameras, carried=carried
-        )
-        assert jp is not None
-        res[chunk.first : chunk.stop] = part
-        weights = None if loss_scale is None else _huber_weights(part, loss_scale)
-        accumulate(normal, layout, chunk, jc, jp, weights)
+
+    def run(chunks: tuple[ObservationChunk, ...], into: NormalEquations) -> None:
+        for chunk in chunks:
+            part, jc, jp = _linearise_rows(
+                unknowns, problem, chunk.first, chunk.stop, jacobians=True, cameras=cameras, carried=carried
+            )
+            assert jp is not None
+            res[chunk.first : chunk.stop] = part
+            weights = None if loss_scale is None else _huber_weights(part, loss_scale)
+            accumulate(into, layout, chunk, jc, jp, weights)
+
+    chunks = layout.chunks
+    if len(chunks) < THREADED_CHUNKS or _cores() < 2:
+        run(chunks, normal)
+        return res, normal
+    half = len(chunks) // 2
+    second = normal._replace(u=np.zeros_like(normal.u), gc=np.zeros_like(normal.gc))  # V, W and gp: disjoint rows
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        done = pool.submit(run, chunks[half:], second)
+        run(chunks[:half], normal)
+        done.result()
+    np.add(normal.u, second.u, out=normal.u)
+    np.add(normal.gc, second.gc, out=normal.gc)
     return res, normal
+
+
+def _cores() -> int:
+    """The processor cores this process may run on."""
+    affinity = getattr(os, "sched_getaffinity", None)
+    return len(affinity(0)) if affinity is not None else os.cpu_count() or 1
 
 
 def moved_camera(model: CameraModel, pose: Pose, delta: FloatArray, *, lens: bool = True) -> tuple[CameraModel, Pose]:
