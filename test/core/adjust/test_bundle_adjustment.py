@@ -128,7 +128,7 @@ def test_sparse_normal_equations_and_schur_complement_match_the_dense_jacobian(m
     # two) and the chunked Schur complement against J^T W J and its dense elimination.
     monkeypatch.setattr("wand_calib_ros.core.adjust.normal_equations.CHUNK_OBSERVATIONS", 64)
     monkeypatch.setattr("wand_calib_ros.core.adjust.bundle_adjustment.THREADED_CHUNKS", 2 if threaded else 10**9)
-    monkeypatch.setattr("wand_calib_ros.core.adjust.bundle_adjustment._cores", lambda: 2)
+    monkeypatch.setattr("wand_calib_ros.core.parallel.cores", lambda: 2)
     scenario, data, state, _ = _setup(1.0, 300, 4, n_cameras=3)
     uv = data.observations.uv.copy()
     rng = np.random.default_rng(5)

@@ -29,9 +29,7 @@ computed once per adjustment).
 from __future__ import annotations
 
 import logging
-import os
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -68,6 +66,7 @@ from wand_calib_ros.core.model.camera_model import (
 )
 from wand_calib_ros.core.model.geometry import Pose, rotation_from_rotvec, tangent_basis
 from wand_calib_ros.core.model.rig import WandSpec
+from wand_calib_ros.core.parallel import both
 
 FloatArray = NDArray[np.float64]
 log = logging.getLogger(__name__)
@@ -573,9 +572,9 @@ def _linearise(
     return np.concatenate(res), np.concatenate(jc), np.concatenate(jp)
 
 
-#: An evaluation of at least this many chunks is shared by two threads when the process may use two cores: numpy
-#: releases the interpreter lock in its loops, and the chunks' sums are disjoint but for the cameras' (U and their
-#: gradient, each thread's own, added at the end). Mocap16's 452k observations: 0.25 -> 0.18 s per evaluation.
+#: An evaluation of at least this many chunks is shared by two threads (:func:`~wand_calib_ros.core.parallel.both`):
+#: the chunks' sums are disjoint but for the cameras' (U and their gradient, each half's own, added at the end).
+#: Mocap16's 452k observations: 0.25 -> 0.18 s per evaluation.
 THREADED_CHUNKS = 16
 
 
@@ -604,25 +603,15 @@ def _evaluate(
             weights = None if loss_scale is None else _huber_weights(part, loss_scale)
             accumulate(into, layout, chunk, jc, jp, weights)
 
-    chunks = layout.chunks
-    if len(chunks) < THREADED_CHUNKS or _cores() < 2:
+    chunks, half = layout.chunks, len(layout.chunks) // 2
+    if len(chunks) < THREADED_CHUNKS:
         run(chunks, normal)
         return res, normal
-    half = len(chunks) // 2
     second = normal._replace(u=np.zeros_like(normal.u), gc=np.zeros_like(normal.gc))  # V, W and gp: disjoint rows
-    with ThreadPoolExecutor(max_workers=1) as pool:
-        done = pool.submit(run, chunks[half:], second)
-        run(chunks[:half], normal)
-        done.result()
+    both(lambda: run(chunks[:half], normal), lambda: run(chunks[half:], second))
     np.add(normal.u, second.u, out=normal.u)
     np.add(normal.gc, second.gc, out=normal.gc)
     return res, normal
-
-
-def _cores() -> int:
-    """The processor cores this process may run on."""
-    affinity = getattr(os, "sched_getaffinity", None)
-    return len(affinity(0)) if affinity is not None else os.cpu_count() or 1
 
 
 def moved_camera(model: CameraModel, pose: Pose, delta: FloatArray, *, lens: bool = True) -> tuple[CameraModel, Pose]:

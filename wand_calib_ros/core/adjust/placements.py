@@ -20,8 +20,13 @@ from wand_calib_ros.core.adjust.bundle_adjustment import (
 from wand_calib_ros.core.model.camera_model import CameraModel, unproject
 from wand_calib_ros.core.model.geometry import Pose, triangulate_rays, wand_directions
 from wand_calib_ros.core.model.rig import WandSpec
+from wand_calib_ros.core.parallel import both
 
 FloatArray = NDArray[np.float64]
+
+#: Triangulations of more rays than this unproject them in two threads, half of the cameras each
+#: (:func:`~wand_calib_ros.core.parallel.both`).
+SPLIT_RAYS = 50_000
 
 
 def triangulate_placements(models: tuple[CameraModel, ...], poses: tuple[Pose, ...], uv: FloatArray) -> FloatArray:
@@ -40,9 +45,19 @@ def triangulate_placements(models: tuple[CameraModel, ...], poses: tuple[Pose, .
     camera, placement, marker = np.nonzero(seen.transpose(1, 0, 2))
     bounds = np.searchsorted(camera, np.arange(n_cameras + 1))
     rays = np.empty((camera.size, 3))
-    for c in np.flatnonzero(np.diff(bounds)):
-        run = slice(bounds[c], bounds[c + 1])
-        rays[run] = unproject(models[c], uv[placement[run], c, marker[run]]) @ poses[c].rotation  # R^T m
+
+    def unproject_cameras(cameras: NDArray[np.int64]) -> None:
+        for c in cameras:
+            run = slice(bounds[c], bounds[c + 1])
+            rays[run] = unproject(models[c], uv[placement[run], c, marker[run]]) @ poses[c].rotation  # R^T m
+
+    seeing = np.flatnonzero(np.diff(bounds))
+    half = int(np.searchsorted(bounds[seeing + 1], camera.size / 2))  # the cameras of about half of the rays
+    both(
+        lambda: unproject_cameras(seeing[:half]),
+        lambda: unproject_cameras(seeing[half:]),
+        split=camera.size > SPLIT_RAYS,
+    )
     centres = np.stack([pose.center for pose in poses])
     points = triangulate_rays(placement * n_markers + marker, n_placements * n_markers, rays, centres, camera)
     return points.reshape(n_placements, uv.shape[2], 3)
