@@ -146,6 +146,7 @@ def test_sparse_normal_equations_and_schur_complement_match_the_dense_jacobian(m
     assert not all(chunk.full for chunk in layout.chunks)
     chunked_res, normal = _evaluate(state, problem, layout, every, 1.5)
     assert np.array_equal(chunked_res, res)
+    assert np.array_equal(residuals(state, problem), res)
     s, rhs, _ = reduced_system(normal, layout)
     u, gc = normal.u, normal.gc
 

@@ -526,11 +526,17 @@ def residuals(state: BundleState, problem: BundleProblem) -> FloatArray:
     """(M, 2) reprojection residuals (projected minus observed) in px. Pure."""
     unknowns = _Unknowns.of(state)
     out = np.empty((problem.n_observations, 2))
-    for first in range(0, problem.n_observations, CHUNK_OBSERVATIONS):
-        stop = min(first + CHUNK_OBSERVATIONS, problem.n_observations)
-        out[first:stop] = _linearise_rows(
-            unknowns, problem, first, stop, jacobians=False, cameras=False, carried=_NO_TIMING
-        )[0]
+    firsts = range(0, problem.n_observations, CHUNK_OBSERVATIONS)
+
+    def run(chunk_firsts: range) -> None:
+        for first in chunk_firsts:
+            stop = min(first + CHUNK_OBSERVATIONS, problem.n_observations)
+            out[first:stop] = _linearise_rows(
+                unknowns, problem, first, stop, jacobians=False, cameras=False, carried=_NO_TIMING
+            )[0]
+
+    half = len(firsts) // 2
+    both(lambda: run(firsts[:half]), lambda: run(firsts[half:]), split=len(firsts) >= THREADED_CHUNKS)
     return out
 
 
