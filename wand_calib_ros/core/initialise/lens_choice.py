@@ -16,7 +16,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wand_calib_ros.core.adjust.bundle_adjustment import (
-    DECIDING_SETTLED,
     INTRINSICS,
     LENS,
     N_CAMERA_PARAMS,
@@ -109,8 +108,7 @@ def choose_models(
     free[candidates] |= parameter_mask(state.models)[candidates] & ~_NOT_INTRINSIC
     problem = BundleProblem.from_dense(rig.wand, uv, clocks.placements(used))
     try:
-        # only a test: settled as the passes that decide outliers are (a chosen camera's model is adjusted again)
-        tested = bundle_adjust(state, problem, free, settled=DECIDING_SETTLED)
+        tested = bundle_adjust(state, problem, free)
     except CoreError as error:  # the alternative did not converge: the fisheye model stays
         log.info("plumb_bob for %s not adjusted (%s)", ", ".join(rig.cameras[c].name for c in candidates), error)
         return result, fixed
