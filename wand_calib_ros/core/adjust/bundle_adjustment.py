@@ -653,7 +653,8 @@ def _apply_step(state: BundleState, delta_c: FloatArray, delta_p: FloatArray, ca
 #: creep by 1e-8 of its cost per iteration for tens of iterations without moving a camera.
 CAMERAS_SETTLED = 1e-3
 #: Near a solution (a step that lowered the cost by less than NEAR of it, as much as it promised to
-#: within TRUSTED_GAIN) the next iteration first tries the undamped (Gauss-Newton) step.
+#: within TRUSTED_GAIN), and after a Gauss-Newton step that did as much as it promised, the next iteration
+#: first tries the undamped (Gauss-Newton) step.
 NEAR = 1e-4
 TRUSTED_GAIN = 0.75
 #: What passes that only decide outliers or test the timing settle at: every camera parameter within
@@ -894,9 +895,12 @@ def bundle_adjust(
                 lam, growth = (lam, growth) if used == 0.0 else (lam * growth, 2.0 * growth)
                 trusted = False
                 continue
-            # The normal equations come with the trial residuals: steps are rarely rejected near a solution.
-            new_res, new_normal = _evaluate(candidate, problem, layout, carried, loss_scale, spare)
-            spare = None
+            # The normal equations come with the trial residuals: steps are rarely rejected near a solution,
+            # Gauss-Newton's least of all: theirs are summed into the state's own arrays (one W held, not two;
+            # the state's are summed again should the step fail).
+            over = spare is None and used == 0.0
+            new_res, new_normal = _evaluate(candidate, problem, layout, carried, loss_scale, normal if over else spare)
+            spare, known = None, None if over else known
             new_cost = robust_cost(new_res, loss_scale) if np.all(np.isfinite(new_res)) else np.inf
             if not new_cost < cost:  # before damping every step: the placements the step made worse held
                 held = _hold_worse_placements(state, candidate, problem, new_res, loss_scale, cost)
@@ -920,14 +924,17 @@ def bundle_adjust(
                 # had a badly started 64-camera robust pass ping-pong between two dampings for 80
                 # iterations (now 30)
                 gain = (cost - new_cost) / max(predicted, 1e-300)
-                state, cost, res, normal, spare = candidate, new_cost, new_res, new_normal, normal
+                state, cost, res, normal, spare = candidate, new_cost, new_res, new_normal, None if over else normal
                 known, previous, promised = None, worth, predicted
                 lam, growth = max(lam * max(0.1, 1.0 - (2.0 * gain - 1.0) ** 3), 1e-12), 2.0
-                trusted = gain > TRUSTED_GAIN and relative_decrease < NEAR
+                trusted = gain > TRUSTED_GAIN and (relative_decrease < NEAR or used == 0.0)
                 converged = relative_decrease < tolerance
                 break
             # rejected: after an undamped try, lam itself; after a damped one, lam grown (doubling growth)
-            spare = new_normal
+            if over:  # the state's normal equations again, in the arrays the step's took
+                _, normal = _evaluate(state, problem, layout, carried, loss_scale, new_normal)
+            else:
+                spare = new_normal
             lam, growth = (lam, growth) if used == 0.0 else (lam * growth, 2.0 * growth)
             trusted = False
         if not accepted:
