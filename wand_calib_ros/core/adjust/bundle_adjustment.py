@@ -764,13 +764,14 @@ def bundle_adjust(
             :data:`DECIDING_SETTLED`).
         last_step: end with a step not linearised again, when the convergence so far says the step after it
             would end the adjustment: its cameras' worth w times the ratio of w to the previous step's (the
-            rate at which the steps shrink; Gauss-Newton's shrink faster still) below ``settled``, or the
-            decrease it promises times its ratio to the previous one's below ``tolerance``. The step is
-            Gauss-Newton's, taken once its residuals (a fraction of the cost of a linearisation) show a
-            lower cost; the covariance comes from the system it was computed on, its gradient moved along
-            the step. Mocap16's final adjustment: steps worth 1,075 and 0.056 chi-square units (the second
-            taken so: next 3e-6 by the rate, 1e-7 measured); a two-camera pair: 14.5, 0.41, 0.0072 (the
-            third taken so: next 1.2e-4 by the rate, 5.6e-4 measured). False: every step is linearised again.
+            rate at which the steps shrink) below ``settled``, or the decrease it promises times its ratio to
+            the previous one's below ``tolerance``. The step is Gauss-Newton's, taken once its residuals (a
+            fraction of the cost of a linearisation) show a lower cost; the covariance comes from the system
+            it was computed on, its gradient moved along the step. The rate guesses the next step within a
+            few times: mocap16's final adjustment, steps worth 1,075 and 0.056 chi-square units (the second
+            taken so: next 3e-6 by the rate, 1e-7 measured); a two-camera pair, 14.5, 0.41 and 0.0072 (the
+            third taken so: next 1.2e-4 by the rate, 5.6e-4 measured, both settled). The state is the one
+            the linearisation after it would have stopped at. False: every step is linearised again.
         choose: decides on the normal equations at the start which camera parameters to estimate
             (e.g. the model order on all placements,
             :class:`~wand_calib_ros.core.adjust.model_order.OrderOnAllPlacements`),
