@@ -18,6 +18,7 @@ from wand_calib_ros.core.adjust.bundle_adjustment import (
 )
 from wand_calib_ros.core.adjust.gating import VIEW_GATE_SIGMAS
 from wand_calib_ros.core.adjust.model_order import FixedParameters, free_mask
+from wand_calib_ros.core.adjust.normal_equations import block_starts
 from wand_calib_ros.core.adjust.placements import triangulate_placements
 from wand_calib_ros.core.adjust.timing import (
     ClockModel,
@@ -177,8 +178,7 @@ def assemble(
     squares = np.bincount(problem.camera, np.sum(result.residuals**2, axis=1), minlength=n_cameras)
     with np.errstate(invalid="ignore", divide="ignore"):
         rms_px = np.sqrt(squares / (2 * counts))  # over u and v; NaN for a camera without points
-    key = problem.placement * n_cameras + problem.camera  # (placement, camera) pairs seen: runs of the sorted problem
-    view_counts = np.bincount(problem.camera[np.r_[True, key[1:] != key[:-1]]], minlength=n_cameras)
+    view_counts = np.bincount(problem.camera[block_starts(problem.placement, problem.camera)], minlength=n_cameras)
     cameras = []
     for c, spec in enumerate(rig.cameras):
         std = {name: float(result.camera_std[c, i]) for i, name in enumerate(CAMERA_PARAM_NAMES) if reported[c, i]}

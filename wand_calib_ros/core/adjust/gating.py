@@ -17,6 +17,7 @@ from wand_calib_ros.core.adjust.bundle_adjustment import (
     bundle_adjust,
     residuals,
 )
+from wand_calib_ros.core.adjust.normal_equations import block_starts
 from wand_calib_ros.core.adjust.placements import fit_placements
 from wand_calib_ros.core.model.rig import RigSpec, WandSpec
 
@@ -100,7 +101,7 @@ def gate_views(uv: FloatArray, residuals: FloatArray, threshold_px: float) -> tu
     placement, camera, _ = np.nonzero(np.isfinite(uv[..., 0] + uv[..., 1]))  # sorted by placement, then camera
     worst = np.zeros(uv.shape[:2])
     if placement.size:  # each view's largest residual: a maximum over its run of points
-        first = np.flatnonzero(np.r_[True, (placement[1:] != placement[:-1]) | (camera[1:] != camera[:-1])])
+        first = block_starts(placement, camera)
         worst[placement[first], camera[first]] = np.maximum.reduceat(np.linalg.norm(residuals, axis=1), first)
     rejected = worst > threshold_px
     return (np.where(rejected[..., None, None], np.nan, uv) if rejected.any() else uv), rejected

@@ -125,6 +125,14 @@ class BlockLayout:
     schur_chunks: tuple[SchurChunk, ...]
 
 
+def block_starts(placement: IntArray, camera: IntArray) -> IntArray:
+    """(B,) the first observation of each block (one placement seen by one camera) of (M,) observations sorted by
+    placement, then camera."""
+    if placement.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    return np.flatnonzero(np.r_[True, (placement[1:] != placement[:-1]) | (camera[1:] != camera[:-1])])
+
+
 def block_layout(
     camera: IntArray, placement: IntArray, point: IntArray, n_cameras: int, n_placements: int, n_points: int, width: int
 ) -> BlockLayout:
@@ -139,12 +147,12 @@ def block_layout(
         ValueError: the observations are not sorted.
         CalibrationFailedError: a placement has no observation.
     """
-    key = placement * n_cameras + camera
-    if np.any(np.diff(key) < 0):
+    if np.any(np.diff(placement * n_cameras + camera) < 0):
         raise ValueError("observations must be sorted by placement, then camera")
-    new_block = np.r_[True, key[1:] != key[:-1]] if key.size else np.zeros(0, bool)
+    first_of_block = block_starts(placement, camera)
+    new_block = np.zeros(camera.size, dtype=bool)
+    new_block[first_of_block] = True
     block_of_obs = np.cumsum(new_block) - 1
-    first_of_block = np.flatnonzero(new_block)
     block_camera, block_placement = camera[first_of_block], placement[first_of_block]
     placement_first_obs = np.searchsorted(placement, np.arange(n_placements + 1))
     if np.any(np.diff(placement_first_obs) == 0):
