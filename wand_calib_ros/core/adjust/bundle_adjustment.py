@@ -804,6 +804,10 @@ def bundle_adjust(
     previous = 0.0  # the cameras' part of the last step taken, chi-square units (0: none yet)
     promised = 0.0  # the decrease the last step taken promised (0: none yet)
 
+    def worth_of(delta_c: FloatArray, rhs: FloatArray) -> float:
+        """The cameras' part of a step, in chi-square units (inf without camera parameters)."""
+        return float(delta_c.reshape(-1) @ rhs) / (cost / dof) if cameras else np.inf
+
     def successor_ends(worth: float, predicted: float) -> bool:
         """Whether the step after one worth ``worth`` (chi-square units) promising ``predicted`` would end the
         adjustment, at the rate the steps shrink."""
@@ -864,7 +868,7 @@ def bundle_adjust(
             s, rhs, delta_c, delta_p, predicted, known = _solve_step(
                 normal, layout, free_flat, used, known, columns.size
             )
-            worth = float(delta_c.reshape(-1) @ rhs) / (cost / dof) if cameras else np.inf  # chi-square units
+            worth = worth_of(delta_c, rhs)
             if attempt == 0 and (predicted < tolerance * cost or worth < settled):
                 # the step is not worth taking, or the cameras' step (their marginal: the placements
                 # follow) is worth less than ``settled`` of a chi-square unit: what is left moves
@@ -878,7 +882,7 @@ def bundle_adjust(
                     s, rhs, delta_c, delta_p, predicted, known = _solve_step(
                         normal, layout, free_flat, used, known, columns.size
                     )
-                    worth = float(delta_c.reshape(-1) @ rhs) / (cost / dof) if cameras else np.inf
+                    worth = worth_of(delta_c, rhs)
                 last = (
                     _last_step(state, delta_c, delta_p, carried, problem, loss_scale, cost)
                     if successor_ends(worth, predicted)
