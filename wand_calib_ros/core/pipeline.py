@@ -32,6 +32,7 @@ from wand_calib_ros.core.judge.quality import judge, noise_wand_error
 from wand_calib_ros.core.model.camera_model import CameraModel
 from wand_calib_ros.core.model.result import CalibrationResult
 from wand_calib_ros.core.model.rig import RigSpec, WandObservations, spread_subset
+from wand_calib_ros.core.model.views import whole_views
 from wand_calib_ros.core.refine import refine_calibration
 
 log = logging.getLogger(__name__)
@@ -189,7 +190,7 @@ def _initialise(rig: RigSpec, uv: NDArray[np.float64], graph: VisionGraph, optio
 def _paper(rig: RigSpec, uv: NDArray[np.float64], options: CalibrationOptions) -> RigInitialisation:
     """The paper's initialisation through the vision graph (pairs of at least ``min_placements`` views)."""
     names = rig.camera_names
-    complete = np.all(np.isfinite(uv), axis=(2, 3))
+    complete = whole_views(uv)
     graph = build_vision_graph(
         names, complete, reference=options.reference_camera, min_shared=options.pair.min_placements
     )
@@ -205,7 +206,7 @@ def _unplaceable(rig: RigSpec, uv: NDArray[np.float64], options: CalibrationOpti
     """Why the cameras cannot be placed one by one instead of through the paper's pairs (None: they can):
     every camera whose intrinsics are estimated needs ``min_placements`` views of the whole wand that
     another camera shares, and the cameras must share views at all."""
-    complete = np.all(np.isfinite(uv), axis=(2, 3))
+    complete = whole_views(uv)
     if not chained(covisibility(complete) > 0):
         return "no camera shares a view of the whole wand with the others"
     views = (complete & (complete.sum(axis=1, keepdims=True) >= 2)).sum(axis=0)

@@ -39,8 +39,8 @@ from wand_calib_ros.core.adjust.gating import (
     enough_views,
     gate_placements,
     gate_threshold,
-    gate_views,
     readmit,
+    rejected_views,
     robust_adjustment,
     subset_state,
 )
@@ -85,6 +85,7 @@ from wand_calib_ros.core.model.camera_model import (
 from wand_calib_ros.core.model.geometry import Pose, wand_directions
 from wand_calib_ros.core.model.result import CalibrationResult, LensTrial
 from wand_calib_ros.core.model.rig import RigSpec, WandSpec, spread_subset
+from wand_calib_ros.core.model.views import some_views
 
 FloatArray = NDArray[np.float64]
 log = logging.getLogger(__name__)
@@ -160,7 +161,9 @@ def refine_calibration(
     robust, sigma, clocks, keep = _robust_pass(
         wand, uv, points, models, poses, keep, low_order_mask(models, full), clocks
     )
-    clean, rejected = gate_views(uv[keep], robust.residuals, VIEW_GATE_SIGMAS * sigma)
+    clean = uv[keep]  # (a copy: its rejected views are set NaN)
+    rejected = rejected_views(clean, robust.residuals, VIEW_GATE_SIGMAS * sigma)
+    clean[rejected] = np.nan
     still = enough_views(clean)
     log.info("robust pass: sigma %.3f px, %d views rejected, %d placements left", sigma, rejected.sum(), still.sum())
     require(int(still.sum()), min_placements, "keep two clean views after outlier rejection")
@@ -216,8 +219,8 @@ def refine_calibration(
                 f"{spec.name}: r(theta) turns over at {np.degrees(radius_limit(model)):.0f} deg, inside the "
                 f"image and below max_view_angle_deg {spec.max_view_angle_deg:g}: check the rig description"
             )
-    seen = np.any(np.isfinite(uv[used]), axis=(2, 3))
-    rejected_views = (seen & ~np.any(np.isfinite(uv_used), axis=(2, 3))).sum(axis=0)
+    seen = some_views(uv[used])
+    views_rejected = (seen & ~some_views(uv_used)).sum(axis=0)
     pulls = () if saturated is None else saturated_pull(
         rig, uv_used, saturated[used], clocks.placements(used), result, free_mask(n_cameras, reference, fixed)
     )  # fmt: skip
@@ -232,7 +235,7 @@ def refine_calibration(
         initial_projections,
         lens_trials,
         len(uv) - used.size,
-        rejected_views,
+        views_rejected,
         warnings,
         clocks,
         tuple(pull.line() for pull in pulls),

@@ -25,7 +25,7 @@ from wand_calib_ros.core.adjust.bundle_adjustment import (
     PlacementTiming,
     bundle_adjust,
 )
-from wand_calib_ros.core.adjust.gating import VIEW_GATE_SIGMAS, gate_views
+from wand_calib_ros.core.adjust.gating import VIEW_GATE_SIGMAS, rejected_views
 from wand_calib_ros.core.adjust.placements import triangulate_placements
 from wand_calib_ros.core.adjust.timing import Timeline, align_views, smooth_motion, timeline
 from wand_calib_ros.core.errors import CoreError
@@ -195,8 +195,8 @@ def prepare(rig: RigSpec, observations: WandObservations, result_path: Path) -> 
     _require_fit(result_path, document, names, problem, res)
     world = wand_points[problem.placement, problem.point]
     sigma = float(document.get("metrics", {}).get("sigma_px", np.nan))
-    _, rejected_views = gate_views(uv, np.nan_to_num(res, nan=np.inf), VIEW_GATE_SIGMAS * sigma)
-    rejected = rejected_views[problem.placement, problem.camera] if np.isfinite(sigma) else np.zeros(len(res), bool)
+    off = rejected_views(uv, np.nan_to_num(res, nan=np.inf), VIEW_GATE_SIGMAS * sigma)
+    rejected = off[problem.placement, problem.camera] if np.isfinite(sigma) else np.zeros(len(res), bool)
     cameras = []
     for c, pose in enumerate(poses):
         mine = problem.camera == c

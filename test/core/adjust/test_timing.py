@@ -7,7 +7,9 @@ import pytest
 
 from wand_calib_ros.core.adjust.timing import (
     MOTION_WINDOWS,
+    WINDOW_CHOICE_BLOCKS,
     align_views,
+    clearly_independent,
     fit_motion,
     frame_period,
     rate_warnings,
@@ -54,6 +56,19 @@ def test_gaps_and_order_do_not_matter_and_independent_placements_are_not_a_motio
     assert motion.continuous
     scattered = np.random.default_rng(1).uniform(-400, 400, size=(80, 3, 3))
     assert not fit_motion(t, scattered, PERIOD).continuous
+
+
+def test_a_sample_of_a_long_recording_tells_independent_placements_from_a_waved_wand() -> None:
+    n = 2 * WINDOW_CHOICE_BLOCKS[0] * WINDOW_CHOICE_BLOCKS[1] + 1000  # longer than the sample
+    t = np.arange(n) * PERIOD
+    rng = np.random.default_rng(3)
+    swing = 400 * np.sin(2 * np.pi * 0.7 * t)[:, None, None] * np.array([1.0, 0.3, -0.5])
+    waved = swing + np.arange(9).reshape(3, 3) * 100 + rng.normal(0, 1.0, (n, 3, 3))  # 1 mm noise
+    scattered = rng.uniform(-400, 400, size=(n, 3, 3))
+    assert not clearly_independent(t, waved, PERIOD) and smooth_motion(t, waved, PERIOD).continuous
+    assert clearly_independent(t, scattered, PERIOD) and not smooth_motion(t, scattered, PERIOD).continuous
+    # a short recording is all sample: its fits decide
+    assert not clearly_independent(t[:300], scattered[:300], PERIOD)
 
 
 def test_the_motion_window_is_chosen_by_how_well_it_predicts_the_placements() -> None:

@@ -66,6 +66,7 @@ from wand_calib_ros.core.model.camera_model import (
 )
 from wand_calib_ros.core.model.geometry import Pose, rotation_from_rotvec, tangent_basis
 from wand_calib_ros.core.model.rig import WandSpec
+from wand_calib_ros.core.model.views import observed_points
 from wand_calib_ros.core.parallel import both
 
 FloatArray = NDArray[np.float64]
@@ -199,9 +200,8 @@ class BundleProblem:
     def from_dense(wand: WandSpec, uv: FloatArray, timing: PlacementTiming | None = None) -> BundleProblem:
         """Problem from dense (P, C, 3, 2) pixels with NaN for unseen points, and their timing."""
         n_placements, n_cameras = uv.shape[:2]
-        seen = np.all(np.isfinite(uv), axis=-1)  # (P, C, 3)
-        placement, camera, point = (i.astype(np.int64) for i in np.nonzero(seen))
-        observed = uv[placement, camera, point]
+        flat, placement, camera, point = observed_points(uv)
+        observed = uv.reshape(-1, 2)[flat]
         return BundleProblem(
             wand,
             n_cameras,

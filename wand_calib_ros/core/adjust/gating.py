@@ -17,9 +17,9 @@ from wand_calib_ros.core.adjust.bundle_adjustment import (
     bundle_adjust,
     residuals,
 )
-from wand_calib_ros.core.adjust.normal_equations import block_starts
 from wand_calib_ros.core.adjust.placements import fit_placements
 from wand_calib_ros.core.model.rig import RigSpec, WandSpec
+from wand_calib_ros.core.model.views import observed_points, whole_views
 
 #: Fewest views a camera must keep in the final bundle adjustment (its 11 parameters need several).
 MIN_CAMERA_VIEWS = 5
@@ -60,7 +60,7 @@ def gate_placements(rig: RigSpec, uv: FloatArray, errors: FloatArray, threshold:
     own median error instead, so the bundle adjustment can correct the camera rather than drop it.
     """
     keep = np.isfinite(errors) & (np.abs(errors) <= threshold)
-    seen = np.all(np.isfinite(uv), axis=(2, 3))
+    seen = whole_views(uv)
     for c, spec in enumerate(rig.cameras):
         mine = seen[:, c] & np.isfinite(errors)
         if (keep & mine).sum() >= max(MIN_CAMERA_VIEWS, mine.sum() // 2) or not mine.any():
@@ -86,30 +86,27 @@ def robust_sigma(residuals: FloatArray) -> float:
     return max(float(np.median(np.linalg.norm(residuals, axis=1)) / np.sqrt(2 * np.log(2))), MIN_SIGMA_PX)
 
 
-def gate_views(uv: FloatArray, residuals: FloatArray, threshold_px: float) -> tuple[FloatArray, NDArray[np.bool_]]:
-    """Remove every camera view with a point whose residual exceeds ``threshold_px``.
+def rejected_views(uv: FloatArray, residuals: FloatArray, threshold_px: float) -> NDArray[np.bool_]:
+    """(P, C) the camera views with a point whose residual exceeds ``threshold_px`` (a caller sets them NaN in its
+    copy of the views: ``views[rejected] = np.nan``).
 
     Args:
-        uv: (P, C, 3, 2) pixels of the adjusted placements (NaN where not seen).
+        uv: (P, C, K, 2) pixels of the adjusted placements (NaN where not seen).
         residuals: (M, 2) residuals of ``BundleProblem.from_dense(wand, uv)``.
         threshold_px: largest 2D residual a view may have.
-
-    Returns:
-        The pixels with rejected views set to NaN (``uv`` itself when none is), and the (P, C) mask of rejected
-        views.
     """
-    placement, camera, _ = np.nonzero(np.isfinite(uv[..., 0] + uv[..., 1]))  # sorted by placement, then camera
+    flat = observed_points(uv)[0]
     worst = np.zeros(uv.shape[:2])
-    if placement.size:  # each view's largest residual: a maximum over its run of points
-        first = block_starts(placement, camera)
-        worst[placement[first], camera[first]] = np.maximum.reduceat(np.linalg.norm(residuals, axis=1), first)
-    rejected = worst > threshold_px
-    return (np.where(rejected[..., None, None], np.nan, uv) if rejected.any() else uv), rejected
+    if flat.size:  # each view's largest residual: a maximum over its run of points
+        view = flat // uv.shape[2]  # (M,) into the (P C) views
+        first = np.flatnonzero(np.r_[True, view[1:] != view[:-1]])
+        worst.reshape(-1)[view[first]] = np.maximum.reduceat(np.linalg.norm(residuals, axis=1), first)
+    return worst > threshold_px
 
 
 def enough_views(uv: FloatArray) -> NDArray[np.bool_]:
     """(P,) placements seen completely by at least two cameras."""
-    return np.all(np.isfinite(uv), axis=(2, 3)).sum(axis=1) >= 2
+    return whole_views(uv).sum(axis=1) >= 2
 
 
 def subset_state(state: BundleState, mask: NDArray[np.bool_]) -> BundleState:
@@ -156,7 +153,8 @@ def readmit(
     sigma = max(result.sigma, MIN_SIGMA_PX)
     # only deciding which views fit: a loose tolerance; the final adjustment refines everything
     index, fitted = fit_placements(rig.wand, result.state, uv, timing, loss_scale=HUBER_SIGMAS * sigma)
-    clean, _ = gate_views(uv[index], fitted.residuals, VIEW_GATE_SIGMAS * sigma)
+    clean = uv[index]  # (a copy: its rejected views are set NaN)
+    clean[rejected_views(clean, fitted.residuals, VIEW_GATE_SIGMAS * sigma)] = np.nan
     ok = enough_views(clean)
     admitted[index[ok]] = True
-    return admitted, clean[ok], subset_state(fitted.state, ok)
+    return admitted, clean if ok.all() else clean[ok], subset_state(fitted.state, ok)

@@ -20,6 +20,7 @@ from wand_calib_ros.core.adjust.bundle_adjustment import (
 from wand_calib_ros.core.model.camera_model import CameraModel, unproject
 from wand_calib_ros.core.model.geometry import Pose, triangulate_rays, wand_directions
 from wand_calib_ros.core.model.rig import WandSpec
+from wand_calib_ros.core.model.views import seen_points, whole_views
 from wand_calib_ros.core.parallel import both
 
 FloatArray = NDArray[np.float64]
@@ -40,7 +41,7 @@ def triangulate_placements(models: tuple[CameraModel, ...], poses: tuple[Pose, .
         (P, K, 3) the markers in the reference frame (NaN where fewer than two views).
     """
     n_placements, n_cameras, n_markers = uv.shape[:3]
-    seen = np.isfinite(uv[..., 0] + uv[..., 1])  # (P, C, K)
+    seen = seen_points(uv)  # (P, C, K)
     # only the pixels seen (a camera sees a fraction of the placements), camera by camera: one run each
     camera, placement, marker = np.nonzero(seen.transpose(1, 0, 2))
     bounds = np.searchsorted(camera, np.arange(n_cameras + 1))
@@ -111,8 +112,9 @@ def fit_placements(
     models, poses = cameras.models, cameras.poses
     points = triangulate_placements(models, poses, uv)
     usable = np.all(np.isfinite(points), axis=(1, 2)) & (np.linalg.norm(points[:, -1] - points[:, 0], axis=1) > 0)
-    usable &= np.all(np.isfinite(uv), axis=(2, 3)).sum(axis=1) >= 2
-    usable[usable] &= ~unprojectable(models, poses, uv[usable], points[usable])
+    usable &= whole_views(uv).sum(axis=1) >= 2
+    if any(model.is_pinhole for model in models):  # (the fisheye model images every direction)
+        usable[usable] &= ~unprojectable(models, poses, uv[usable], points[usable])
     index = np.flatnonzero(usable)
     start = BundleState(
         models, poses, points[index, 0], wand_directions(points[index, 0], points[index, -1]), cameras.timing

@@ -52,6 +52,9 @@ END_WINDOW = (4, 2)
 #: A recording is a continuous motion when the local fits leave less than this fraction of the points'
 #: spread within each fit (independent placements leave about all of it).
 CONTINUITY_FRACTION = 0.3
+#: A sample of a recording's placements whose fits leave more than this multiple of CONTINUITY_FRACTION of the
+#: spread shows that the recording is no continuous motion (:func:`clearly_independent`).
+CLEARLY_INDEPENDENT = 2.0
 #: frame_period: a period is at least this fraction of the spacings' lower quartile (most images lost), ...
 MAX_MULTIPLE = 5
 #: ... this fraction of the spacings (at least two) are single periods, ...
@@ -324,17 +327,48 @@ def choose_window(times: FloatArray, points: FloatArray, period: float) -> tuple
     A long recording is scored on WINDOW_CHOICE_BLOCKS stretches of consecutive placements spread over
     it: the choice needs a representative sample of the motion, not every placement.
     """
-    order = np.argsort(times, kind="stable")
-    n_blocks = WINDOW_CHOICE_BLOCKS[0]
-    if order.size > n_blocks * WINDOW_CHOICE_BLOCKS[1] * 2:
-        starts = np.linspace(0, order.size - WINDOW_CHOICE_BLOCKS[1], n_blocks).astype(np.int64)
-        order = order[(starts[:, None] + np.arange(WINDOW_CHOICE_BLOCKS[1])).ravel()]
+    order = _sample_stretches(times)
     fits = [fit_motion(times[order], points[order], period, neighbours=n, degree=d) for n, d in MOTION_WINDOWS]
     common = np.all([fit.known for fit in fits], axis=0)
     if not common.any():
         return (MOTION_NEIGHBOURS, MOTION_DEGREE)
     scores = [float(np.mean(fit.residual[common] ** 2)) for fit in fits]
     return MOTION_WINDOWS[int(np.argmin(scores))]
+
+
+def _sample_stretches(times: FloatArray) -> NDArray[np.int64]:
+    """Indices of the WINDOW_CHOICE_BLOCKS stretches of consecutive placements (in time order) spread over a long
+    recording; of every placement, in time order, in a shorter one."""
+    order = np.argsort(times, kind="stable")
+    n_blocks, length = WINDOW_CHOICE_BLOCKS
+    if order.size <= n_blocks * length * 2:
+        return order
+    starts = np.linspace(0, order.size - length, n_blocks).astype(np.int64)
+    return order[(starts[:, None] + np.arange(length)).ravel()]
+
+
+def clearly_independent(times: FloatArray, points: FloatArray, period: float) -> bool:
+    """Whether a long recording's WINDOW_CHOICE_BLOCKS stretches already show that its placements follow no
+    continuous motion, so that the fits of every placement (:func:`smooth_motion`) need not be made to find that.
+
+    The stretches' local fits leave more than CLEARLY_INDEPENDENT times the fraction of the points' spread that
+    :attr:`Motion.continuous` allows (independent placements leave about all of it, a wand waved through the
+    volume a few percent). False for a recording no longer than the sample, and wherever the sample is not clear.
+
+    Args:
+        times: (P,) placement times, in the time unit.
+        points: (P, 3, 3) the placements' markers (NaN where unknown).
+        period: frame period in the time unit.
+    """
+    sample = _sample_stretches(times)
+    if sample.size == times.size:
+        return False
+    fit = fit_motion(times[sample], points[sample], period)
+    fitted = fit.known & np.isfinite(fit.residual) & np.isfinite(fit.spread)
+    if np.count_nonzero(fitted) < max(10, sample.size // 2):
+        return False
+    left = float(np.median(fit.residual[fitted]))
+    return left > CLEARLY_INDEPENDENT * CONTINUITY_FRACTION * float(np.median(fit.spread[fitted]))
 
 
 def align_views(
@@ -491,7 +525,10 @@ def start_clocks(rig: RigSpec, timing: TimingInput | None, points: FloatArray, r
     line = timing.line
     given = timing.given_readouts(n)
     start[:, 1] = np.nan_to_num(given)
-    motion = smooth_motion(line.placement_times, points, line.period)
+    # (independent placements, e.g. a subsampled recording: a sample tells, the fits of them all need not be made)
+    independent = clearly_independent(line.placement_times, points, line.period)
+    motion = None if independent else smooth_motion(line.placement_times, points, line.period)
+    continuous = motion is not None and motion.continuous
     notes = []
     # Stamps that put a frame's views at different instants come from free-running cameras, whose
     # drivers' latencies differ too: ``auto`` estimates their offsets without a test.
@@ -499,7 +536,7 @@ def start_clocks(rig: RigSpec, timing: TimingInput | None, points: FloatArray, r
     for column, mode, what in ((0, offsets, "time offsets"), (1, timing.rolling_shutter, "readout times")):
         if mode == "fixed":
             continue
-        if not motion.continuous:
+        if not continuous:
             if mode == "estimate":
                 raise TimingError(
                     f"{what} cannot be estimated: consecutive frames do not show one continuous motion of the wand "
@@ -510,10 +547,10 @@ def start_clocks(rig: RigSpec, timing: TimingInput | None, points: FloatArray, r
         free[:, column] = True
     free[reference, 0] = False
     free[np.isfinite(given), 1] = False
-    if not motion.continuous and not line.simultaneous:
+    if not continuous and not line.simultaneous:
         notes.append("the stamps put the cameras' views of a frame at different instants, but without a continuous "
                      "motion they are treated as simultaneous")  # fmt: skip
-    modelled = motion.continuous and (free.any() or not line.simultaneous or bool(np.any(start)))
+    modelled = continuous and (free.any() or not line.simultaneous or bool(np.any(start)))
     tentative = (
         modelled and line.simultaneous and not np.any(start) and "estimate" not in (offsets, timing.rolling_shutter)
     )

@@ -32,6 +32,7 @@ from wand_calib_ros.core.model.camera_model import CameraModel
 from wand_calib_ros.core.model.geometry import Pose
 from wand_calib_ros.core.model.result import LensTrial
 from wand_calib_ros.core.model.rig import CameraSpec, RigSpec
+from wand_calib_ros.core.model.views import whole_views
 
 FloatArray = NDArray[np.float64]
 log = logging.getLogger(__name__)
@@ -90,7 +91,7 @@ def initialise_rig(
         graph: the vision graph with the pairs to calibrate.
         options: settings of the pairwise calibrations.
     """
-    complete = np.all(np.isfinite(uv), axis=(2, 3))
+    complete = whole_views(uv)
     n_cameras = len(rig.cameras)
     poses: list[Pose | None] = [None] * n_cameras
     poses[graph.reference] = Pose.identity()

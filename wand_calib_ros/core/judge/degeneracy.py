@@ -13,6 +13,7 @@ from wand_calib_ros.core.adjust.gating import MIN_CAMERA_VIEWS
 from wand_calib_ros.core.adjust.narrow_field import NARROW_FIELD_DEG, field_of_view_deg
 from wand_calib_ros.core.errors import DegenerateDataError, InsufficientDataError
 from wand_calib_ros.core.model.rig import RigSpec
+from wand_calib_ros.core.model.views import whole_views
 
 FloatArray = NDArray[np.float64]
 
@@ -65,8 +66,8 @@ def check_camera_views(rig: RigSpec, uv_seen: FloatArray, uv_used: FloatArray) -
     Raises:
         InsufficientDataError: naming the camera and how many of its views were left.
     """
-    views = np.all(np.isfinite(uv_used), axis=(2, 3)).sum(axis=0)
-    seen = np.all(np.isfinite(uv_seen), axis=(2, 3)).sum(axis=0)
+    views = whole_views(uv_used).sum(axis=0)
+    seen = whole_views(uv_seen).sum(axis=0)
     for c, spec in enumerate(rig.cameras):
         if views[c] < MIN_CAMERA_VIEWS:
             raise InsufficientDataError(

@@ -9,6 +9,7 @@ from numpy.typing import NDArray
 
 from wand_calib_ros.core.errors import InsufficientDataError, ModelError
 from wand_calib_ros.core.model.camera_model import CameraModel
+from wand_calib_ros.core.model.views import whole_views
 
 FloatArray = NDArray[np.float64]
 
@@ -235,7 +236,7 @@ class WandObservations:
     @property
     def complete(self) -> NDArray[np.bool_]:
         """(F, C) True where a camera sees every wand marker."""
-        return np.all(np.isfinite(self.uv), axis=(2, 3))
+        return whole_views(self.uv)
 
     def camera_index(self, name: str) -> int:
         try:

@@ -1,0 +1,26 @@
+"""What dense views hold: the shortcuts give what numpy's reductions over the trailing axes give."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from wand_calib_ros.core.model.views import observed_points, seen_points, some_views, whole_views
+
+
+@pytest.mark.parametrize("n_points", [2, 3, 5])
+def test_markers_views_and_observations_are_those_numpy_finds(n_points: int) -> None:
+    rng = np.random.default_rng(n_points)
+    uv = rng.uniform(0, 1000, size=(40, 6, n_points, 2))
+    uv[rng.random(uv.shape[:3]) < 0.4] = np.nan  # markers not seen
+    uv[rng.random(uv.shape[:2]) < 0.3] = np.nan  # whole views missing
+    uv[0, 0, 0, 1] = np.nan  # one coordinate alone: the marker is not seen
+    seen = np.all(np.isfinite(uv), axis=-1)
+    assert np.array_equal(seen_points(uv), seen)
+    assert np.array_equal(whole_views(uv), np.all(np.isfinite(uv), axis=(2, 3)))
+    assert np.array_equal(some_views(uv), np.any(seen, axis=2))
+    flat, placement, camera, point = observed_points(uv)
+    for mine, numpys in zip((placement, camera, point), np.nonzero(seen), strict=True):
+        assert np.array_equal(mine, numpys)
+    assert np.array_equal(uv.reshape(-1, 2)[flat], uv[seen])
+    assert whole_views(uv[:, 0]).shape == (40,)  # any leading shape
