@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from wand_calib_ros.core.adjust.normal_equations import scaled_inverse, solve_free
+from wand_calib_ros.core.adjust.normal_equations import jacobi_scale, scaled_inverse, solve_free
 
 
 def _badly_scaled(seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -67,3 +67,20 @@ def test_a_prior_adds_its_information_to_the_parameters_it_holds() -> None:
     assert np.allclose(covariance[np.ix_(index, index)], expected, rtol=1e-9, atol=rounding)
     assert np.isclose(np.sqrt(covariance[6, 6]), 15.0, rtol=1e-12)  # only the prior knows v0
     assert np.all(covariance[np.ix_([1, 2, 3], [1, 2, 3])] == 0.0)  # neither free nor at a prior
+
+
+def test_the_inverse_is_the_pseudo_inverse_whether_taken_directly_or_by_eigenvalues() -> None:
+    """A well-conditioned matrix is inverted directly; a singular one (a direction the data leave undetermined) or
+    an ill-conditioned one takes the pseudo-inverse: that direction gets no variance."""
+    for seed in range(6):
+        s, d = _badly_scaled(seed)
+        scaled = s / d[:, None] / d[None, :]
+        by_eigenvalues = np.linalg.pinv(scaled, hermitian=True) / d[:, None] / d[None, :]
+        assert np.allclose(scaled_inverse(s), by_eigenvalues, rtol=1e-10, atol=0.0)
+        for smallest in (0.0, 1e-14):  # singular, and beyond DIRECT_INVERSE_CONDITION
+            values, vectors = np.linalg.eigh(scaled)
+            values[0] = smallest * values[-1]
+            near = d[:, None] * (vectors * values) @ vectors.T * d[None, :]
+            unit = jacobi_scale(near)  # (its diagonal, as scaled_inverse scales it)
+            expected = np.linalg.pinv(near * unit[:, None] * unit[None, :], hermitian=True) * unit[:, None] * unit
+            assert np.array_equal(scaled_inverse(near), expected)
