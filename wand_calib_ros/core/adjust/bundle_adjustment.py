@@ -580,8 +580,8 @@ def _linearise(
 
 #: An evaluation of at least this many chunks is shared by two threads (:func:`~wand_calib_ros.core.parallel.both`):
 #: the chunks' sums are disjoint but for the cameras' (U and their gradient, each half's own, added at the end).
-#: Mocap16's 452k observations: 0.25 -> 0.18 s per evaluation.
-THREADED_CHUNKS = 16
+#: Mocap16's 452k observations: 0.21 -> 0.16 s per evaluation (from 65,000 observations on).
+THREADED_CHUNKS = 8
 
 
 def _evaluate(

@@ -35,10 +35,12 @@ IntArray = NDArray[np.int64]
 
 #: Parameters per placement: A (3), wand direction (2, tangent plane).
 N_PLACEMENT_PARAMS = 5
-#: Observations per chunk of the linearisation: its arrays (a few hundred kB each) stay in cache. The
-#: chunks of a problem are of equal size near it: up to 1.5x of it is one chunk (a live buffer's 5,700
-#: observations: one evaluation 30 % faster than in two).
-CHUNK_OBSERVATIONS = 4096
+#: Observations per chunk of the linearisation: its arrays (up to a MB each) stay in cache, and each of its
+#: numpy calls does enough work to pay for its call (in two threads, the interpreter lock is held while numpy
+#: dispatches a call: 4096 left mocap16's evaluations 10 % slower, 20 % at 64 cameras). The chunks of a problem
+#: are of equal size near it: up to 1.5x of it is one chunk (a live buffer's 5,700 observations: one
+#: evaluation 30 % faster than in two).
+CHUNK_OBSERVATIONS = 8192
 #: Placements per Schur chunk at most: small enough that a chunk's placements share most of their
 #: cameras once sorted by which cameras see them, large enough for one BLAS product to pay.
 SCHUR_PLACEMENTS = 128
