@@ -31,6 +31,7 @@ from wand_calib_ros.core.adjust.bundle_adjustment import (
     bundle_adjust,
     camera_std,
     default_free_mask,
+    residuals,
 )
 from wand_calib_ros.core.adjust.gating import (
     HUBER_SIGMAS,
@@ -42,6 +43,7 @@ from wand_calib_ros.core.adjust.gating import (
     readmit,
     rejected_views,
     robust_adjustment,
+    robust_sigma,
     subset_state,
 )
 from wand_calib_ros.core.adjust.model_order import (
@@ -69,6 +71,7 @@ from wand_calib_ros.core.adjust.timing import (
     ClockModel,
     TimingInput,
     align_views,
+    clearly_synchronised,
     reduce_timing,
     refresh_motion,
     start_clocks,
@@ -338,7 +341,9 @@ def _robust_pass(
     if clocks.tentative:
         robust, sigma = robust_adjustment(start(keep, None), BundleProblem.from_dense(wand, uv[keep]), free)
         problem = BundleProblem.from_dense(wand, uv[keep], clocks.placements(keep))
-        test = _test_timing(problem, clocks, robust.state, free, start(keep, clocks.start))
+        scale = start(keep, clocks.start)
+        absent = _clearly_synchronised(problem, clocks, robust.state, free, scale)
+        test = None if absent else _test_timing(problem, clocks, robust.state, free, scale)
         if test is None:
             log.info("the views are synchronised: no time offsets or readout times")
             note = "time offsets and readout times tested: not significant (synchronised global shutters)"
@@ -355,6 +360,20 @@ def _robust_pass(
     cold = start(keep, clocks.start)  # the robust problem of a pass from the start, from the test's solution if any
     robust, sigma = robust_adjustment(cold if warm is None else warm, problem, with_timing, scale_from=cold)
     return robust, sigma, clocks, keep
+
+
+def _clearly_synchronised(
+    problem: BundleProblem, clocks: ClockModel, synchronised: BundleState, free: NDArray[np.bool_], scale: BundleState
+) -> bool:
+    """Whether the tentative timing parameters clearly stay out (:func:`clearly_synchronised`), on one
+    linearisation at the synchronised pass's solution with them carried, Huber-weighted as :func:`_test_timing`'s
+    adjustments are (the scale ``scale``'s): no adjustment of them when the data plainly hold none."""
+    test_free = free.copy()
+    test_free[:, TIMING] = clocks.free
+    loss_scale = HUBER_SIGMAS * robust_sigma(residuals(scale, problem))
+    at = bundle_adjust(replace(synchronised, timing=clocks.start), problem, test_free, loss_scale=loss_scale,
+                       max_iterations=0)  # fmt: skip
+    return at.system is not None and clearly_synchronised(clocks, at.system, at.sigma, free)
 
 
 def _test_timing(

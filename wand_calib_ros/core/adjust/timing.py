@@ -28,7 +28,9 @@ from wand_calib_ros.core.adjust.bundle_adjustment import (
     N_CAMERA_PARAMS,
     READOUT,
     TIME_OFFSET,
+    TIMING,
     BundleResult,
+    CameraSystem,
     PlacementTiming,
 )
 from wand_calib_ros.core.adjust.chi_square import chi_square_quantile
@@ -64,6 +66,9 @@ MULTIPLE_TOLERANCE = 0.1
 #: ``auto`` keeps the time offsets (the readout times) when they differ from zero at this level
 #: (chi-square test over the cameras).
 SIGNIFICANCE_LEVEL = 0.99
+#: Tentative timing parameters whose linearised statistics stay below this fraction of their quantiles are left
+#: out without adjusting them (:func:`clearly_synchronised`).
+CLEARLY_SYNCHRONISED = 0.5
 #: Frame periods (seconds) outside this range mean stamps in another unit.
 PERIOD_RANGE_S = (1e-4, 10.0)
 #: A camera's frame period that changes by more than this fraction within a recording is reported.
@@ -444,12 +449,46 @@ def timing_input(
     return TimingInput(line, offsets, rolling_shutter, given)
 
 
-def significant(values: FloatArray, covariance: FloatArray, level: float = SIGNIFICANCE_LEVEL) -> bool:
-    """Whether estimates (k,) with covariance (k, k) differ from zero jointly (chi-square test at ``level``)."""
+def significant(
+    values: FloatArray, covariance: FloatArray, level: float = SIGNIFICANCE_LEVEL, fraction: float = 1.0
+) -> bool:
+    """Whether estimates (k,) with covariance (k, k) differ from zero jointly (chi-square test at ``level``; with
+    ``fraction``, whether their statistic exceeds that fraction of the test's quantile)."""
     if values.size == 0:
         return False
     statistic = float(values @ np.linalg.pinv(covariance, hermitian=True) @ values)
-    return statistic > chi_square_quantile(level, values.size)
+    return statistic > fraction * chi_square_quantile(level, values.size)
+
+
+def clearly_synchronised(clocks: ClockModel, system: CameraSystem, sigma: float, free: NDArray[np.bool_]) -> bool:
+    """Whether the tentative timing parameters clearly stay out, judged without adjusting them: on the cameras'
+    system at the synchronised solution with them carried (one linearisation).
+
+    The Gauss-Newton step from there estimates them (and moves the rest along); :func:`reduce_timing`'s tests, in
+    its order (the readout times jointly with every tentative parameter free, then the offsets with the readout
+    times held), then find each statistic below CLEARLY_SYNCHRONISED of its quantile. Where they do not, the
+    timing is tested by adjusting it (:func:`wand_calib_ros.core.refine`), as the statistic of an adjusted
+    solution may differ from the linearised one near the quantile.
+
+    Args:
+        clocks: the tentative model (``clocks.free`` the parameters tested, the ``auto`` ones).
+        system: the cameras' normal equations at the synchronised solution, the timing parameters carried.
+        sigma: the pixel noise of that linearisation (its robust one).
+        free: (C, 20) the other camera parameters estimated.
+    """
+    tested = free.copy()
+    tested[:, TIMING] = clocks.free
+    for column, parameter in ((1, READOUT), (0, TIME_OFFSET)):  # the finer term first, as reduce_timing
+        cameras = np.flatnonzero(tested[:, parameter])
+        if cameras.size == 0:
+            continue
+        values = clocks.start[cameras, column] + system.step(tested)[cameras, parameter]
+        index = cameras * N_CAMERA_PARAMS + parameter
+        covariance = system.covariance(tested, sigma)[np.ix_(index, index)]
+        if significant(values, covariance, fraction=CLEARLY_SYNCHRONISED):
+            return False
+        tested[:, parameter] = False
+    return True
 
 
 @dataclass(frozen=True, eq=False)
