@@ -86,22 +86,21 @@ def coverage_warnings(
     max_theta: float,
     result: BundleResult,
     camera: int,
-    uv: FloatArray,
+    points: FloatArray,
     pinned: bool = False,
 ) -> list[str]:
     """Plain-language warnings about what one camera's data leave weak.
 
     Args:
-        uv: (P, 3, 2) the camera's points in the adjustment (NaN where not seen).
+        points: (N, 2) the camera's image points in the adjustment, px.
         pinned: a narrow camera, its distortion and principal point held (said with them): no warnings
             about its curve and principal point.
     """
     out = []
-    points = uv.reshape(-1, 2)
-    points = points[np.all(np.isfinite(points), axis=1)]
     width, height = spec.image_size
     cell = np.clip((points / [width, height] * COVERAGE_GRID).astype(np.int64), 0, COVERAGE_GRID - 1)
-    covered = np.unique(cell[:, 0] * COVERAGE_GRID + cell[:, 1]).size / COVERAGE_GRID**2
+    cells = np.bincount(cell[:, 0] * COVERAGE_GRID + cell[:, 1], minlength=COVERAGE_GRID**2)
+    covered = np.count_nonzero(cells) / COVERAGE_GRID**2
     if covered < MIN_COVERAGE:
         out.append(
             f"{spec.name}: the wand covered only {100 * covered:.0f} % of the image ({COVERAGE_GRID}x{COVERAGE_GRID} "
@@ -179,11 +178,14 @@ def assemble(
     with np.errstate(invalid="ignore", divide="ignore"):
         rms_px = np.sqrt(squares / (2 * counts))  # over u and v; NaN for a camera without points
     view_counts = np.bincount(problem.camera[block_starts(problem.placement, problem.camera)], minlength=n_cameras)
+    by_camera = np.argsort(problem.camera, kind="stable")  # each camera's observations, a run each
+    bounds = np.searchsorted(problem.camera[by_camera], np.arange(n_cameras + 1))
     cameras = []
     for c, spec in enumerate(rig.cameras):
         std = {name: float(result.camera_std[c, i]) for i, name in enumerate(CAMERA_PARAM_NAMES) if reported[c, i]}
         pinned = fixed.pinned is not None and bool(fixed.pinned.cameras()[c])
-        warnings.extend(coverage_warnings(spec, state.models[c], max_theta[c], result, c, uv[:, c], pinned))
+        mine = problem.uv[by_camera[bounds[c] : bounds[c + 1]]]
+        warnings.extend(coverage_warnings(spec, state.models[c], max_theta[c], result, c, mine, pinned))
         warnings.extend(weak_parameters(spec.name, float(state.models[c].k[0]), std))
         views = int(view_counts[c])
         if rejected_views[c]:
