@@ -142,9 +142,10 @@ def _parse_plain(
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError:
         return None
-    if any(mark in text for mark in ('"', " ", "\t")) or "\r" in text.replace("\r\n", "\n"):
+    if any(mark in text for mark in ('"', " ", "\t")) or ("\r" in text and "\r" in text.replace("\r\n", "\n")):
         return None
-    header = text.split("\n", 1)[0].rstrip("\r").split(",")
+    end = text.find("\n")  # (the first line only: not a copy of the rest)
+    header = text[: end if end >= 0 else len(text)].rstrip("\r").split(",")
     if any(c not in header for c in COLUMNS) or not _cells_per_line_are(raw, len(header)):
         return None
     longest = 1 + (max(map(len, known)) if known else 64)  # a longer name shows as this long: not known
