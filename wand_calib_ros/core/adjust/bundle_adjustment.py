@@ -902,18 +902,32 @@ def bundle_adjust(
                 continue
             # The normal equations come with the trial residuals: steps are rarely rejected near a solution,
             # Gauss-Newton's least of all: theirs are summed into the state's own arrays (one W held, not two;
-            # the state's are summed again should the step fail).
+            # the state's are summed again should the step fail). After a rejection the next try is likelier
+            # rejected too: its residuals first, its normal equations once it is taken (a rejected try then
+            # costs a pass over the residuals, not two linearisations).
             over = spare is None and used == 0.0
-            new_res, new_normal = _evaluate(candidate, problem, layout, carried, loss_scale, normal if over else spare)
-            spare, known = None, None if over else known
+            new_normal: NormalEquations | None = None
+            if attempt == 0:
+                new_res, new_normal = _evaluate(
+                    candidate, problem, layout, carried, loss_scale, normal if over else spare
+                )
+                spare, known = None, None if over else known
+            else:
+                new_res = residuals(candidate, problem)
             new_cost = robust_cost(new_res, loss_scale) if np.all(np.isfinite(new_res)) else np.inf
             if not new_cost < cost:  # before damping every step: the placements the step made worse held
                 held = _hold_worse_placements(state, candidate, problem, new_res, loss_scale, cost)
                 if held is not None:
                     candidate = held
-                    new_res, new_normal = _evaluate(candidate, problem, layout, carried, loss_scale, new_normal)
+                    if new_normal is None:
+                        new_res = residuals(candidate, problem)
+                    else:
+                        new_res, new_normal = _evaluate(candidate, problem, layout, carried, loss_scale, new_normal)
                     new_cost = robust_cost(new_res, loss_scale) if np.all(np.isfinite(new_res)) else np.inf
             if new_cost < cost:
+                if new_normal is None:  # (taken: its normal equations now)
+                    new_res, new_normal = _evaluate(candidate, problem, layout, carried, loss_scale, spare)
+                    new_cost, spare = robust_cost(new_res, loss_scale), None
                 accepted = True
                 relative_decrease = (cost - new_cost) / max(cost, 1e-300)
                 log.debug(
@@ -936,10 +950,11 @@ def bundle_adjust(
                 converged = relative_decrease < tolerance
                 break
             # rejected: after an undamped try, lam itself; after a damped one, lam grown (doubling growth)
-            if over:  # the state's normal equations again, in the arrays the step's took
-                _, normal = _evaluate(state, problem, layout, carried, loss_scale, new_normal)
-            else:
-                spare = new_normal
+            if new_normal is not None:  # (a first try's; a later one's were not formed)
+                if over:  # the state's normal equations again, in the arrays the step's took
+                    _, normal = _evaluate(state, problem, layout, carried, loss_scale, new_normal)
+                else:
+                    spare = new_normal
             lam, growth = (lam, growth) if used == 0.0 else (lam * growth, 2.0 * growth)
             trusted = False
         if not accepted:
