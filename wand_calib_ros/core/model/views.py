@@ -3,7 +3,7 @@
 The calibration keeps its image points as dense (P, C, K, 2) arrays of pixels, NaN where a camera did
 not see a marker (P placements, C cameras, K markers). On a large rig most of such an array is NaN (64
 cameras x 50,000 placements: 87 %), and a reduction over its two or three trailing entries costs numpy
-an inner loop per view: these functions take the few trailing entries one by one instead (2-6x faster
+an inner loop per view: these functions take the few trailing entries one by one instead (2-8x faster
 on such arrays), so that every pass over the views costs about one read of them.
 """
 
