@@ -475,7 +475,7 @@ def scaled_inverse(s: FloatArray) -> FloatArray:
 
     A well-conditioned one (positive definite, its condition number bounded by ``trace(s) trace(s^-1)`` below
     DIRECT_INVERSE_CONDITION) is inverted directly, several times faster than the eigendecomposition the
-    pseudo-inverse takes (64 cameras: 832 parameters, 15 against 90 ms).
+    pseudo-inverse takes (832 parameters, 64 cameras': 37 against 70 ms here).
     """
     scale = jacobi_scale(s)
     scaled = s * scale[:, None] * scale[None, :]
