@@ -680,8 +680,10 @@ def _observation_costs(res: FloatArray, loss_scale: float | None) -> FloatArray:
 
 
 def robust_cost(res: FloatArray, loss_scale: float | None) -> float:
-    """Sum of the Huber loss of the 2D residual norms (sum of squares when loss_scale is None)."""
-    return float(np.sum(_observation_costs(res, loss_scale)))
+    """Sum of the Huber loss of the 2D residual norms (sum of squares when loss_scale is None); inf when a
+    residual is not finite (a point the state cannot project: no cost compares below it)."""
+    total = float(np.sum(_observation_costs(res, loss_scale)))
+    return total if np.isfinite(total) else np.inf
 
 
 def _hold_worse_placements(
@@ -848,7 +850,7 @@ def bundle_adjust(
             state = chosen
             flat = delta_c.reshape(-1)
             previous = float(flat @ s @ flat) / (cost / dof)  # the move's length, chi-square units
-            cost = robust_cost(res, loss_scale) if np.all(np.isfinite(res)) else np.inf
+            cost = robust_cost(res, loss_scale)
             if not np.isfinite(cost):
                 raise CalibrationFailedError("the bundle adjustment's chosen start has non-finite reprojections")
             trusted = True  # from the linearised solution, Gauss-Newton's step first
@@ -914,7 +916,7 @@ def bundle_adjust(
                 spare, known = None, None if over else known
             else:
                 new_res = residuals(candidate, problem)
-            new_cost = robust_cost(new_res, loss_scale) if np.all(np.isfinite(new_res)) else np.inf
+            new_cost = robust_cost(new_res, loss_scale)
             if not new_cost < cost:  # before damping every step: the placements the step made worse held
                 held = _hold_worse_placements(state, candidate, problem, new_res, loss_scale, cost)
                 if held is not None:
@@ -923,7 +925,7 @@ def bundle_adjust(
                         new_res = residuals(candidate, problem)
                     else:
                         new_res, new_normal = _evaluate(candidate, problem, layout, carried, loss_scale, new_normal)
-                    new_cost = robust_cost(new_res, loss_scale) if np.all(np.isfinite(new_res)) else np.inf
+                    new_cost = robust_cost(new_res, loss_scale)
             if new_cost < cost:
                 if new_normal is None:  # (taken: its normal equations now)
                     new_res, new_normal = _evaluate(candidate, problem, layout, carried, loss_scale, spare)
@@ -1030,7 +1032,7 @@ def _last_step(
     except ModelError:
         return None
     res = residuals(candidate, problem)
-    new_cost = robust_cost(res, loss_scale) if np.all(np.isfinite(res)) else np.inf
+    new_cost = robust_cost(res, loss_scale)
     return (candidate, res, new_cost) if new_cost < cost else None
 
 
