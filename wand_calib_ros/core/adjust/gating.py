@@ -17,6 +17,7 @@ from wand_calib_ros.core.adjust.bundle_adjustment import (
     bundle_adjust,
     residuals,
 )
+from wand_calib_ros.core.adjust.normal_equations import block_starts
 from wand_calib_ros.core.adjust.placements import fit_placements
 from wand_calib_ros.core.model.rig import RigSpec, WandSpec
 from wand_calib_ros.core.model.views import observed_points, whole_views
@@ -95,12 +96,11 @@ def rejected_views(uv: FloatArray, residuals: FloatArray, threshold_px: float) -
         residuals: (M, 2) residuals of ``BundleProblem.from_dense(wand, uv)``.
         threshold_px: largest 2D residual a view may have.
     """
-    flat = observed_points(uv)[0]
+    _, placement, camera, _ = observed_points(uv)
     worst = np.zeros(uv.shape[:2])
-    if flat.size:  # each view's largest residual: a maximum over its run of points
-        view = flat // uv.shape[2]  # (M,) into the (P C) views
-        first = np.flatnonzero(np.r_[True, view[1:] != view[:-1]])
-        worst.reshape(-1)[view[first]] = np.maximum.reduceat(np.linalg.norm(residuals, axis=1), first)
+    if placement.size:  # each view's largest residual: a maximum over its run of points
+        first = block_starts(placement, camera)
+        worst[placement[first], camera[first]] = np.maximum.reduceat(np.linalg.norm(residuals, axis=1), first)
     return worst > threshold_px
 
 

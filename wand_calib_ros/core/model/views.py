@@ -24,20 +24,20 @@ def seen_points(uv: FloatArray) -> BoolArray:
 
 def whole_views(uv: FloatArray) -> BoolArray:
     """(...) the views that see every marker, of (..., K, 2) pixels."""
-    seen = seen_points(uv)
-    whole = seen[..., 0].copy()
-    for k in range(1, seen.shape[-1]):
-        whole &= seen[..., k]
-    return whole
+    return _across_markers(np.logical_and, seen_points(uv))
 
 
 def some_views(uv: FloatArray) -> BoolArray:
     """(...) the views that see at least one marker, of (..., K, 2) pixels."""
-    seen = seen_points(uv)
-    some = seen[..., 0].copy()
+    return _across_markers(np.logical_or, seen_points(uv))
+
+
+def _across_markers(combine: np.ufunc, seen: BoolArray) -> BoolArray:
+    """(...) ``combine`` of (..., K) over its K markers, one marker's array at a time."""
+    out = seen[..., 0].copy()
     for k in range(1, seen.shape[-1]):
-        some |= seen[..., k]
-    return some
+        combine(out, seen[..., k], out=out)
+    return out
 
 
 def observed_points(uv: FloatArray) -> tuple[IntArray, IntArray, IntArray, IntArray]:
