@@ -31,7 +31,6 @@ from wand_calib_ros.core.adjust.bundle_adjustment import (
     bundle_adjust,
     camera_std,
     default_free_mask,
-    residuals,
 )
 from wand_calib_ros.core.adjust.gating import (
     HUBER_SIGMAS,
@@ -40,10 +39,10 @@ from wand_calib_ros.core.adjust.gating import (
     enough_views,
     gate_placements,
     gate_threshold,
+    huber_scale,
     readmit,
     rejected_views,
     robust_adjustment,
-    robust_sigma,
     subset_state,
 )
 from wand_calib_ros.core.adjust.model_order import (
@@ -75,6 +74,7 @@ from wand_calib_ros.core.adjust.timing import (
     reduce_timing,
     refresh_motion,
     start_clocks,
+    with_timing,
 )
 from wand_calib_ros.core.initialise.lens_choice import choose_models
 from wand_calib_ros.core.judge.centre_bias import saturated_pull
@@ -354,11 +354,10 @@ def _robust_pass(
             return fit, fit_sigma, clocks, keep
         warm = subset_state(fit.state, placeable)
     keep = keep[placeable]
-    with_timing = free.copy()
-    with_timing[:, TIMING] = clocks.free
     problem = BundleProblem.from_dense(wand, uv[keep], clocks.placements(keep))
     cold = start(keep, clocks.start)  # the robust problem of a pass from the start, from the test's solution if any
-    robust, sigma = robust_adjustment(cold if warm is None else warm, problem, with_timing, scale_from=cold)
+    timed = with_timing(free, clocks.free)
+    robust, sigma = robust_adjustment(cold if warm is None else warm, problem, timed, scale_from=cold)
     return robust, sigma, clocks, keep
 
 
@@ -368,11 +367,8 @@ def _clearly_synchronised(
     """Whether the tentative timing parameters clearly stay out (:func:`clearly_synchronised`), on one
     linearisation at the synchronised pass's solution with them carried, Huber-weighted as :func:`_test_timing`'s
     adjustments are (the scale ``scale``'s): no adjustment of them when the data plainly hold none."""
-    test_free = free.copy()
-    test_free[:, TIMING] = clocks.free
-    loss_scale = HUBER_SIGMAS * robust_sigma(residuals(scale, problem))
-    at = bundle_adjust(replace(synchronised, timing=clocks.start), problem, test_free, loss_scale=loss_scale,
-                       max_iterations=0)  # fmt: skip
+    at = bundle_adjust(replace(synchronised, timing=clocks.start), problem, with_timing(free, clocks.free),
+                       loss_scale=huber_scale(scale, problem), max_iterations=0)  # fmt: skip
     return at.system is not None and clearly_synchronised(clocks, at.system, at.sigma, free)
 
 
@@ -388,9 +384,7 @@ def _test_timing(
     """
     timing, tested = clocks.free, replace(synchronised, timing=clocks.start)
     while timing.any():
-        test_free = free.copy()
-        test_free[:, TIMING] = timing
-        fit, sigma = robust_adjustment(tested, problem, test_free, scale_from=scale)
+        fit, sigma = robust_adjustment(tested, problem, with_timing(free, timing), scale_from=scale)
         kept = reduce_timing(clocks, fit, timing)
         if np.array_equal(kept, timing):
             return fit, sigma, timing

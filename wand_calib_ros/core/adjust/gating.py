@@ -113,6 +113,12 @@ def subset_state(state: BundleState, mask: NDArray[np.bool_]) -> BundleState:
     return BundleState(state.models, state.poses, state.wand_a[mask], state.wand_direction[mask], state.timing)
 
 
+def huber_scale(state: BundleState, problem: BundleProblem) -> float:
+    """The Huber threshold (px) of a robust adjustment from ``state``: HUBER_SIGMAS robust sigmas of its
+    residuals."""
+    return HUBER_SIGMAS * robust_sigma(residuals(state, problem))
+
+
 def robust_adjustment(
     state: BundleState, problem: BundleProblem, free: NDArray[np.bool_], *, scale_from: BundleState | None = None
 ) -> tuple[BundleResult, float]:
@@ -126,11 +132,9 @@ def robust_adjustment(
         The result and the robust estimate of the pixel noise: the residuals' robust
         scale corrected for the degrees of freedom the fit absorbs (sqrt(m / (m - p))).
     """
-    sigma = robust_sigma(residuals(state if scale_from is None else scale_from, problem))
+    loss_scale = huber_scale(state if scale_from is None else scale_from, problem)
     # Only outliers are decided here: a loose tolerance is enough, the least-squares passes finish the job.
-    result = bundle_adjust(
-        state, problem, free, loss_scale=HUBER_SIGMAS * sigma, tolerance=1e-5, settled=DECIDING_SETTLED
-    )
+    result = bundle_adjust(state, problem, free, loss_scale=loss_scale, tolerance=1e-5, settled=DECIDING_SETTLED)
     m, p = result.dof
     return result, robust_sigma(result.residuals) * np.sqrt(m / max(m - p, 1))
 

@@ -460,6 +460,13 @@ def significant(
     return statistic > fraction * chi_square_quantile(level, values.size)
 
 
+def with_timing(free: NDArray[np.bool_], timing: NDArray[np.bool_]) -> NDArray[np.bool_]:
+    """(C, 20) the camera parameters ``free`` with the timing parameters ``timing`` (C, 2) estimated (a copy)."""
+    out = free.copy()
+    out[:, TIMING] = timing
+    return out
+
+
 def clearly_synchronised(clocks: ClockModel, system: CameraSystem, sigma: float, free: NDArray[np.bool_]) -> bool:
     """Whether the tentative timing parameters clearly stay out, judged without adjusting them: on the cameras'
     system at the synchronised solution with them carried (one linearisation).
@@ -476,8 +483,7 @@ def clearly_synchronised(clocks: ClockModel, system: CameraSystem, sigma: float,
         sigma: the pixel noise of that linearisation (its robust one).
         free: (C, 20) the other camera parameters estimated.
     """
-    tested = free.copy()
-    tested[:, TIMING] = clocks.free
+    tested = with_timing(free, clocks.free)
     for column, parameter in ((1, READOUT), (0, TIME_OFFSET)):  # the finer term first, as reduce_timing
         cameras = np.flatnonzero(tested[:, parameter])
         if cameras.size == 0:
