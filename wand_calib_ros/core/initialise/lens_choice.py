@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wand_calib_ros.core.adjust.bundle_adjustment import (
+    DECIDING_SETTLED,
     INTRINSICS,
     LENS,
     N_CAMERA_PARAMS,
@@ -107,8 +108,8 @@ def choose_models(
     free = free_mask(len(rig.cameras), reference, fixed) & parameter_mask(state.models)
     free[candidates] |= parameter_mask(state.models)[candidates] & ~_NOT_INTRINSIC
     problem = BundleProblem.from_dense(rig.wand, uv, clocks.placements(used))
-    try:
-        tested = bundle_adjust(state, problem, free)
+    try:  # (a test: settled as the passes that decide are; the adjustment after a change finishes the job)
+        tested = bundle_adjust(state, problem, free, settled=DECIDING_SETTLED)
     except CoreError as error:  # the alternative did not converge: the fisheye model stays
         log.info("plumb_bob for %s not adjusted (%s)", ", ".join(rig.cameras[c].name for c in candidates), error)
         return result, fixed
