@@ -26,7 +26,6 @@ from wand_calib_ros.commands import (
     sweep,
 )
 from wand_calib_ros.errors import WandCalibError
-from wand_calib_ros.memory import keep_freed_memory
 
 #: The subcommands in the order ``--help`` lists them.
 COMMANDS: dict[str, ModuleType] = {
@@ -72,8 +71,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     level = logging.DEBUG if args.verbose else logging.WARNING if args.quiet else logging.INFO
     logging.basicConfig(level=level, format="wand-calib: %(message)s", stream=sys.stderr)
-    if argv is None:  # the process is this command's (not a caller's that passes its arguments): keep freed memory
-        keep_freed_memory()
     try:
         check_numbers(args)
         code: int = COMMANDS[args.command].run(args)
