@@ -88,7 +88,7 @@ from wand_calib_ros.core.model.camera_model import (
 from wand_calib_ros.core.model.geometry import Pose, wand_directions
 from wand_calib_ros.core.model.result import CalibrationResult, LensTrial
 from wand_calib_ros.core.model.rig import RigSpec, WandSpec, spread_subset
-from wand_calib_ros.core.model.views import some_views
+from wand_calib_ros.core.model.views import appended, some_views
 
 FloatArray = NDArray[np.float64]
 log = logging.getLogger(__name__)
@@ -185,12 +185,12 @@ def refine_calibration(
     # 3. Placements set aside so far come back with their clean views if they fit the solution.
     decided_on = used.size
     aside = np.setdiff1d(np.flatnonzero(clocks.placeable(len(uv))), used)
-    admitted, admitted_uv, admitted_state = readmit(rig, uv[aside], result, clocks.placements(aside))
+    admitted, left_out, admitted_state = readmit(rig, uv, aside, result, clocks.placements(aside))
     if admitted.any():
         log.info("%d more placements fit the solution: admitted", admitted.sum())
+        uv_used = appended(uv_used, uv, aside[admitted])
+        uv_used[used.size :][left_out] = np.nan  # (their rejected views)
         used = np.concatenate([used, aside[admitted]])
-        uv_used = np.concatenate([uv_used, admitted_uv])
-    del admitted_uv  # (its views are in ``uv_used`` now: the final adjustment's memory is the dense views' once)
     if admitted.any() or clocks.modelled:  # with timing, the refreshed motion changes the problem
         state = BundleState(
             result.state.models,

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wand_calib_ros.core.model.views import observed_points, seen_points, some_views, whole_views
+from wand_calib_ros.core.model.views import appended, observed_points, seen_points, some_views, whole_views
 
 
 @pytest.mark.parametrize("n_points", [2, 3, 5])
@@ -24,3 +24,12 @@ def test_markers_views_and_observations_are_those_numpy_finds(n_points: int) -> 
         assert np.array_equal(mine, numpys)
     assert np.array_equal(uv.reshape(-1, 2)[flat], uv[seen])
     assert whole_views(uv[:, 0]).shape == (40,)  # any leading shape
+
+
+def test_rows_appended_are_numpys_concatenation() -> None:
+    rng = np.random.default_rng(3)
+    views, uv = rng.normal(size=(7, 4, 3, 2)), rng.normal(size=(20, 4, 3, 2))
+    uv[rng.random(uv.shape[:3]) < 0.5] = np.nan
+    rows = np.array([2, 5, 6, 19])
+    assert np.array_equal(appended(views, uv, rows), np.concatenate([views, uv[rows]]), equal_nan=True)
+    assert np.array_equal(appended(views, uv, rows[:0]), views)

@@ -119,7 +119,10 @@ def fit_placements(
     start = BundleState(
         models, poses, points[index, 0], wand_directions(points[index, 0], points[index, -1]), cameras.timing
     )
-    problem = BundleProblem.from_dense(wand, uv[index], None if timing is None else timing.subset(index))
+    every = index.size == len(uv)  # (the common case: no copy of the views)
+    problem = BundleProblem.from_dense(
+        wand, uv if every else uv[index], timing if timing is None or every else timing.subset(index)
+    )
     if index.size == 0:
         return index, BundleResult(start, np.zeros((0, 2)), 0, True, np.zeros((len(models), N_CAMERA_PARAMS)),
                                    np.zeros((0, 0)), 0.0, (0, 0))  # fmt: skip

@@ -48,3 +48,12 @@ def observed_points(uv: FloatArray) -> tuple[IntArray, IntArray, IntArray, IntAr
     placement, rest = np.divmod(flat, n_cameras * n_points)
     camera, point = np.divmod(rest, n_points)
     return flat, placement, camera, point
+
+
+def appended(views: FloatArray, uv: FloatArray, rows: IntArray) -> FloatArray:
+    """(N + R, ...) the (N, ...) ``views`` followed by the rows ``rows`` (R,) of ``uv``, each written once (no copy
+    of those rows first: at 64 cameras a copy of the views is 150 MB)."""
+    out = np.empty((views.shape[0] + rows.size, *views.shape[1:]), dtype=views.dtype)
+    out[: views.shape[0]] = views
+    np.take(uv, rows, axis=0, out=out[views.shape[0] :])
+    return out
