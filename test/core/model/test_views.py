@@ -33,3 +33,15 @@ def test_rows_appended_are_numpys_concatenation() -> None:
     rows = np.array([2, 5, 6, 19])
     assert np.array_equal(appended(views, uv, rows), np.concatenate([views, uv[rows]]), equal_nan=True)
     assert np.array_equal(appended(views, uv, rows[:0]), views)
+
+
+def test_points_observed_in_some_rows_are_those_of_their_copy_indexed_into_the_whole() -> None:
+    rng = np.random.default_rng(4)
+    uv = rng.uniform(0, 1000, size=(30, 5, 3, 2))
+    uv[rng.random(uv.shape[:3]) < 0.5] = np.nan
+    rows = np.array([1, 4, 5, 17, 29])
+    flat, placement, camera, point = observed_points(uv, rows)
+    flat_copy, *copy = observed_points(uv[rows])
+    for mine, theirs in zip((placement, camera, point), copy, strict=True):
+        assert np.array_equal(mine, theirs)
+    assert np.array_equal(uv.reshape(-1, 2)[flat], uv[rows].reshape(-1, 2)[flat_copy])

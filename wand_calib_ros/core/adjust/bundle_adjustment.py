@@ -197,10 +197,13 @@ class BundleProblem:
     timing: ObservationTiming | None = None
 
     @staticmethod
-    def from_dense(wand: WandSpec, uv: FloatArray, timing: PlacementTiming | None = None) -> BundleProblem:
-        """Problem from dense (P, C, 3, 2) pixels with NaN for unseen points, and their timing."""
-        n_placements, n_cameras = uv.shape[:2]
-        flat, placement, camera, point = observed_points(uv)
+    def from_dense(
+        wand: WandSpec, uv: FloatArray, timing: PlacementTiming | None = None, rows: IntArray | None = None
+    ) -> BundleProblem:
+        """Problem from dense (P, C, 3, 2) pixels with NaN for unseen points, or from their placements ``rows``
+        (R,) only (no copy of those), and the timing of those placements."""
+        n_placements, n_cameras = (uv.shape[0] if rows is None else rows.size), uv.shape[1]
+        flat, placement, camera, point = observed_points(uv, rows)
         observed = uv.reshape(-1, 2)[flat]
         return BundleProblem(
             wand,

@@ -30,18 +30,22 @@ FloatArray = NDArray[np.float64]
 SPLIT_RAYS = 50_000
 
 
-def triangulate_placements(models: tuple[CameraModel, ...], poses: tuple[Pose, ...], uv: FloatArray) -> FloatArray:
+def triangulate_placements(
+    models: tuple[CameraModel, ...], poses: tuple[Pose, ...], uv: FloatArray, rows: NDArray[np.int64] | None = None
+) -> FloatArray:
     """Linear n-view triangulation of every wand point.
 
     Args:
         models, poses: per camera intrinsics and pose (reference frame).
         uv: (P, C, K, 2) pixels of the K markers, NaN where not seen.
+        rows: (R,) the placements to triangulate (no copy of their views); None: all.
 
     Returns:
-        (P, K, 3) the markers in the reference frame (NaN where fewer than two views).
+        (P, K, 3) the markers in the reference frame, or (R, K, 3) those of ``rows`` (NaN where fewer than two views).
     """
-    n_placements, n_cameras, n_markers = uv.shape[:3]
-    seen = seen_points(uv)  # (P, C, K)
+    _, n_cameras, n_markers = uv.shape[:3]
+    seen = seen_points(uv) if rows is None else seen_points(uv)[rows]  # (P or R, C, K)
+    n_placements = seen.shape[0]
     # only the pixels seen (a camera sees a fraction of the placements), camera by camera: one run each
     camera, placement, marker = np.nonzero(seen.transpose(1, 0, 2))
     bounds = np.searchsorted(camera, np.arange(n_cameras + 1))
@@ -50,7 +54,8 @@ def triangulate_placements(models: tuple[CameraModel, ...], poses: tuple[Pose, .
     def unproject_cameras(cameras: NDArray[np.int64]) -> None:
         for c in cameras:
             run = slice(bounds[c], bounds[c + 1])
-            rays[run] = unproject(models[c], uv[placement[run], c, marker[run]]) @ poses[c].rotation  # R^T m
+            at = placement[run] if rows is None else rows[placement[run]]
+            rays[run] = unproject(models[c], uv[at, c, marker[run]]) @ poses[c].rotation  # R^T m
 
     seeing = np.flatnonzero(np.diff(bounds))
     half = int(np.searchsorted(bounds[seeing + 1], camera.size / 2))  # the cameras of about half of the rays
@@ -61,7 +66,7 @@ def triangulate_placements(models: tuple[CameraModel, ...], poses: tuple[Pose, .
     )
     centres = np.stack([pose.center for pose in poses])
     points = triangulate_rays(placement * n_markers + marker, n_placements * n_markers, rays, centres, camera)
-    return points.reshape(n_placements, uv.shape[2], 3)
+    return points.reshape(n_placements, n_markers, 3)
 
 
 def unprojectable(
@@ -89,6 +94,7 @@ def fit_placements(
     uv: FloatArray,
     timing: PlacementTiming | None = None,
     *,
+    rows: NDArray[np.int64] | None = None,
     loss_scale: float | None = None,
     max_iterations: int = 10,
     tolerance: float = 1e-5,
@@ -101,27 +107,34 @@ def fit_placements(
     Args:
         wand: the wand.
         cameras: the cameras' models, poses and timing (its placements are ignored).
-        uv: (P, C, 3, 2) pixels.
-        timing: when each camera saw each placement and how the wand moved (None: simultaneous).
+        uv: (P, C, K, 2) pixels.
+        timing: when each camera saw each placement (of ``rows``, where given) and how the wand moved (None:
+            simultaneous).
+        rows: (R,) the placements to fit (no copy of their views); None: all.
         loss_scale: Huber threshold (px) of the fit, or None for least squares.
         max_iterations, tolerance: of the Levenberg-Marquardt.
 
     Returns:
-        The indices of the fitted placements and the fit (its state holds only them).
+        The indices of the fitted placements (into ``rows`` where given) and the fit (its state holds only them).
     """
     models, poses = cameras.models, cameras.poses
-    points = triangulate_placements(models, poses, uv)
+    points = triangulate_placements(models, poses, uv, rows)
     usable = np.all(np.isfinite(points), axis=(1, 2)) & (np.linalg.norm(points[:, -1] - points[:, 0], axis=1) > 0)
-    usable &= whole_views(uv).sum(axis=1) >= 2
+    whole = whole_views(uv)
+    usable &= (whole if rows is None else whole[rows]).sum(axis=1) >= 2
+    placements = np.arange(len(uv)) if rows is None else rows
     if any(model.is_pinhole for model in models):  # (the fisheye model images every direction)
-        usable[usable] &= ~unprojectable(models, poses, uv[usable], points[usable])
+        usable[usable] &= ~unprojectable(models, poses, uv[placements[usable]], points[usable])
     index = np.flatnonzero(usable)
     start = BundleState(
         models, poses, points[index, 0], wand_directions(points[index, 0], points[index, -1]), cameras.timing
     )
-    every = index.size == len(uv)  # (the common case: no copy of the views)
+    every = index.size == placements.size  # (the common case: the timing as it is)
     problem = BundleProblem.from_dense(
-        wand, uv if every else uv[index], timing if timing is None or every else timing.subset(index)
+        wand,
+        uv,
+        timing if timing is None or every else timing.subset(index),
+        rows=None if every and rows is None else placements[index],
     )
     if index.size == 0:
         return index, BundleResult(start, np.zeros((0, 2)), 0, True, np.zeros((len(models), N_CAMERA_PARAMS)),

@@ -40,14 +40,16 @@ def _across_markers(combine: np.ufunc, seen: BoolArray) -> BoolArray:
     return out
 
 
-def observed_points(uv: FloatArray) -> tuple[IntArray, IntArray, IntArray, IntArray]:
-    """Every point seen in (P, C, K, 2) pixels, sorted by placement, then camera, then marker (``np.nonzero``'s
-    order): (M,) its index into the (P C K, 2) rows of ``uv``, its placement, camera and marker."""
+def observed_points(uv: FloatArray, rows: IntArray | None = None) -> tuple[IntArray, IntArray, IntArray, IntArray]:
+    """Every point seen in (P, C, K, 2) pixels, or in their placements ``rows`` (R,) (no copy of those), sorted by
+    placement, then camera, then marker (``np.nonzero``'s order): (M,) its index into the (P C K, 2) rows of
+    ``uv``, its placement (among ``rows`` where given), camera and marker."""
     _, n_cameras, n_points = uv.shape[:3]
-    flat = np.flatnonzero(seen_points(uv))
+    seen = seen_points(uv)
+    flat = np.flatnonzero(seen if rows is None else seen[rows])
     placement, rest = np.divmod(flat, n_cameras * n_points)
     camera, point = np.divmod(rest, n_points)
-    return flat, placement, camera, point
+    return flat if rows is None else rows[placement] * (n_cameras * n_points) + rest, placement, camera, point
 
 
 def appended(views: FloatArray, uv: FloatArray, rows: IntArray) -> FloatArray:
