@@ -48,3 +48,13 @@ def test_freed_memory_is_kept_so_arrays_of_a_few_mb_do_not_fault_their_pages_in_
     assert _faults_per_round("package") < 10
     # a user's own allocator setting is left alone (any of glibc's tunables turns its dynamic thresholds off)
     assert _faults_per_round("package", {"MALLOC_TRIM_THRESHOLD_": "131072", "PATH": ""}) > 1000
+
+
+def test_numpy_asks_for_no_huge_pages_unless_the_user_says_otherwise() -> None:
+    code = "import wand_calib_ros, numpy; print(numpy._core.multiarray._get_madvise_hugepage())"
+
+    def advised(env: dict[str, str] | None) -> str:
+        return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env).stdout.strip()
+
+    assert advised(None) == "False"
+    assert advised({"NUMPY_MADVISE_HUGEPAGE": "1", "PATH": ""}) == "True"
