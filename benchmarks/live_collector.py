@@ -3,7 +3,8 @@
 Publishes 4 cameras x 1280x1024 mono8 x 30 fps (a rendered waved wand, looped)
 from this process into a ``collector`` process for ``--seconds``, reads the
 collector's per camera "received" counts from /diagnostics, and reports dropped
-frames and the collector's CPU use; then times ``/calibrate`` on what it stored: the answer to a client
+frames and the collector's CPU use and memory (resident at the end of the publishing, and its peak);
+then times ``/calibrate`` on what it stored: the answer to a client
 that had found the service before (the service's own latency), then a fresh ``trigger /calibrate``
 (its node's discovery of the service included, 0.1-2 s with Fast DDS here).
 Runs with the image QoS the collector uses by default (sensor data, best effort)
@@ -52,6 +53,12 @@ FPS = 30.0
 def _cpu_seconds(pid: int) -> float:
     fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _memory_mb(pid: int) -> tuple[float, float]:
+    """A process's resident memory now and at its peak, MB."""
+    fields = dict(line.split(":", 1) for line in Path(f"/proc/{pid}/status").read_text().splitlines() if ":" in line)
+    return tuple(int(fields[name].split()[0]) / 1024 for name in ("VmRSS", "VmHWM"))  # type: ignore[return-value]
 
 
 def run(folder: Path, frames: list, names: tuple[str, ...], qos_name: str, seconds: float, estimate: bool) -> None:
@@ -108,6 +115,7 @@ def run(folder: Path, frames: list, names: tuple[str, ...], qos_name: str, secon
                 published += 1
         elapsed = time.monotonic() - begin
         cpu = _cpu_seconds(collector.pid) - cpu0
+        resident, peak = _memory_mb(collector.pid)
         settled = -1
         while settled != sum(received.values()):  # until two diagnostics in a row agree
             settled = sum(received.values())
@@ -118,7 +126,7 @@ def run(folder: Path, frames: list, names: tuple[str, ...], qos_name: str, secon
             f"{qos_name:>11}: published {published} images in {elapsed:.1f} s ({rate:.0f}/s, "
             f"{rate * 1280 * 1024 / 1e6:.0f} MB/s); collector received {got} "
             f"({published - got} dropped, {100 * (published - got) / published:.2f} %), "
-            f"collector CPU {100 * cpu / elapsed:.0f} % of one core"
+            f"collector CPU {100 * cpu / elapsed:.0f} % of one core, {resident:.0f} MB resident (peak {peak:.0f} MB)"
         )
         # The service's answer time, to a client that found it before (a GUI's, rqt's); then the
         # whole of a fresh `trigger /calibrate`, whose node first has to discover the service.
