@@ -6,7 +6,7 @@ Layers, lowest first; each imports only those before it (``test/test_layout.py``
 points), ``sim`` (synthetic rigs), ``commands`` (one module per subcommand), ``cli`` (the ``wand-calib``
 command built from them) and ``nodes`` (ROS 2, the only layer importing rclpy).
 
-Importing the package tunes two process-wide settings for a calibration's workload, each left alone
+Importing the package tunes three process-wide settings for a calibration's workload, each left alone
 when the user set it:
 
 - OpenBLAS uses one thread (unless ``OPENBLAS_NUM_THREADS`` is set, which only works before numpy
