@@ -36,7 +36,6 @@ from wand_calib_ros.core.adjust.gating import (
     HUBER_SIGMAS,
     VIEW_GATE_SIGMAS,
     ac_length_errors,
-    enough_views,
     gate_placements,
     gate_threshold,
     huber_scale,
@@ -88,7 +87,7 @@ from wand_calib_ros.core.model.camera_model import (
 from wand_calib_ros.core.model.geometry import Pose, wand_directions
 from wand_calib_ros.core.model.result import CalibrationResult, LensTrial
 from wand_calib_ros.core.model.rig import RigSpec, WandSpec, spread_subset
-from wand_calib_ros.core.model.views import appended, some_views
+from wand_calib_ros.core.model.views import appended, enough_views, some_views
 
 FloatArray = NDArray[np.float64]
 log = logging.getLogger(__name__)

@@ -5,7 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wand_calib_ros.core.model.views import appended, observed_points, seen_points, some_views, whole_views
+from wand_calib_ros.core.model.views import (
+    appended,
+    enough_views,
+    observed_points,
+    seen_points,
+    some_views,
+    whole_views,
+)
 
 
 @pytest.mark.parametrize("n_points", [2, 3, 5])
@@ -45,3 +52,17 @@ def test_points_observed_in_some_rows_are_those_of_their_copy_indexed_into_the_w
     for mine, theirs in zip((placement, camera, point), copy, strict=True):
         assert np.array_equal(mine, theirs)
     assert np.array_equal(uv.reshape(-1, 2)[flat], uv[rows].reshape(-1, 2)[flat_copy])
+
+
+def test_enough_views_of_some_rows_and_without_some_views() -> None:
+    rng = np.random.default_rng(6)
+    uv = rng.uniform(0, 1000, size=(40, 4, 3, 2))
+    uv[rng.random(uv.shape[:3]) < 0.3] = np.nan
+    whole = np.all(np.isfinite(uv), axis=(2, 3))
+    assert np.array_equal(enough_views(uv), whole.sum(axis=1) >= 2)
+    rows = np.array([0, 3, 4, 9, 20, 39])
+    left_out = rng.random((rows.size, 4)) < 0.3
+    assert np.array_equal(enough_views(uv, rows, left_out), (whole[rows] & ~left_out).sum(axis=1) >= 2)
+    copy = uv[rows]
+    copy[left_out] = np.nan
+    assert np.array_equal(enough_views(uv, rows, left_out), enough_views(copy))  # as with the views set NaN

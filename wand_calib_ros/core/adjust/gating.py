@@ -20,7 +20,7 @@ from wand_calib_ros.core.adjust.bundle_adjustment import (
 from wand_calib_ros.core.adjust.normal_equations import block_starts
 from wand_calib_ros.core.adjust.placements import fit_placements
 from wand_calib_ros.core.model.rig import RigSpec, WandSpec
-from wand_calib_ros.core.model.views import observed_points, whole_views
+from wand_calib_ros.core.model.views import enough_views, observed_points, whole_views
 
 #: Fewest views a camera must keep in the final bundle adjustment (its 11 parameters need several).
 MIN_CAMERA_VIEWS = 5
@@ -107,11 +107,6 @@ def rejected_views(
     return worst > threshold_px
 
 
-def enough_views(uv: FloatArray) -> NDArray[np.bool_]:
-    """(P,) placements seen completely by at least two cameras."""
-    return whole_views(uv).sum(axis=1) >= 2
-
-
 def subset_state(state: BundleState, mask: NDArray[np.bool_]) -> BundleState:
     return BundleState(state.models, state.poses, state.wand_a[mask], state.wand_direction[mask], state.timing)
 
@@ -168,6 +163,6 @@ def readmit(
     index, fitted = fit_placements(rig.wand, result.state, uv, timing, rows=aside, loss_scale=HUBER_SIGMAS * sigma)
     rows = aside[index]
     rejected = rejected_views(uv, fitted.residuals, VIEW_GATE_SIGMAS * sigma, rows)
-    ok = (whole_views(uv)[rows] & ~rejected).sum(axis=1) >= 2  # (enough_views with the rejected ones left out)
+    ok = enough_views(uv, rows, left_out=rejected)
     admitted[index[ok]] = True
     return admitted, rejected[ok], subset_state(fitted.state, ok)

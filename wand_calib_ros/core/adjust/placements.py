@@ -20,7 +20,7 @@ from wand_calib_ros.core.adjust.bundle_adjustment import (
 from wand_calib_ros.core.model.camera_model import CameraModel, unproject
 from wand_calib_ros.core.model.geometry import Pose, triangulate_rays, wand_directions
 from wand_calib_ros.core.model.rig import WandSpec
-from wand_calib_ros.core.model.views import seen_points, whole_views
+from wand_calib_ros.core.model.views import enough_views, seen_points
 from wand_calib_ros.core.parallel import both
 
 FloatArray = NDArray[np.float64]
@@ -120,8 +120,7 @@ def fit_placements(
     models, poses = cameras.models, cameras.poses
     points = triangulate_placements(models, poses, uv, rows)
     usable = np.all(np.isfinite(points), axis=(1, 2)) & (np.linalg.norm(points[:, -1] - points[:, 0], axis=1) > 0)
-    whole = whole_views(uv)
-    usable &= (whole if rows is None else whole[rows]).sum(axis=1) >= 2
+    usable &= enough_views(uv, rows)
     placements = np.arange(len(uv)) if rows is None else rows
     if any(model.is_pinhole for model in models):  # (the fisheye model images every direction)
         usable[usable] &= ~unprojectable(models, poses, uv[placements[usable]], points[usable])
@@ -129,13 +128,7 @@ def fit_placements(
     start = BundleState(
         models, poses, points[index, 0], wand_directions(points[index, 0], points[index, -1]), cameras.timing
     )
-    every = index.size == placements.size  # (the common case: the timing as it is)
-    problem = BundleProblem.from_dense(
-        wand,
-        uv,
-        timing if timing is None or every else timing.subset(index),
-        rows=None if every and rows is None else placements[index],
-    )
+    problem = BundleProblem.from_dense(wand, uv, None if timing is None else timing.subset(index), placements[index])
     if index.size == 0:
         return index, BundleResult(start, np.zeros((0, 2)), 0, True, np.zeros((len(models), N_CAMERA_PARAMS)),
                                    np.zeros((0, 0)), 0.0, (0, 0))  # fmt: skip

@@ -32,6 +32,16 @@ def some_views(uv: FloatArray) -> BoolArray:
     return _across_markers(np.logical_or, seen_points(uv))
 
 
+def enough_views(uv: FloatArray, rows: IntArray | None = None, left_out: BoolArray | None = None) -> BoolArray:
+    """(P,) the placements of (P, C, K, 2) pixels seen whole by at least two cameras, or (R,) those of the
+    placements ``rows`` (no copy of their views), the views ``left_out`` ((P or R, C), e.g. rejected) not
+    counted."""
+    whole = whole_views(uv) if rows is None else whole_views(uv)[rows]
+    if left_out is not None:
+        whole &= ~left_out
+    return np.asarray(whole.sum(axis=1) >= 2)
+
+
 def _across_markers(combine: np.ufunc, seen: BoolArray) -> BoolArray:
     """(...) ``combine`` of (..., K) over its K markers, one marker's array at a time."""
     out = seen[..., 0].copy()
