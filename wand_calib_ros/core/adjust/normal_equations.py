@@ -320,20 +320,22 @@ def accumulate(
         jp = jp * root
         jc = None if jc is None else jc * root
     rows = 2 * layout.n_points  # of a block
-    # Placements: [jp | r]^T [jp | r] per block, summed over each placement's blocks.
+    # Placements: jp^T [jp | r] per block (V's and gp's rows), summed over each placement's blocks. (Not the
+    # whole [jp | r]^T [jp | r]: numpy hands a product of an array with its own transpose to BLAS's syrk, matrix by
+    # matrix, four times slower on these 6 x 6 blocks than its own loop.)
     jp_blocks = _by_block(jp, chunk, layout.n_points)
-    per_block = jp_blocks.transpose(0, 2, 1) @ jp_blocks
+    per_block = jp_blocks[:, :, :N_PLACEMENT_PARAMS].transpose(0, 2, 1) @ jp_blocks
     summed = np.add.reduceat(per_block, chunk.placement_starts, axis=0)
     placements = slice(chunk.first_placement, chunk.first_placement + chunk.placement_starts.size)
-    normal.v[placements] += summed[:, :N_PLACEMENT_PARAMS, :N_PLACEMENT_PARAMS]
-    normal.gp[placements] -= summed[:, :N_PLACEMENT_PARAMS, N_PLACEMENT_PARAMS]
+    normal.v[placements] += summed[:, :, :N_PLACEMENT_PARAMS]
+    normal.gp[placements] -= summed[:, :, N_PLACEMENT_PARAMS]
     if jc is None:
         return
     width = jc.shape[2] - 1
     jc_blocks = _by_block(jc, chunk, layout.n_points)
     # Blocks: jc^T jp over each block's rows (a block's observations are all in one chunk).
     blocks = slice(chunk.first_block, chunk.first_block + chunk.n_blocks)
-    normal.w[blocks] = jc_blocks[:, :, :width].transpose(0, 2, 1) @ jp_blocks[:, :, :N_PLACEMENT_PARAMS]
+    normal.w[blocks] = (jc_blocks[:, :, :width].transpose(0, 2, 1) @ jp_blocks)[:, :, :N_PLACEMENT_PARAMS]
     # Cameras: [jc | r]^T [jc | r] over each camera's rows, one BLAS product per camera.
     by_camera = jc_blocks[chunk.by_camera].reshape(-1, width + 1)
     for camera, first, stop in zip(chunk.cameras, chunk.camera_bounds[:-1], chunk.camera_bounds[1:], strict=True):
