@@ -12,6 +12,7 @@ by the wand length.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import cv2
@@ -62,13 +63,13 @@ def epipolar_angles(essential: FloatArray, m0: FloatArray, m1: FloatArray) -> Fl
 
 def _rotation_to_z(direction: FloatArray) -> FloatArray:
     """(3, 3) rotation Q with Q @ direction = +z."""
-    d = direction / np.linalg.norm(direction)
-    axis = np.cross(d, [0.0, 0.0, 1.0])
-    s, c = np.linalg.norm(axis), d[2]
+    x, y, z = (float(v) for v in direction)
+    length = math.sqrt(x * x + y * y + z * z)
+    x, y, c = x / length, y / length, z / length
+    s = math.hypot(x, y)  # |d x z|: the axis (y, -x, 0) / s, the angle's sine s and cosine c
     if s < 1e-12:
         return np.eye(3) if c > 0 else np.diag([1.0, -1.0, -1.0])
-    k = axis / s
-    kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    kx = np.array([[0.0, 0.0, -x / s], [0.0, 0.0, -y / s], [x / s, y / s, 0.0]])
     return np.eye(3) + s * kx + (1 - c) * kx @ kx
 
 

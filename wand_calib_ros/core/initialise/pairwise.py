@@ -102,11 +102,12 @@ def check_motion(spec: CameraSpec, uv: FloatArray) -> None:
             f"{spec.image_size[0]} x {spec.image_size[1]} image); wave it through the whole view"
         )
     points = uv.reshape(-1, 2)
-    spread_2d = np.linalg.svd(points - points.mean(axis=0), compute_uv=False) / np.sqrt(points.shape[0])
-    if spread_2d[1] < 0.01 * diagonal:
+    centred = points - points.mean(axis=0)
+    across = np.sqrt(max(float(np.linalg.eigvalsh(centred.T @ centred / points.shape[0])[0]), 0.0))  # least spread
+    if across < 0.01 * diagonal:
         raise DegenerateDataError(
             f"camera '{spec.name}': all wand points lie on one line in its image (spread across it "
-            f"{spread_2d[1]:.1f} px): the wand moved only along its own axis or in a plane seen edge-on; "
+            f"{across:.1f} px): the wand moved only along its own axis or in a plane seen edge-on; "
             "move and turn it through the whole volume"
         )
     image_length = np.linalg.norm(uv[:, -1] - uv[:, 0], axis=-1)
