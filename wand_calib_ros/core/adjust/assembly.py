@@ -15,6 +15,7 @@ from wand_calib_ros.core.adjust.bundle_adjustment import (
     BundleResult,
     BundleState,
     residuals,
+    squared_norms,
 )
 from wand_calib_ros.core.adjust.gating import VIEW_GATE_SIGMAS
 from wand_calib_ros.core.adjust.model_order import FixedParameters, free_mask
@@ -174,7 +175,7 @@ def assemble(
     reported = free if fixed.pinned is None else free | (fixed.pinned.std > 0)  # (and those held at a prior)
     n_cameras = problem.n_cameras
     counts = np.bincount(problem.camera, minlength=n_cameras)
-    squares = np.bincount(problem.camera, np.sum(result.residuals**2, axis=1), minlength=n_cameras)
+    squares = np.bincount(problem.camera, squared_norms(result.residuals), minlength=n_cameras)
     with np.errstate(invalid="ignore", divide="ignore"):
         rms_px = np.sqrt(squares / (2 * counts))  # over u and v; NaN for a camera without points
     view_counts = np.bincount(problem.camera[block_starts(problem.placement, problem.camera)], minlength=n_cameras)

@@ -16,6 +16,7 @@ from wand_calib_ros.core.adjust.bundle_adjustment import (
     PlacementTiming,
     bundle_adjust,
     residuals,
+    squared_norms,
 )
 from wand_calib_ros.core.adjust.normal_equations import block_starts
 from wand_calib_ros.core.adjust.placements import fit_placements
@@ -84,7 +85,7 @@ def robust_sigma(residuals: FloatArray) -> float:
 
     Never below MIN_SIGMA_PX, so noise-free data do not make every view an outlier.
     """
-    return max(float(np.median(np.linalg.norm(residuals, axis=1)) / np.sqrt(2 * np.log(2))), MIN_SIGMA_PX)
+    return max(float(np.median(np.sqrt(squared_norms(residuals))) / np.sqrt(2 * np.log(2))), MIN_SIGMA_PX)
 
 
 def rejected_views(
@@ -103,7 +104,7 @@ def rejected_views(
     worst = np.zeros((uv.shape[0] if rows is None else rows.size, uv.shape[1]))
     if placement.size:  # each view's largest residual: a maximum over its run of points
         first = block_starts(placement, camera)
-        worst[placement[first], camera[first]] = np.maximum.reduceat(np.linalg.norm(residuals, axis=1), first)
+        worst[placement[first], camera[first]] = np.maximum.reduceat(np.sqrt(squared_norms(residuals)), first)
     return worst > threshold_px
 
 

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.adjust.bundle_adjustment import BundleProblem, BundleState
+from wand_calib_ros.core.adjust.bundle_adjustment import BundleProblem, BundleState, squared_norms
 from wand_calib_ros.core.adjust.placements import fit_placements
 from wand_calib_ros.core.model.camera_model import CameraModel
 from wand_calib_ros.core.model.geometry import Pose
@@ -66,7 +66,7 @@ def pair_squares(
             pair[:, [i, j]] = uv[rows][:, [i, j]]
             index, fit = fit_placements(wand, cameras, pair, max_iterations=10)
             problem = BundleProblem.from_dense(wand, pair[index])
-            squares = np.bincount(problem.placement, np.sum(fit.residuals**2, axis=1), minlength=index.size)
+            squares = np.bincount(problem.placement, squared_norms(fit.residuals), minlength=index.size)
             out[rows[index], i, j] = out[rows[index], j, i] = squares
     return out
 
