@@ -434,7 +434,8 @@ def reduced_system(normal: NormalEquations, layout: BlockLayout) -> tuple[FloatA
 
 def back_substitute(delta_c: FloatArray, v_inv: FloatArray, normal: NormalEquations, layout: BlockLayout) -> FloatArray:
     """(P, 5) the placements' step for the cameras' step ``delta_c`` (C, K): V^-1 (gp - W^T delta_c)."""
-    wt_dc = np.einsum("bkj,bk->bj", normal.w, delta_c[layout.block_camera])  # (B, 5)
+    # (B, 5), one small product per block (einsum's loop took 11 ms for mocap16's 150,000 blocks, this 6.5)
+    wt_dc = (delta_c[layout.block_camera][:, None, :] @ normal.w)[:, 0, :]
     per_placement = np.add.reduceat(wt_dc, layout.placement_first_block, axis=0)
     return (v_inv @ (normal.gp - per_placement)[..., None])[..., 0]
 
