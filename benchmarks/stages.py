@@ -41,6 +41,7 @@ STAGES = (
     ("wand_calib_ros.core.refine", "triangulate_placements", "triangulate the starts"),
     ("wand_calib_ros.core.refine", "_robust_pass", "robust pass (timing tests)"),
     ("wand_calib_ros.core.refine", "adjust_with_model_selection", "model order"),
+    ("wand_calib_ros.core.refine", "choose_models", "lens choice (plumb_bob test)"),
     ("wand_calib_ros.core.refine", "readmit", "re-admission"),
     ("wand_calib_ros.core.refine", "_final_adjustment", "final adjustment"),
     ("wand_calib_ros.core.refine", "check_uncertainty", "uncertainty check"),
