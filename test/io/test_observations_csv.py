@@ -186,6 +186,33 @@ def test_the_fast_reader_and_the_row_by_row_reader_agree(tmp_path: Path, stamps:
     assert (fast is not None) == (variant in ("plain", "crlf", "bom", "extra column", "unknown cameras"))
 
 
+@pytest.mark.parametrize(
+    ("row", "fast"),
+    [
+        ("7,left,B,12,5,40.0", False),  # a decimal comma: one cell too many
+        ("7,left,B,12.5", False),  # a cell short
+        ("7,left,B,12.5,40.0,", False),  # a trailing comma
+        ("", True),  # a blank line: skipped by both readers
+    ],
+)
+def test_the_fast_reader_counts_every_rows_cells(tmp_path: Path, row: str, fast: bool) -> None:
+    """With the header's columns exactly those read, numpy's reader counts each row's cells itself."""
+    from wand_calib_ros.io.observations_csv import _parse_plain
+
+    lines = ["frame,camera,point,u,v", "7,left,A,10.0,20.0", row, "7,right,A,30.0,40.0", "8,left,A,11.0,21.0"]
+    path = tmp_path / "observations.csv"
+    path.write_text("\n".join(lines) + "\n")
+    parsed = _parse_plain(path.read_bytes(), ["left", "right"], {})
+    assert (parsed is not None) == fast
+    if fast:
+        assert parsed is not None
+        slow = _row_by_row(path, ["left", "right"], {})
+        assert np.array_equal(parsed.uv, slow.uv, equal_nan=True) and np.array_equal(parsed.frames, slow.frames)
+    else:
+        with pytest.raises(FormatError, match="row 3"):
+            read_observations(path, ["left", "right"])
+
+
 def test_saturation_flags_round_trip_and_a_bad_flag_names_its_row(tmp_path: Path) -> None:
     uv = np.arange(2 * 2 * 3 * 2, dtype=float).reshape(2, 2, 3, 2) + 10.0
     flags = np.array([[[True, False, False], [False, False, True]], [[False, False, False], [True, True, True]]])

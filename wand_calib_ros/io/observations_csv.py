@@ -146,10 +146,15 @@ def _parse_plain(
         return None
     end = text.find("\n")  # (the first line only: not a copy of the rest)
     header = text[: end if end >= 0 else len(text)].rstrip("\r").split(",")
-    if any(c not in header for c in COLUMNS) or not _cells_per_line_are(raw, len(header)):
+    if any(c not in header for c in COLUMNS):
+        return None
+    fields = [*COLUMNS, *([STAMP] if STAMP in header else []), *([SATURATED] if SATURATED in header else [])]
+    # numpy's reader checks every row's cells itself when it reads them all (a decimal comma: ValueError); with
+    # columns left out it ignores cells beyond them, and they are counted first
+    every = header == fields
+    if not every and not _cells_per_line_are(raw, len(header)):
         return None
     longest = 1 + (max(map(len, known)) if known else 64)  # a longer name shows as this long: not known
-    fields = [*COLUMNS, *([STAMP] if STAMP in header else []), *([SATURATED] if SATURATED in header else [])]
     text_kind = "S" if text.isascii() else "U"  # bytes compare and sort faster than str
     kinds = {"frame": "i8", "camera": f"{text_kind}{longest}", "point": f"{text_kind}2", "u": "f8", "v": "f8"}
     kinds[STAMP] = "f8"
@@ -161,7 +166,7 @@ def _parse_plain(
             delimiter=",",
             skiprows=1,
             comments=None,
-            usecols=[header.index(name) for name in fields],
+            usecols=None if every else [header.index(name) for name in fields],
             dtype=[(name, kinds[name]) for name in fields],
             ndmin=1,
         )
