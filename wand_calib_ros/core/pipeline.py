@@ -132,7 +132,7 @@ def calibrate(
         if rig.wand.n_points == 2:  # one label per marker in every view and over time, from the started cameras
             views = consistent_labels(init.models, init.poses, uv, narrow_fields(rig))
             start_uv = align_views(views, line)
-        result = refine_calibration(
+        result, points = refine_calibration(
             rig,
             views,
             init.models,
@@ -144,7 +144,7 @@ def calibrate(
             start_uv=start_uv,
             saturated=saturated,
         )
-        return replace(result, warnings=(*result.warnings, *check_result(rig, result, views))), views
+        return replace(result, warnings=(*result.warnings, *check_result(rig, result, views, points))), views
 
     if options.start is not None:
         result, uv = solve(_warm(rig, reference, options.start))

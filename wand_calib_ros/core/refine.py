@@ -20,7 +20,7 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.adjust.assembly import assemble
+from wand_calib_ros.core.adjust.assembly import assemble, free_placements
 from wand_calib_ros.core.adjust.bundle_adjustment import (
     INTRINSICS,
     READOUT,
@@ -113,7 +113,7 @@ def refine_calibration(
     timing: TimingInput | None = None,
     start_uv: FloatArray | None = None,
     saturated: NDArray[np.bool_] | None = None,
-) -> CalibrationResult:
+) -> tuple[CalibrationResult, FloatArray]:
     """Gate, bundle-adjust and report (paper Step 4 / Section III-B Step 2).
 
     Args:
@@ -132,6 +132,10 @@ def refine_calibration(
             None: ``uv``. The adjustments model the timing on the observed pixels.
         saturated: (P, C, 3) which points of ``uv`` the detector measured on saturated spots (None: not known):
             what they pull is checked (:mod:`~wand_calib_ros.core.judge.centre_bias`).
+
+    Returns:
+        The calibration, and (U, K, 3) the markers of the U placements it used, triangulated freely with its
+        cameras (:func:`~wand_calib_ros.core.adjust.assembly.free_placements`; reference frame, mm).
     """
     wand = rig.wand
     n_cameras = len(rig.cameras)
@@ -227,7 +231,8 @@ def refine_calibration(
         rig, uv_used, saturated[used], clocks.placements(used), result, free_mask(n_cameras, reference, fixed)
     )  # fmt: skip
     warnings += [pull.line() for pull in pulls]
-    return assemble(
+    points = free_placements(result.state, problem, uv_used)
+    calibration = assemble(
         rig,
         uv_used,
         problem,
@@ -241,7 +246,9 @@ def refine_calibration(
         warnings,
         clocks,
         tuple(pull.line() for pull in pulls),
+        points=points,
     )
+    return calibration, points
 
 
 def _narrow_principal_points(

@@ -168,7 +168,11 @@ def assemble(
     warnings: list[str],
     clocks: ClockModel,
     systematic: tuple[str, ...] = (),
+    *,
+    points: FloatArray,
 ) -> CalibrationResult:
+    """The calibration of an adjustment's ``result`` on the views ``uv`` (P, C, K, 2) of ``problem``, ``points``
+    (P, K, 3) their markers as :func:`free_placements` gives them (the wand lengths' statistics)."""
     state = result.state
     max_theta = max_off_axis(result, problem)
     free = free_mask(problem.n_cameras, reference, fixed)
@@ -213,7 +217,6 @@ def assemble(
                 "estimated" if spec.intrinsics is None else "given" if spec.intrinsics_fixed else "given_start",
             )
         )
-    points = triangulate_placements(state.models, state.poses, synchronised_pixels(state, problem, uv))
     lengths = np.linalg.norm(points[:, -1] - points[:, 0], axis=-1)
     lengths = lengths[np.isfinite(lengths)]
     order = [reference] + [c for c in range(len(cameras)) if c != reference]
@@ -249,6 +252,12 @@ def timing_summary(rig: RigSpec, clocks: ClockModel, fixed: FixedParameters) -> 
         line.frame_period,
         clocks.notes,
     )
+
+
+def free_placements(state: BundleState, problem: BundleProblem, uv: FloatArray) -> FloatArray:
+    """(P, K, 3) the markers of the adjusted views ``uv`` (P, C, K, 2, those of ``problem``) triangulated freely (no
+    wand constraint) with the adjusted cameras, each placement as one instant saw it (reference frame, mm)."""
+    return triangulate_placements(state.models, state.poses, synchronised_pixels(state, problem, uv))
 
 
 def synchronised_pixels(state: BundleState, problem: BundleProblem, uv: FloatArray) -> FloatArray:

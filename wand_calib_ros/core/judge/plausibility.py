@@ -192,10 +192,13 @@ def _distinct_views(uv: FloatArray, measured: NDArray[np.bool_]) -> int:
     return int(np.unique(keys).size)
 
 
-def check_result(rig: RigSpec, result: CalibrationResult, views: FloatArray) -> list[str]:
+def check_result(
+    rig: RigSpec, result: CalibrationResult, views: FloatArray, points: FloatArray | None = None
+) -> list[str]:
     """A calibration's focal lengths, image errors and wand lengths must be those of a real rig.
 
-    Its wand too, from ``views`` ((F, C, K, 2) the views it used, the rig's camera order): the markers between
+    Its wand too, from ``views`` ((F, C, K, 2) the views it used, the rig's camera order) or, where given, ``points``
+    (their markers triangulated freely with its cameras, as the calibration returns them): the markers between
     the ends where the description puts them (:func:`check_segments`) and the wand's length error within what
     the pixel noise causes on a wand of that image length (:data:`WAND_NOISE_FACTOR`).
 
@@ -239,7 +242,7 @@ def check_result(rig: RigSpec, result: CalibrationResult, views: FloatArray) -> 
                 f"cameras' median is {others:.2f} px: its model or its views are wrong (check its entry in the rig "
                 "description and which images its views come from)"
             )
-    check_segments(rig, result, views)
+    check_segments(rig, result, views, points)
     return warnings + _wand_length(rig, result, views)
 
 
@@ -285,7 +288,9 @@ def _wand_length(rig: RigSpec, result: CalibrationResult, views: FloatArray) -> 
     )
 
 
-def check_segments(rig: RigSpec, result: CalibrationResult, views: FloatArray) -> None:
+def check_segments(
+    rig: RigSpec, result: CalibrationResult, views: FloatArray, points: FloatArray | None = None
+) -> None:
     """Each marker between the wand's ends must sit where the rig description puts it.
 
     The placements seen whole are triangulated freely with the calibration (no wand constraint), and each
@@ -296,6 +301,7 @@ def check_segments(rig: RigSpec, result: CalibrationResult, views: FloatArray) -
 
     Args:
         views: (F, C, K, 2) the views the calibration used, cameras in the rig's order.
+        points: (F', K, 3) their markers so triangulated already (the calibration's), or None.
 
     Raises:
         PlausibilityError: naming the marker, where the images put it and where the description does.
@@ -305,10 +311,11 @@ def check_segments(rig: RigSpec, result: CalibrationResult, views: FloatArray) -
     wand = rig.wand
     if wand.n_points < 3:
         return
-    names = rig.camera_names
-    models = tuple(result.camera(name).model for name in names)
-    poses = tuple(result.camera(name).pose for name in names)
-    points = triangulate_placements(models, poses, views)
+    if points is None:
+        names = rig.camera_names
+        models = tuple(result.camera(name).model for name in names)
+        poses = tuple(result.camera(name).pose for name in names)
+        points = triangulate_placements(models, poses, views)
     points = points[np.all(np.isfinite(points), axis=(1, 2))]
     if len(points) < SEGMENT_PLACEMENTS:
         return
