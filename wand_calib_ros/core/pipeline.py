@@ -30,10 +30,9 @@ from wand_calib_ros.core.judge.metrics import rereference
 from wand_calib_ros.core.judge.plausibility import check_result, check_rig, check_views
 from wand_calib_ros.core.judge.quality import judge, noise_wand_error
 from wand_calib_ros.core.model.camera_model import CameraModel
-from wand_calib_ros.core.model.result import CalibrationResult, ClockOffset
+from wand_calib_ros.core.model.result import CalibrationResult
 from wand_calib_ros.core.model.rig import RigSpec, WandObservations, spread_subset
 from wand_calib_ros.core.model.views import whole_views
-from wand_calib_ros.core.parallel import both
 from wand_calib_ros.core.refine import refine_calibration
 
 log = logging.getLogger(__name__)
@@ -171,17 +170,11 @@ def calibrate(
     if floor is not None:
         result = _with_floor(rig, result, floor, options.floor_origin)
     warnings = [*result.warnings, *rate_warnings(obs, timing.line), *offset_warnings(result)]
-    modelled = result.timing is not None and result.timing.time_offsets == "estimated"
-    noise: list[float] = []
-    offsets: list[ClockOffset] = []  # where not modelled: say when the residuals show them
-    both(  # (two passes over the views, side by side)
-        lambda: noise.append(noise_wand_error(result, names, uv)),
-        lambda: offsets.extend(() if modelled else clock_offsets(result, obs)),
-    )
-    result = replace(result, quality=judge(result, noise[0]))
-    if modelled:
+    result = replace(result, quality=judge(result, noise_wand_error(result, names, uv)))
+    if result.timing is not None and result.timing.time_offsets == "estimated":
         return replace(result, warnings=tuple(warnings))
-    return replace(result, clock_offsets=tuple(offsets), warnings=(*warnings, *clock_warnings(tuple(offsets))))
+    offsets = clock_offsets(result, obs)  # not modelled: say when the residuals show them
+    return replace(result, clock_offsets=offsets, warnings=(*warnings, *clock_warnings(offsets)))
 
 
 def _initialise(rig: RigSpec, uv: NDArray[np.float64], graph: VisionGraph, options: PairOptions) -> RigInitialisation:
