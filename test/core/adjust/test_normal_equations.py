@@ -4,7 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from wand_calib_ros.core.adjust.normal_equations import jacobi_scale, scaled_inverse, solve_free
+from wand_calib_ros.core.adjust.normal_equations import (
+    ILL_CONDITIONED,
+    _inverse_and_root,
+    jacobi_scale,
+    scaled_inverse,
+    solve_free,
+)
 
 
 def _badly_scaled(seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -84,3 +90,41 @@ def test_the_inverse_is_the_pseudo_inverse_whether_taken_directly_or_by_eigenval
             unit = jacobi_scale(near)  # (its diagonal, as scaled_inverse scales it)
             expected = np.linalg.pinv(near * unit[:, None] * unit[None, :], hermitian=True) * unit[:, None] * unit
             assert np.array_equal(scaled_inverse(near), expected)
+
+
+def _placement_blocks(seed: int, n: int, condition: float) -> np.ndarray:
+    """(n, 5, 5) random symmetric positive definite blocks with the given condition number, scaled as a placement's
+    V is (A in mm beside the direction's two angles, a wand of 600 mm: entries a few hundred thousand times apart)."""
+    rng = np.random.default_rng(seed)
+    q, _ = np.linalg.qr(rng.normal(size=(n, 5, 5)))
+    values = np.geomspace(1.0, condition, 5)[None, :] * rng.uniform(0.5, 2.0, (n, 5))
+    units = np.array([1.0, 1.0, 1.0, 600.0, 600.0])
+    return units[:, None] * ((q * values[:, None, :]) @ q.transpose(0, 2, 1)) * units[None, :]
+
+
+def test_the_placements_inverse_and_its_factor_are_those_of_the_blocks() -> None:
+    """V^-1 (by the Cholesky factor's forward substitution) agrees with numpy's inverse, and its factor L
+    (returned as L^T) gives L L^T = V^-1, for well-conditioned blocks, blocks beyond ILL_CONDITIONED_DIAGONAL (the
+    LU route) and both in one batch; to the blocks' condition number times the rounding."""
+    for seed, condition in ((0, 1e2), (1, 1e6), (2, 1e10)):
+        v = _placement_blocks(seed, 200, condition)
+        if condition == 1e6:  # a batch of both kinds: the ill-conditioned half routed apart
+            v[100:] = _placement_blocks(seed + 10, 100, 1e12)
+        v_inv, root_t = _inverse_and_root(v)
+        expected = np.linalg.inv(v)
+        scale = np.max(np.abs(expected), axis=(1, 2))[:, None, None]
+        tolerance = 1e3 * np.finfo(float).eps * np.linalg.cond(v)[:, None, None]
+        assert np.all(np.abs(v_inv - expected) <= tolerance * scale)
+        assert np.all(np.abs(root_t.transpose(0, 2, 1) @ root_t - v_inv) <= tolerance * scale)
+        assert root_t.flags.c_contiguous and np.array_equal(v_inv, v_inv.transpose(0, 2, 1))
+
+
+def test_ill_conditioned_blocks_take_numpys_inverse() -> None:
+    """Blocks whose condition number may exceed ILL_CONDITIONED are inverted as before the forward substitution
+    (numpy's LU inverse, symmetrised): the same numbers; the others by the substitution."""
+    ill, fine = _placement_blocks(3, 50, 1e8), _placement_blocks(4, 50, 10.0)  # (the units add up to 600^2)
+    assert np.all(np.linalg.cond(ill) > ILL_CONDITIONED) and np.all(np.linalg.cond(fine) < ILL_CONDITIONED / 25)
+    v_inv, _ = _inverse_and_root(np.concatenate([ill, fine]))
+    expected = np.linalg.inv(ill)
+    assert np.array_equal(v_inv[:50], 0.5 * (expected + expected.transpose(0, 2, 1)))
+    assert not np.array_equal(v_inv[50:], np.linalg.inv(fine))  # (rounded otherwise: another route)

@@ -354,9 +354,11 @@ def _by_block(rows: FloatArray, chunk: ObservationChunk, n_points: int) -> Float
     return rows.reshape(chunk.n_blocks, 2 * n_points, rows.shape[2])
 
 
-#: A block whose Cholesky diagonal spans more than this ratio (its condition number at least the square) is
-#: inverted by LU and factored again (:func:`_inverse_and_root`): placements far from narrow cameras.
-ILL_CONDITIONED_DIAGONAL = 1e4
+#: A block whose condition number may exceed this (the bound (|C|_F |C^-1|_F)^2 of its Cholesky factor C) is
+#: inverted by LU and factored again (:func:`_inverse_and_root`), as before the forward substitution: placements
+#: far from narrow cameras (up to 3e12 there). Elsewhere blocks stay below it: mocap16's up to 1.7e8, the live
+#: buffer's 1.6e7 (millimetres beside radians).
+ILL_CONDITIONED = 1e9
 
 
 def _inverse_and_root(v: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -364,8 +366,8 @@ def _inverse_and_root(v: FloatArray) -> tuple[FloatArray, FloatArray]:
 
     With V = C C^T (Cholesky), L^T = C^-1 by forward substitution, all blocks at once, and V^-1 = (C^-1)^T C^-1
     (numpy's batched inverse makes a LAPACK call per block: 10,000 blocks 11.7 -> 6.9 ms). Ill-conditioned blocks
-    (:data:`ILL_CONDITIONED_DIAGONAL`) and blocks only numerically positive definite take that inverse, L its
-    Cholesky factor, else its symmetric square root.
+    (:data:`ILL_CONDITIONED`) and blocks only numerically positive definite take that inverse, L its Cholesky
+    factor, else its symmetric square root.
     """
     try:
         lower = np.linalg.cholesky(v)
@@ -373,8 +375,7 @@ def _inverse_and_root(v: FloatArray) -> tuple[FloatArray, FloatArray]:
         return _inverse_and_root_by_lu(v)
     n = lower.shape[-1]
     inverse, inverse_t = np.zeros_like(lower), np.zeros_like(lower)  # C^-1 and its transpose, both contiguous
-    pivots = np.einsum("pii->pi", lower)
-    diagonal = 1.0 / pivots
+    diagonal = 1.0 / np.einsum("pii->pi", lower)
     for i in range(n):
         inverse[:, i, i] = inverse_t[:, i, i] = diagonal[:, i]
         for j in range(i):
@@ -383,7 +384,8 @@ def _inverse_and_root(v: FloatArray) -> tuple[FloatArray, FloatArray]:
                 total = total + lower[:, i, k] * inverse[:, k, j]
             inverse[:, i, j] = inverse_t[:, j, i] = -total * diagonal[:, i]
     v_inv = inverse_t @ inverse
-    ill = np.flatnonzero(np.max(pivots, axis=1) > ILL_CONDITIONED_DIAGONAL * np.min(pivots, axis=1))
+    bound = np.einsum("pij,pij->p", lower, lower) * np.einsum("pij,pij->p", inverse, inverse)  # (|C|_F |C^-1|_F)^2
+    ill = np.flatnonzero(~(bound <= ILL_CONDITIONED))
     if ill.size:
         v_inv[ill], inverse[ill] = _inverse_and_root_by_lu(v[ill])
     return v_inv, inverse
