@@ -234,7 +234,6 @@ def refine_calibration(
     points = free_placements(result.state, problem, uv_used)
     calibration = assemble(
         rig,
-        uv_used,
         problem,
         result,
         reference,

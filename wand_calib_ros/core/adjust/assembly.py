@@ -156,7 +156,6 @@ def max_off_axis(result: BundleResult, problem: BundleProblem) -> FloatArray:
 
 def assemble(
     rig: RigSpec,
-    uv: FloatArray,
     problem: BundleProblem,
     result: BundleResult,
     reference: int,
@@ -171,8 +170,8 @@ def assemble(
     *,
     points: FloatArray,
 ) -> CalibrationResult:
-    """The calibration of an adjustment's ``result`` on the views ``uv`` (P, C, K, 2) of ``problem``, ``points``
-    (P, K, 3) their markers as :func:`free_placements` gives them (the wand lengths' statistics)."""
+    """The calibration of an adjustment's ``result`` on the observations ``problem``, ``points`` (P, K, 3) its
+    placements' markers as :func:`free_placements` gives them (the wand lengths' statistics)."""
     state = result.state
     max_theta = max_off_axis(result, problem)
     free = free_mask(problem.n_cameras, reference, fixed)
