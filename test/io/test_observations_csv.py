@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -211,6 +212,18 @@ def test_the_fast_reader_counts_every_rows_cells(tmp_path: Path, row: str, fast:
     else:
         with pytest.raises(FormatError, match="row 3"):
             read_observations(path, ["left", "right"])
+
+
+@pytest.mark.parametrize(
+    "text", ["frame,camera,point,u,v\n", "frame,camera,point,u,v\r\n\r\n\n", "frame,camera,point,u,v"]
+)
+def test_a_header_without_rows_is_one_error_and_no_warning(tmp_path: Path, text: str) -> None:
+    path = tmp_path / "observations.csv"
+    path.write_bytes(text.encode())
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # (numpy's reader warned of an empty input before the error)
+        with pytest.raises(FormatError, match="no observations after the header"):
+            read_observations(path, None)
 
 
 def test_saturation_flags_round_trip_and_a_bad_flag_names_its_row(tmp_path: Path) -> None:

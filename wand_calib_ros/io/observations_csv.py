@@ -145,7 +145,9 @@ def _parse_plain(
     if any(mark in text for mark in ('"', " ", "\t")) or ("\r" in text and "\r" in text.replace("\r\n", "\n")):
         return None
     end = text.find("\n")  # (the first line only: not a copy of the rest)
-    header = text[: end if end >= 0 else len(text)].rstrip("\r").split(",")
+    if end < 0 or text.find(",", end + 1) < 0:  # no row after the header (numpy's reader would warn of it)
+        return None
+    header = text[:end].rstrip("\r").split(",")
     if any(c not in header for c in COLUMNS):
         return None
     fields = [*COLUMNS, *([STAMP] if STAMP in header else []), *([SATURATED] if SATURATED in header else [])]
