@@ -231,7 +231,7 @@ def refine_calibration(
         rig, uv_used, saturated[used], clocks.placements(used), result, free_mask(n_cameras, reference, fixed)
     )  # fmt: skip
     warnings += [pull.line() for pull in pulls]
-    points = free_placements(result.state, problem, uv_used)
+    markers = free_placements(result.state, problem, uv_used)  # (the used placements' markers, freely)
     calibration = assemble(
         rig,
         problem,
@@ -245,9 +245,9 @@ def refine_calibration(
         warnings,
         clocks,
         tuple(pull.line() for pull in pulls),
-        points=points,
+        points=markers,
     )
-    return calibration, points
+    return calibration, markers
 
 
 def _narrow_principal_points(
