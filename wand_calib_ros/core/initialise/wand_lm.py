@@ -196,8 +196,15 @@ def optimise_wand_lengths(
     if x[0] <= 0 or x[4] <= 0:
         raise CalibrationFailedError("Step 3 diverged (a focal length became negative): the data do not fix the scale")
     fitted, fitted_pose = _unpack(x, models)
-    errors = wand_length_errors(reconstruct_wands(fitted, fitted_pose, uv0, uv1), wand)
-    return WandFit(fitted, fitted_pose, errors)
+    return wand_fit(fitted, fitted_pose, uv0, uv1, wand)
+
+
+def wand_fit(
+    models: tuple[CameraModel, CameraModel], pose: Pose, uv0: FloatArray, uv1: FloatArray, wand: WandSpec
+) -> WandFit:
+    """The two cameras ``models``, camera 1 at ``pose`` relative to camera 0, with their wand-length errors on
+    the (N, K, 2) pixels ``uv0``, ``uv1`` of the markers of placements both see."""
+    return WandFit(models, pose, wand_length_errors(reconstruct_wands(models, pose, uv0, uv1), wand))
 
 
 def _levenberg_marquardt(
