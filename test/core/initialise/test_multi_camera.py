@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 import pytest
 from rigs import errors_against_truth, fixed_of, in_truth_frame, scenario_data, truth_bundle
 
 from wand_calib_ros.core.errors import DegenerateDataError, InsufficientDataError
-from wand_calib_ros.core.initialise import multi_camera
+from wand_calib_ros.core.initialise import multi_camera, pairwise
 from wand_calib_ros.core.initialise.vision_graph import DisconnectedRigError, build_vision_graph
 from wand_calib_ros.core.judge.metrics import heldout_wand_rms, rereference
 from wand_calib_ros.core.model.rig import WandObservations
@@ -166,3 +167,35 @@ def test_a_pair_that_moves_a_started_camera_far_is_redone_and_never_replaces_its
     assert calls.count(False) == len(graph.edges)  # ... and was redone from every lens start
     for model, camera in zip(init.models, scenario.cameras, strict=True):
         assert abs(model.k[0] / camera.model.k[0] - 1.0) < 0.1
+
+
+def test_a_camera_with_a_calibrated_twin_starts_from_its_lens_and_its_pair_skips_step_3(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    # ring6 alternates two data sheets: after the first pair of each, a new camera starts from the lens curve
+    # calibrated for its twin, its principal point at the image centre (not the twin's), and a pair whose two
+    # cameras both have a start goes from Step 2 to its bundle adjustment without Step 3; the starts stay near
+    # the truth's focal lengths.
+    scenario, data, _ = scenario_data("ring6", 1)
+    real_pair, real_step3 = multi_camera.initialise_pair, pairwise.optimise_wand_lengths
+    pairs: list[tuple[Any, Any]] = []
+    step3: list[int] = []
+
+    def recorded(specs, uv0, uv1, wand, options, *, known=(None, None)):  # type: ignore[no-untyped-def]
+        pairs.append(known)
+        return real_pair(specs, uv0, uv1, wand, options, known=known)
+
+    def counted(*args, **kwargs):  # type: ignore[no-untyped-def]
+        step3.append(len(pairs))
+        return real_step3(*args, **kwargs)
+
+    monkeypatch.setattr(multi_camera, "initialise_pair", recorded)
+    monkeypatch.setattr(pairwise, "optimise_wand_lengths", counted)
+    graph = build_vision_graph(scenario.rig.camera_names, data.observations.complete)
+    init = multi_camera.initialise_rig(scenario.rig, data.observations.uv, graph)
+    started = [i for i, known in enumerate(pairs, start=1) if known[0] is not None and known[1] is not None]
+    assert started, "no pair had both cameras started"
+    assert step3 and not set(step3) & set(started)  # Step 3 ran, only in pairs with a camera without a start
+    for (_, child), known in zip(graph.edges, pairs, strict=True):
+        if known[1] is not None:
+            assert np.array_equal(known[1][1].principal_point, scenario.rig.cameras[child].image_center)
+    for model, camera in zip(init.models, scenario.cameras, strict=True):  # (k1, k2 of the starts against the
+        assert abs(model.k[0] / camera.model.k[0] - 1.0) < 0.05  # truth's five terms: 2.1-2.4 % at most here)
