@@ -70,15 +70,15 @@ def _twin_start(rig: RigSpec, camera: int, starts: list[Start | None]) -> Start 
     of view, lens hint) as ``camera`` that is calibrated already, if any: its projection and lens curve
     (the same kind of lens, made alike), the principal point at the image centre.
 
-    Not the other camera's principal point: that is its own lens's mounting. (From it, a short sparse take
-    of four cameras, sparse4 at 200 frames, settled with principal points 120-190 px off where the data
-    do not determine them, and were no longer refused for it.)
+    Not the other camera's principal point: that is its own lens's mounting. (Started from it, a short sparse
+    take of four cameras, sparse4 at 200 frames, settled with principal points 120-190 px off where its data do
+    not determine them, and was no longer refused for it.)
     """
     spec = rig.cameras[camera]
     for other, start in zip(rig.cameras, starts, strict=True):
         if start is not None and replace(other, name=spec.name) == spec:
             projection, model = start
-            return projection, CameraModel(model.k, model.m, spec.image_center, spec.image_size)
+            return projection, replace(model, principal_point=spec.image_center)
     return None
 
 

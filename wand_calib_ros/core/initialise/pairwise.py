@@ -163,7 +163,7 @@ def initialise_pair(
         known: per camera, a (projection name, intrinsics) start from an earlier pair that
             replaces its Step 1 candidates (multi-camera chains). With both cameras started so, Step 3 is
             skipped: its wand-length fit of four intrinsics per camera only starts the pair's adjustment, and
-            such lenses start it as well (mocap16's 15 pairs: 0.51 -> 0.25 s, every camera's errors the same).
+            such lenses start it as well (mocap16's 15 pairs: 0.49 -> 0.26 s, every camera's errors the same).
 
     Raises:
         InsufficientDataError: fewer than ``options.min_placements`` placements.
