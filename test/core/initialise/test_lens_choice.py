@@ -11,10 +11,13 @@ import numpy as np
 import pytest
 from rigs import errors_against_truth, in_truth_frame, rms, truth_bundle
 
+from wand_calib_ros.core import refine
+from wand_calib_ros.core.initialise import lens_choice
 from wand_calib_ros.core.initialise.lens_choice import BORDERLINE, TANGENTIAL_THRESHOLD, _borderline, pinhole_start
 from wand_calib_ros.core.model.camera_model import EQUIDISTANT, PLUMB_BOB, radius_mm
 from wand_calib_ros.core.model.rig import RigSpec
 from wand_calib_ros.core.pipeline import calibrate
+from wand_calib_ros.sim.clocks import TakeOptions, film, observe, take_trajectory
 from wand_calib_ros.sim.scenarios import SCENARIOS, Scenario, SimulatedData, simulate
 
 SEEDS = range(4)
@@ -114,3 +117,37 @@ def test_a_settled_test_is_converged_first_where_a_statistic_is_near_its_thresho
     assert not _borderline((root - 1.1 * BORDERLINE) ** 2, 5.0, 1.0)  # clearly below: the size does not matter
     assert not _borderline(100.0, 3.0, 1.0) and not _borderline(2.0, 1.0, 1.0)
     assert _borderline(100.0, 1.04, 1.0) and not _borderline(100.0, 1.1, 1.0)  # 0.5 / 10: 5 % of the noise
+
+
+def test_timing_parameters_dropped_before_the_lens_choice_stay_dropped(monkeypatch: pytest.MonkeyPatch) -> None:
+    # Free-running cameras with plumb_bob lenses: the model order keeps cam1's time offset and drops the readout
+    # times, then the data choose plumb_bob. The adjustment in plumb_bob decides its radial order again, but not
+    # the timing: what was dropped stays held at its start, what was kept is tested again.
+    options = TakeOptions(readout_s=0.0)
+    scenario = SCENARIOS["conventional"](pinhole=True)
+    trajectory = take_trajectory(scenario, options, np.random.default_rng(0))
+    cameras_clocks = options.clocks(len(scenario.cameras), np.random.default_rng(1))
+    takes = film(scenario, trajectory, cameras_clocks, options.duration_s, np.random.default_rng(2))
+    observations = observe(scenario.rig.camera_names, takes, 0.2, np.random.default_rng(3))
+    decided: list[np.ndarray] = []
+    passed: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    real_choice, real_adjust = refine.choose_models, lens_choice.adjust_with_model_selection
+
+    def choice(*args, **kwargs):  # type: ignore[no-untyped-def]
+        decided.append(args[3].timing.copy())  # (rig, uv, result, fixed, ...)
+        return real_choice(*args, **kwargs)
+
+    def adjust(rig, uv, start, reference, clocks, used, pinned=None, timing=None):  # type: ignore[no-untyped-def]
+        result, fixed = real_adjust(rig, uv, start, reference, clocks, used, pinned, timing)
+        passed.append((timing, fixed.timing, result.state.camera_timing[~timing] - clocks.start[~timing]))
+        return result, fixed
+
+    monkeypatch.setattr(refine, "choose_models", choice)
+    monkeypatch.setattr(lens_choice, "adjust_with_model_selection", adjust)
+    result = calibrate(scenario.rig, observations)
+    assert [c.model.distortion_model for c in result.cameras] == [PLUMB_BOB, PLUMB_BOB]
+    assert len(decided) == len(passed) == 1
+    ((timing, kept, held),) = passed
+    assert np.array_equal(timing, decided[0]) and timing[1, 0] and not timing[:, 1].any()
+    assert not np.any(kept & ~timing) and not np.any(held)
+    assert result.timing is not None and result.timing.time_offsets == "estimated"

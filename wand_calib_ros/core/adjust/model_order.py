@@ -178,6 +178,7 @@ def adjust_with_model_selection(
     clocks: ClockModel,
     used: NDArray[np.int64],
     pinned: Pinned | None = None,
+    timing: NDArray[np.bool_] | None = None,
 ) -> tuple[BundleResult, FixedParameters]:
     """Bundle-adjust with every k3..k5 (and the timing) free, then drop what the data do not support and re-adjust.
 
@@ -196,10 +197,13 @@ def adjust_with_model_selection(
     Args:
         uv: (P, C, 3, 2) the placements to adjust, ``used`` (P,) their indices in the timeline.
         pinned: parameters held at their start (no order decided for their cameras).
+        timing: (C, 2) the timing parameters to estimate, ``clocks.free`` or fewer (None: ``clocks.free``): a
+            decision made before, whose dropped parameters ``initial`` holds at ``clocks.start``, is not made again.
     """
     problem = BundleProblem.from_dense(rig.wand, uv, clocks.placements(used))
     exists = parameter_mask(initial.models)
-    fixed = FixedParameters(tuple(() for _ in rig.cameras), clocks.free.copy(), held_intrinsics(rig), exists, pinned)
+    free_timing = clocks.free if timing is None else clocks.free & timing
+    fixed = FixedParameters(tuple(() for _ in rig.cameras), free_timing.copy(), held_intrinsics(rig), exists, pinned)
     start = initial
     choose: OrderOnAllPlacements | None = OrderOnAllPlacements(rig, fixed, reference, len(uv))
     while True:

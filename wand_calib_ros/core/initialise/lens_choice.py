@@ -137,7 +137,8 @@ def choose_models(
     for c in chosen:
         chosen_models[c] = tested.state.models[c]
     start = replace(tested.state, models=tuple(chosen_models))  # the model order of the chosen decided in plumb_bob
-    return adjust_with_model_selection(rig, uv, start, reference, clocks, used, fixed.pinned)
+    # (the timing parameters ``fixed`` dropped as insignificant stay dropped: plumb_bob only fits the lenses better)
+    return adjust_with_model_selection(rig, uv, start, reference, clocks, used, fixed.pinned, fixed.timing)
 
 
 def _tangential_statistics(tested: BundleResult, camera: int) -> tuple[float, float]:
