@@ -120,9 +120,9 @@ def test_a_settled_test_is_converged_first_where_a_statistic_is_near_its_thresho
 
 
 def test_timing_parameters_dropped_before_the_lens_choice_stay_dropped(monkeypatch: pytest.MonkeyPatch) -> None:
-    # Free-running cameras with plumb_bob lenses: the model order keeps cam1's time offset and drops the readout
-    # times, then the data choose plumb_bob. The adjustment in plumb_bob decides its radial order again, but not
-    # the timing: what was dropped stays held at its start, what was kept is tested again.
+    # Free-running cameras with plumb_bob lenses: the timing decided before the lens choice keeps cam1's time
+    # offset and no readout time, then the data choose plumb_bob. The adjustment in plumb_bob decides its radial
+    # order again, but not the timing: what was dropped stays held at its start, what was kept is tested again.
     options = TakeOptions(readout_s=0.0)
     scenario = SCENARIOS["conventional"](pinhole=True)
     trajectory = take_trajectory(scenario, options, np.random.default_rng(0))
