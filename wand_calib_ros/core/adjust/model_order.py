@@ -87,11 +87,12 @@ def low_order(models: tuple[CameraModel, ...]) -> tuple[CameraModel, ...]:
     return tuple(zeroed(model, LOW_ORDER_FIXED[model.distortion_model]) for model in models)
 
 
-def low_order_mask(models: tuple[CameraModel, ...], free: NDArray[np.bool_]) -> NDArray[np.bool_]:
-    """``free`` (C, 20) with the terms of :data:`LOW_ORDER_FIXED` held."""
+def low_order_mask(models: tuple[CameraModel, ...], free: NDArray[np.bool_], *, terms: int = 0) -> NDArray[np.bool_]:
+    """``free`` (C, 20) with the terms of :data:`LOW_ORDER_FIXED` held, but for the first ``terms`` of them
+    (k3 of the fisheye model, k4 of plumb_bob's: ``terms=1``)."""
     out = free.copy()
     for c, model in enumerate(models):
-        out[c, list(LOW_ORDER_FIXED[model.distortion_model])] = False
+        out[c, list(LOW_ORDER_FIXED[model.distortion_model][terms:])] = False
     return out
 
 
