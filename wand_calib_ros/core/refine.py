@@ -165,10 +165,7 @@ def refine_calibration(
     # k3..k5 stay at zero here: the robust pass only has to find the outliers, and the
     # low-order model converges in a few iterations even from a rough start. Where it tests or estimates
     # timing, k3 is free too (see _robust_pass).
-    robust, sigma, clocks, keep = _robust_pass(
-        wand, uv, points, models, poses, keep, low_order_mask(models, full), low_order_mask(models, full, terms=1),
-        clocks,
-    )  # fmt: skip
+    robust, sigma, clocks, keep = _robust_pass(wand, uv, points, models, poses, keep, full, clocks)
     clean = uv[keep]  # (a copy: its rejected views are set NaN)
     rejected = rejected_views(clean, robust.residuals, VIEW_GATE_SIGMAS * sigma)
     clean[rejected] = np.nan
@@ -318,8 +315,7 @@ def _robust_pass(
     models: tuple[CameraModel, ...],
     poses: tuple[Pose, ...],
     keep: NDArray[np.int64],
-    free: NDArray[np.bool_],
-    timed_free: NDArray[np.bool_],
+    full: NDArray[np.bool_],
     clocks: ClockModel,
 ) -> tuple[BundleResult, float, ClockModel, NDArray[np.int64]]:
     """The robust adjustment of the placements ``keep``, with the timing parameters the clock model estimates.
@@ -333,11 +329,11 @@ def _robust_pass(
 
     Args:
         uv: (P, C, 3, 2) every placement of the timeline; ``points`` (P, 3, 3) their starting triangulation.
-        keep: the placements the gate kept; ``free`` the geometric parameters to estimate.
-        timed_free: those estimated beside timing parameters (tested or estimated): ``free`` with one radial
-            term more. The low order's misfit otherwise passes for readout times and offsets where the noise is
-            low (a 4-camera live buffer at 0.02 px: readout times of -1 ms at 10 sigma, offsets 34 us at 9, where
-            k3 free gives -10 us and offsets within their noise).
+        keep: the placements the gate kept; ``full`` the geometric parameters the calibration estimates, of which
+            the pass estimates the low order (:func:`low_order_mask`), and one radial term more beside timing
+            parameters (tested or estimated). The low order's misfit otherwise passes for readout times and offsets
+            where the noise is low (a 4-camera live buffer at 0.02 px: readout times of -1 ms at 10 sigma, offsets
+            34 us at 9, where k3 free gives -10 us and offsets within their noise).
 
     Returns:
         The pass, its robust pixel noise, the clock model and the placements it adjusted.
@@ -348,6 +344,7 @@ def _robust_pass(
             models, poses, points[index, 0], wand_directions(points[index, 0], points[index, -1]), timing
         )
 
+    free, timed_free = low_order_mask(models, full), low_order_mask(models, full, terms=1)
     warm: BundleState | None = None  # the timing test's solution, on the placements it can place
     placeable = clocks.placeable(len(uv))[keep]
     if clocks.tentative:
