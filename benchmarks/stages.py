@@ -55,6 +55,8 @@ STAGES = (
 INNER = (
     ("wand_calib_ros.core.adjust.bundle_adjustment", "bundle_adjust", "bundle_adjust"),
     ("wand_calib_ros.core.adjust.bundle_adjustment", "_evaluate", "residuals and normal equations"),
+    ("wand_calib_ros.core.adjust.bundle_adjustment", "residuals", "residuals alone (costs)"),
+    ("wand_calib_ros.core.adjust.placements", "triangulate_placements", "triangulations"),
     ("wand_calib_ros.core.adjust.normal_equations", "reduced_system", "Schur complement"),
     ("wand_calib_ros.core.initialise.pairwise", "initialise_pair", "pair initialisations"),
 )
