@@ -95,7 +95,7 @@ def check_motion(spec: CameraSpec, uv: FloatArray) -> None:
         DegenerateDataError: with what the user should change.
     """
     # Column by column: numpy's reductions along the first axis of a few columns cost 10x more here (30 checks of
-    # about 9,000 placements on mocap16: 40 -> 9 ms).
+    # about 9,000 placements on mocap16: 40 -> 10-12 ms).
     columns = uv.reshape(uv.shape[0], -1).T.copy()  # (2K, N): u, v of each marker in turn
     std = np.std(columns, axis=1).reshape(-1, 2)  # (K, 2)
     spread = float(np.max(np.hypot(std[:, 0], std[:, 1])))  # largest spread of A, B or C over placements
