@@ -94,7 +94,7 @@ def check_motion(spec: CameraSpec, uv: FloatArray) -> None:
     Raises:
         DegenerateDataError: with what the user should change.
     """
-    # Column by column: numpy's reductions along the first axis of a few columns cost 10x more here (30 checks of
+    # Column by column: numpy's reductions along the first axis of a few columns cost 4-15x more here (30 checks of
     # about 9,000 placements on mocap16: 40 -> 10-12 ms).
     columns = uv.reshape(uv.shape[0], -1).T.copy()  # (2K, N): u, v of each marker in turn
     std = np.std(columns, axis=1).reshape(-1, 2)  # (K, 2)
