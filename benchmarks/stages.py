@@ -54,8 +54,8 @@ STAGES = (
 #: Counted inside the stages: (module, function, label).
 INNER = (
     ("wand_calib_ros.core.adjust.bundle_adjustment", "bundle_adjust", "bundle_adjust"),
-    ("wand_calib_ros.core.adjust.bundle_adjustment", "_evaluate", "residuals and normal equations"),
-    ("wand_calib_ros.core.adjust.bundle_adjustment", "residuals", "residuals alone (costs)"),
+    ("wand_calib_ros.core.adjust.linearisation", "evaluate", "residuals and normal equations"),
+    ("wand_calib_ros.core.adjust.linearisation", "residuals", "residuals alone (costs)"),
     ("wand_calib_ros.core.adjust.placements", "triangulate_placements", "triangulations"),
     ("wand_calib_ros.core.adjust.normal_equations", "reduced_system", "Schur complement"),
     ("wand_calib_ros.core.initialise.pairwise", "initialise_pair", "pair initialisations"),

@@ -25,13 +25,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))
 
 from rigs import errors_against_truth, fixed_of, in_truth_frame, rms, scenario_data, truth_bundle, z_scores
 
-from wand_calib_ros.core.adjust.bundle_adjustment import (
-    BundleProblem,
-    BundleResult,
-    BundleState,
-    bundle_adjust,
-    default_free_mask,
-)
+from wand_calib_ros.core.adjust.bundle_adjustment import BundleResult, bundle_adjust
+from wand_calib_ros.core.adjust.bundle_problem import BundleProblem, BundleState, default_free_mask
 from wand_calib_ros.core.adjust.narrow_field import DISTORTION, PRINCIPAL_POINT, pinhole_at_centre
 from wand_calib_ros.core.adjust.placements import triangulate_placements
 from wand_calib_ros.core.errors import CoreError

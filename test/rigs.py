@@ -8,13 +8,12 @@ from functools import cache
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.adjust.bundle_adjustment import (
+from wand_calib_ros.core.adjust.bundle_adjustment import BundleResult, bundle_adjust
+from wand_calib_ros.core.adjust.bundle_problem import (
     CAMERA_PARAM_NAMES,
     INTRINSICS,
     BundleProblem,
-    BundleResult,
     BundleState,
-    bundle_adjust,
     default_free_mask,
 )
 from wand_calib_ros.core.adjust.model_order import zeroed

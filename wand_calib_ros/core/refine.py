@@ -21,15 +21,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wand_calib_ros.core.adjust.assembly import assemble, free_placements
-from wand_calib_ros.core.adjust.bundle_adjustment import (
+from wand_calib_ros.core.adjust.bundle_adjustment import BundleResult, bundle_adjust, camera_std
+from wand_calib_ros.core.adjust.bundle_problem import (
     INTRINSICS,
     READOUT,
     TIMING,
     BundleProblem,
-    BundleResult,
     BundleState,
-    bundle_adjust,
-    camera_std,
     default_free_mask,
 )
 from wand_calib_ros.core.adjust.gating import (

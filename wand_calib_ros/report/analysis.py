@@ -17,14 +17,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.adjust.bundle_adjustment import (
-    N_CAMERA_PARAMS,
-    BundleProblem,
-    BundleResult,
-    BundleState,
-    PlacementTiming,
-    bundle_adjust,
-)
+from wand_calib_ros.core.adjust.bundle_adjustment import BundleResult, bundle_adjust
+from wand_calib_ros.core.adjust.bundle_problem import N_CAMERA_PARAMS, BundleProblem, BundleState, PlacementTiming
 from wand_calib_ros.core.adjust.gating import VIEW_GATE_SIGMAS, rejected_views
 from wand_calib_ros.core.adjust.placements import triangulate_placements
 from wand_calib_ros.core.adjust.timing import Timeline, align_views, smooth_motion, timeline

@@ -7,24 +7,20 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from wand_calib_ros.core.adjust.bundle_adjustment import (
+from wand_calib_ros.core.adjust.bundle_adjustment import CameraSystem, bundle_adjust
+from wand_calib_ros.core.adjust.bundle_problem import (
     N_CAMERA_PARAMS,
     READOUT,
     TIME_OFFSET,
     BundleProblem,
     BundleState,
-    CameraSystem,
     PlacementTiming,
-    _apply_step,
-    _evaluate,
-    _hold_worse_placements,
-    _huber_weights,
-    _linearise,
-    bundle_adjust,
+    apply_step,
     default_free_mask,
     parameter_mask,
-    residuals,
 )
+from wand_calib_ros.core.adjust.levenberg_marquardt import held_placements
+from wand_calib_ros.core.adjust.linearisation import evaluate, huber_weights, linearise, residuals
 from wand_calib_ros.core.adjust.normal_equations import SCHUR_OVERHEAD, SCHUR_WASTE, block_layout, reduced_system
 from wand_calib_ros.core.model.camera_model import from_opencv_pinhole
 from wand_calib_ros.core.model.geometry import Pose
@@ -90,7 +86,7 @@ def test_jacobians_match_finite_differences(lenses: str) -> None:
     if lenses == "pinhole":
         state = _pinhole_cameras(state)
         every = np.arange(TIME_OFFSET, N_CAMERA_PARAMS)
-    _, jc, jp = _linearise(state, problem, carried=every)
+    _, jc, jp = linearise(state, problem, carried=every)
     assert jc.shape[2] == 13 + every.size
     finite = np.all(np.isfinite(jc), axis=(1, 2))
     assert finite.mean() > 0.9  # points behind a pinhole camera have no image
@@ -100,8 +96,8 @@ def test_jacobians_match_finite_differences(lenses: str) -> None:
         for i in range(jc.shape[2]):
             delta = np.zeros((3, jc.shape[2]))
             delta[c, i] = h
-            plus = residuals(_apply_step(state, delta, np.zeros((8, 5)), every), problem)
-            minus = residuals(_apply_step(state, -delta, np.zeros((8, 5)), every), problem)
+            plus = residuals(apply_step(state, delta, np.zeros((8, 5)), every), problem)
+            minus = residuals(apply_step(state, -delta, np.zeros((8, 5)), every), problem)
             numeric = (plus - minus) / (2 * h)
             analytic = np.where((problem.camera == c)[:, None], jc[:, :, i], 0.0)
             if not exists[c, np.r_[0:13, every][i]]:
@@ -114,8 +110,8 @@ def test_jacobians_match_finite_differences(lenses: str) -> None:
         delta[:, j] = h
         zero = np.zeros((3, jc.shape[2]))
         numeric = (
-            residuals(_apply_step(state, zero, delta, every), problem)
-            - residuals(_apply_step(state, zero, -delta, every), problem)
+            residuals(apply_step(state, zero, delta, every), problem)
+            - residuals(apply_step(state, zero, -delta, every), problem)
         ) / (2 * h)
         assert np.allclose(jp[finite, :, j], numeric[finite], atol=1e-5)
 
@@ -127,7 +123,7 @@ def test_sparse_normal_equations_and_schur_complement_match_the_dense_jacobian(m
     # column, chunks of about 64 observations: the sums chunk by chunk (by one thread, or shared by
     # two) and the chunked Schur complement against J^T W J and its dense elimination.
     monkeypatch.setattr("wand_calib_ros.core.adjust.normal_equations.CHUNK_OBSERVATIONS", 64)
-    monkeypatch.setattr("wand_calib_ros.core.adjust.bundle_adjustment.THREADED_CHUNKS", 2 if threaded else 10**9)
+    monkeypatch.setattr("wand_calib_ros.core.adjust.linearisation.THREADED_CHUNKS", 2 if threaded else 10**9)
     monkeypatch.setattr("wand_calib_ros.core.parallel.cores", lambda: 2)
     scenario, data, state, _ = _setup(1.0, 300, 4, n_cameras=3)
     uv = data.observations.uv.copy()
@@ -138,13 +134,13 @@ def test_sparse_normal_equations_and_schur_complement_match_the_dense_jacobian(m
     state = BundleState(state.models, state.poses, data.wand_a[seen], data.wand_direction[seen])
     state, problem = _with_timing(scenario, data, state, 6, uv[seen])
     every = np.array([TIME_OFFSET])
-    res, jc, jp = _linearise(state, problem, carried=every)
-    weights = _huber_weights(res, 1.5)
+    res, jc, jp = linearise(state, problem, carried=every)
+    weights = huber_weights(res, 1.5)
     assert 0 < np.sum(weights < 1) < weights.size
     layout = block_layout(problem.camera, problem.placement, problem.point, 3, problem.n_placements, 3, jc.shape[2])
     assert len(layout.chunks) > 10 and len(layout.schur_chunks) > 1
     assert not all(chunk.full for chunk in layout.chunks)
-    chunked_res, normal = _evaluate(state, problem, layout, every, 1.5)
+    chunked_res, normal = evaluate(state, problem, layout, every, 1.5)
     assert np.array_equal(chunked_res, res)
     assert np.array_equal(residuals(state, problem), res)
     s, rhs, _ = reduced_system(normal, layout)
@@ -233,12 +229,12 @@ def test_a_placement_whose_step_raises_its_cost_is_held() -> None:
     thrown[7] += 300.0
     candidate = BundleState(truth.models, truth.poses, thrown, truth.wand_direction)
     res = residuals(candidate, problem)
-    held = _hold_worse_placements(before, candidate, problem, res, None, np.inf)
+    held = held_placements(before, candidate, problem, res, None, np.inf)
     assert held is not None
     moved = np.flatnonzero(np.any(held.wand_a != candidate.wand_a, axis=1))
     assert moved.tolist() == [7] and np.array_equal(held.wand_a[7], before.wand_a[7])
-    assert _hold_worse_placements(before, candidate, problem, res, None, 0.0) is None
-    assert _hold_worse_placements(before, truth, problem, residuals(truth, problem), None, np.inf) is None
+    assert held_placements(before, candidate, problem, res, None, 0.0) is None
+    assert held_placements(before, truth, problem, residuals(truth, problem), None, np.inf) is None
 
 
 def test_schur_chunks_keep_apart_placements_of_cameras_that_share_none() -> None:

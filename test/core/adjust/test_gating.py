@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from wand_calib_ros.core.adjust.bundle_adjustment import BundleProblem
+from wand_calib_ros.core.adjust.bundle_problem import BundleProblem
 from wand_calib_ros.core.adjust.gating import rejected_views
 from wand_calib_ros.core.model.rig import WandSpec
 

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 from rigs import scenario_data
 
-from wand_calib_ros.core.adjust.bundle_adjustment import BundleProblem, BundleResult, BundleState, bundle_adjust
+from wand_calib_ros.core.adjust.bundle_adjustment import BundleResult, bundle_adjust
+from wand_calib_ros.core.adjust.bundle_problem import BundleProblem, BundleState
 from wand_calib_ros.core.adjust.model_order import (
     FixedParameters,
     OrderOnAllPlacements,

@@ -11,12 +11,8 @@ import numpy as np
 import pytest
 from rigs import errors_against_truth, in_truth_frame, rms, scenario_data, z_scores
 
-from wand_calib_ros.core.adjust.bundle_adjustment import (
-    BundleProblem,
-    BundleState,
-    bundle_adjust,
-    default_free_mask,
-)
+from wand_calib_ros.core.adjust.bundle_adjustment import bundle_adjust
+from wand_calib_ros.core.adjust.bundle_problem import BundleProblem, BundleState, default_free_mask
 from wand_calib_ros.core.adjust.narrow_field import (
     DISTORTION,
     MOUNTING_TOLERANCE_MM,

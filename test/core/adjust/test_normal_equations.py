@@ -53,7 +53,8 @@ def test_badly_scaled_steps_are_solved_exactly_over_the_free_unknowns() -> None:
 def test_a_prior_adds_its_information_to_the_parameters_it_holds() -> None:
     """CameraSystem.covariance with a prior: sigma^2 (S + sigma^2 / prior^2)^-1 over the free parameters and
     those held at a prior; a parameter the data do not see at all gets the prior's own variance."""
-    from wand_calib_ros.core.adjust.bundle_adjustment import N_CAMERA_PARAMS, CameraSystem
+    from wand_calib_ros.core.adjust.bundle_adjustment import CameraSystem
+    from wand_calib_ros.core.adjust.bundle_problem import N_CAMERA_PARAMS
 
     rng = np.random.default_rng(5)
     columns = np.arange(13)  # the geometric parameters of one camera

@@ -6,7 +6,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wand_calib_ros.core.adjust import placements
-from wand_calib_ros.core.adjust.bundle_adjustment import BundleProblem, BundleState
+from wand_calib_ros.core.adjust.bundle_problem import BundleProblem, BundleState
 from wand_calib_ros.core.adjust.gating import rejected_views
 from wand_calib_ros.core.adjust.placements import fit_placements, triangulate_placements
 from wand_calib_ros.core.model.camera_model import CameraModel

@@ -8,16 +8,10 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.adjust.bundle_adjustment import (
-    CAMERA_PARAM_NAMES,
-    LENS,
-    BundleProblem,
-    BundleResult,
-    BundleState,
-    residuals,
-    squared_norms,
-)
+from wand_calib_ros.core.adjust.bundle_adjustment import BundleResult
+from wand_calib_ros.core.adjust.bundle_problem import CAMERA_PARAM_NAMES, LENS, BundleProblem, BundleState
 from wand_calib_ros.core.adjust.gating import VIEW_GATE_SIGMAS
+from wand_calib_ros.core.adjust.linearisation import residuals, squared_norms
 from wand_calib_ros.core.adjust.model_order import FixedParameters, free_mask
 from wand_calib_ros.core.adjust.normal_equations import block_starts
 from wand_calib_ros.core.adjust.placements import triangulate_placements

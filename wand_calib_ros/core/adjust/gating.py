@@ -8,16 +8,9 @@ import logging
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.adjust.bundle_adjustment import (
-    DECIDING_SETTLED,
-    BundleProblem,
-    BundleResult,
-    BundleState,
-    PlacementTiming,
-    bundle_adjust,
-    residuals,
-    squared_norms,
-)
+from wand_calib_ros.core.adjust.bundle_adjustment import DECIDING_SETTLED, BundleResult, bundle_adjust
+from wand_calib_ros.core.adjust.bundle_problem import BundleProblem, BundleState, PlacementTiming
+from wand_calib_ros.core.adjust.linearisation import residuals, squared_norms
 from wand_calib_ros.core.adjust.normal_equations import block_starts
 from wand_calib_ros.core.adjust.placements import fit_placements
 from wand_calib_ros.core.model.rig import RigSpec, WandSpec

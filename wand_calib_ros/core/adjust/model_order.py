@@ -14,17 +14,15 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.adjust.bundle_adjustment import (
+from wand_calib_ros.core.adjust.bundle_adjustment import BundleResult, CameraSystem, bundle_adjust
+from wand_calib_ros.core.adjust.bundle_problem import (
     CAMERA_PARAM_NAMES,
     INTRINSICS,
     LENS,
     N_CAMERA_PARAMS,
     TIMING,
     BundleProblem,
-    BundleResult,
     BundleState,
-    CameraSystem,
-    bundle_adjust,
     default_free_mask,
     parameter_mask,
 )

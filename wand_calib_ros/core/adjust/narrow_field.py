@@ -16,7 +16,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.adjust.bundle_adjustment import LENS, N_CAMERA_PARAMS, CameraSystem, camera_std
+from wand_calib_ros.core.adjust.bundle_adjustment import CameraSystem, camera_std
+from wand_calib_ros.core.adjust.bundle_problem import LENS, N_CAMERA_PARAMS
 from wand_calib_ros.core.adjust.model_order import Pinned
 from wand_calib_ros.core.model.camera_model import N_RADIAL, PLUMB_BOB, CameraModel
 from wand_calib_ros.core.model.rig import CameraSpec, RigSpec

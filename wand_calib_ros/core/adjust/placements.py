@@ -9,14 +9,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.adjust.bundle_adjustment import (
-    N_CAMERA_PARAMS,
-    BundleProblem,
-    BundleResult,
-    BundleState,
-    PlacementTiming,
-    bundle_adjust,
-)
+from wand_calib_ros.core.adjust.bundle_adjustment import BundleResult, bundle_adjust
+from wand_calib_ros.core.adjust.bundle_problem import N_CAMERA_PARAMS, BundleProblem, BundleState, PlacementTiming
 from wand_calib_ros.core.model.camera_model import CameraModel, unproject
 from wand_calib_ros.core.model.geometry import Pose, triangulate_rays, wand_directions
 from wand_calib_ros.core.model.rig import WandSpec

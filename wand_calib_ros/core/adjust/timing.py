@@ -24,15 +24,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.adjust.bundle_adjustment import (
-    N_CAMERA_PARAMS,
-    READOUT,
-    TIME_OFFSET,
-    TIMING,
-    BundleResult,
-    CameraSystem,
-    PlacementTiming,
-)
+from wand_calib_ros.core.adjust.bundle_adjustment import BundleResult, CameraSystem
+from wand_calib_ros.core.adjust.bundle_problem import N_CAMERA_PARAMS, READOUT, TIME_OFFSET, TIMING, PlacementTiming
 from wand_calib_ros.core.adjust.chi_square import chi_square_quantile
 from wand_calib_ros.core.errors import TimingError
 from wand_calib_ros.core.model.result import TIMING_MODES, CalibrationResult

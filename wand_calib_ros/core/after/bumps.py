@@ -23,7 +23,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.adjust.bundle_adjustment import BundleProblem, BundleState, squared_norms
+from wand_calib_ros.core.adjust.bundle_problem import BundleProblem, BundleState
+from wand_calib_ros.core.adjust.linearisation import squared_norms
 from wand_calib_ros.core.adjust.placements import fit_placements
 from wand_calib_ros.core.model.camera_model import CameraModel
 from wand_calib_ros.core.model.geometry import Pose

@@ -28,7 +28,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.adjust.bundle_adjustment import N_CAMERA_PARAMS, TIMING, camera_std, moved_camera
+from wand_calib_ros.core.adjust.bundle_adjustment import camera_std
+from wand_calib_ros.core.adjust.bundle_problem import N_CAMERA_PARAMS, TIMING, moved_camera
 from wand_calib_ros.core.errors import DegenerateDataError
 from wand_calib_ros.core.model.camera_model import CameraModel, project
 from wand_calib_ros.core.model.geometry import Pose, rotation_from_rotvec

@@ -16,13 +16,13 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.adjust.bundle_adjustment import (
+from wand_calib_ros.core.adjust.bundle_adjustment import bundle_adjust
+from wand_calib_ros.core.adjust.bundle_problem import (
     CAMERA_PARAM_NAMES,
     N_CAMERA_PARAMS,
     N_GEOMETRIC,
     BundleProblem,
     BundleState,
-    bundle_adjust,
 )
 from wand_calib_ros.core.adjust.gating import robust_adjustment
 from wand_calib_ros.core.adjust.placements import triangulate_placements

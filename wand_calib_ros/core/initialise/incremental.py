@@ -29,7 +29,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.adjust.bundle_adjustment import N_CAMERA_PARAMS, BundleProblem, BundleState
+from wand_calib_ros.core.adjust.bundle_problem import N_CAMERA_PARAMS, BundleProblem, BundleState
 from wand_calib_ros.core.adjust.gating import robust_adjustment
 from wand_calib_ros.core.adjust.placements import triangulate_placements
 from wand_calib_ros.core.errors import CoreError, DegenerateDataError, InsufficientDataError

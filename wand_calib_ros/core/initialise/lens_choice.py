@@ -15,16 +15,8 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.adjust.bundle_adjustment import (
-    DECIDING_SETTLED,
-    INTRINSICS,
-    LENS,
-    N_CAMERA_PARAMS,
-    BundleProblem,
-    BundleResult,
-    bundle_adjust,
-    parameter_mask,
-)
+from wand_calib_ros.core.adjust.bundle_adjustment import DECIDING_SETTLED, BundleResult, bundle_adjust
+from wand_calib_ros.core.adjust.bundle_problem import INTRINSICS, LENS, N_CAMERA_PARAMS, BundleProblem, parameter_mask
 from wand_calib_ros.core.adjust.chi_square import chi_square_quantile
 from wand_calib_ros.core.adjust.model_order import FixedParameters, adjust_with_model_selection, free_mask
 from wand_calib_ros.core.adjust.timing import ClockModel

@@ -16,11 +16,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.adjust.bundle_adjustment import (
-    BundleProblem,
-    BundleState,
-    default_free_mask,
-)
+from wand_calib_ros.core.adjust.bundle_problem import BundleProblem, BundleState, default_free_mask
 from wand_calib_ros.core.adjust.gating import robust_adjustment
 from wand_calib_ros.core.adjust.placements import triangulate_placements
 from wand_calib_ros.core.errors import CoreError, DegenerateDataError, InsufficientDataError

@@ -20,7 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.adjust.bundle_adjustment import BundleProblem, BundleResult, PlacementTiming, bundle_adjust
+from wand_calib_ros.core.adjust.bundle_adjustment import BundleResult, bundle_adjust
+from wand_calib_ros.core.adjust.bundle_problem import BundleProblem, PlacementTiming
 from wand_calib_ros.core.errors import CoreError
 from wand_calib_ros.core.model.geometry import rotvec_from_rotation
 from wand_calib_ros.core.model.rig import RigSpec

@@ -6,9 +6,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.adjust.bundle_adjustment import (
-    BundleResult,
-)
+from wand_calib_ros.core.adjust.bundle_adjustment import BundleResult
 from wand_calib_ros.core.adjust.gating import MIN_CAMERA_VIEWS
 from wand_calib_ros.core.adjust.narrow_field import NARROW_FIELD_DEG, field_of_view_deg
 from wand_calib_ros.core.errors import DegenerateDataError, InsufficientDataError

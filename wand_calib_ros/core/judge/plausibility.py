@@ -14,7 +14,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.adjust.bundle_adjustment import N_CAMERA_PARAMS, BundleResult
+from wand_calib_ros.core.adjust.bundle_adjustment import BundleResult
+from wand_calib_ros.core.adjust.bundle_problem import N_CAMERA_PARAMS
 from wand_calib_ros.core.adjust.narrow_field import NARROW_FIELD_DEG, field_of_view_deg
 from wand_calib_ros.core.errors import PlausibilityError
 from wand_calib_ros.core.judge.degeneracy import MAX_FOCAL_STD
