@@ -74,7 +74,7 @@ from wand_calib_ros.core.adjust.timing import (
     with_timing,
 )
 from wand_calib_ros.core.initialise.lens_choice import choose_models
-from wand_calib_ros.core.judge.centre_bias import saturated_pull
+from wand_calib_ros.core.judge.centre_bias import CentreBias, saturated_pull
 from wand_calib_ros.core.judge.degeneracy import check_camera_views, check_geometry, check_uncertainty, require
 from wand_calib_ros.core.judge.plausibility import check_given_intrinsics
 from wand_calib_ros.core.model.camera_model import (
@@ -135,99 +135,36 @@ def refine_calibration(
         The calibration, and (U, K, 3) the markers of the U placements it used, triangulated freely with its
         cameras (:func:`~wand_calib_ros.core.adjust.assembly.free_placements`; reference frame, mm).
     """
-    wand = rig.wand
-    n_cameras = len(rig.cameras)
-    narrow = narrow_cameras(rig)  # pinholes, their principal point held at the centre (at a prior)
-    pinned = narrow_pins(rig, narrow) if narrow.any() else None
-    models = tuple(narrow_start(m, rig.cameras[c]) if narrow[c] else m for c, m in enumerate(models))
-    full = default_free_mask(n_cameras, reference, models)
-    full[np.ix_(held_intrinsics(rig), INTRINSICS)] = False
-    if pinned is not None:
-        full &= ~pinned.mask
-    models = tuple(  # given intrinsics start as given; estimated ones from the low-order model
-        m if spec.intrinsics is not None else low
-        for m, low, spec in zip(models, low_order(models), rig.cameras, strict=True)
-    )
+    models, full, pinned = _starting_models(rig, models, reference)
     points = triangulate_placements(models, poses, uv if start_uv is None else start_uv)
     clocks = start_clocks(rig, timing, points, reference)
-    errors = ac_length_errors(points, wand)
-    threshold = gate_threshold(errors, wand)
-    keep = np.flatnonzero(gate_placements(rig, uv, errors, threshold) & ~unprojectable(models, poses, uv, points))
-    log.info("gate |AC| within %.1f mm: %d placements kept, %d set aside", threshold, keep.size, len(uv) - keep.size)
-    require(keep.size, min_placements, f"reconstruct to the wand length within {threshold:.1f} mm")
-    # Coarse to fine: outliers and the distortion model are settled on a spread subset; the
-    # other placements join through the re-admission below and the final adjustment uses all.
-    keep = coarse_subset(keep, len(uv))
+    # Coarse to fine: outliers and the distortion model are settled on a spread subset of the placements the
+    # gate keeps; the other placements join through the re-admission below and the final adjustment uses all.
+    keep = coarse_subset(_gated(rig, uv, models, poses, points, min_placements), len(uv))
 
     # 1. Robust adjustment (Huber), then views with a point off by more than VIEW_GATE_SIGMAS are rejected.
     # k3..k5 stay at zero here: the robust pass only has to find the outliers, and the
     # low-order model converges in a few iterations even from a rough start. Where it tests or estimates
     # timing, k3 is free too (see _robust_pass).
-    robust, sigma, clocks, keep = _robust_pass(wand, uv, points, models, poses, keep, full, clocks)
-    clean = uv[keep]  # (a copy: its rejected views are set NaN)
-    rejected = rejected_views(clean, robust.residuals, VIEW_GATE_SIGMAS * sigma)
-    clean[rejected] = np.nan
-    still = enough_views(clean)
-    log.info("robust pass: sigma %.3f px, %d views rejected, %d placements left", sigma, rejected.sum(), still.sum())
-    require(int(still.sum()), min_placements, "keep two clean views after outlier rejection")
-    used, uv_used = keep[still], clean[still]
-    state = subset_state(robust.state, still)
-    if clocks.modelled:  # the motion from where the robust cameras put every placement
-        placed = _fitted_points(wand, robust.state, uv, clocks, keep, HUBER_SIGMAS * sigma)
-        clocks = refresh_motion(clocks, placed, choose=True)
+    robust, sigma, clocks, keep = _robust_pass(rig.wand, uv, points, models, poses, keep, full, clocks)
+    used, uv_used, state, clocks = _cleaned(rig.wand, uv, robust, sigma, clocks, keep, min_placements)
 
     # 2. Least squares on the clean data, dropping the distortion terms (and the timing) the data do not support.
     result, fixed = adjust_with_model_selection(rig, uv_used, state, reference, clocks, used, pinned)
     # ... in plumb_bob instead for the conventional cameras whose model the rig leaves open, where the data say so
     result, fixed = choose_models(rig, uv_used, result, fixed, reference, clocks, used)
-    free = free_mask(n_cameras, reference, fixed)
 
-    # 3. Placements set aside so far come back with their clean views if they fit the solution.
-    decided_on = used.size
-    aside = np.setdiff1d(np.flatnonzero(clocks.placeable(len(uv))), used)
-    admitted, left_out, admitted_state = readmit(rig, uv, aside, result, clocks.placements(aside))
-    if admitted.any():
-        log.info("%d more placements fit the solution: admitted", admitted.sum())
-        uv_used = appended(uv_used, uv, aside[admitted])
-        uv_used[used.size :][left_out] = np.nan  # (their rejected views)
-        used = np.concatenate([used, aside[admitted]])
-    if admitted.any() or clocks.modelled:  # with timing, the refreshed motion changes the problem
-        state = BundleState(
-            result.state.models,
-            result.state.poses,
-            np.concatenate([result.state.wand_a, admitted_state.wand_a]),
-            np.concatenate([result.state.wand_direction, admitted_state.wand_direction]),
-            result.state.timing,
-        )
-        # 4. The final adjustment of them all; with more than the coarse ones, the model order decided
-        # again on all of them on its way.
-        order = OrderOnAllPlacements(rig, fixed, reference, decided_on) if used.size > decided_on else None
-        result, clocks, free = _final_adjustment(rig, uv, uv_used, used, state, clocks, free, order)
-        fixed = order.decision if order is not None else fixed
-        held = fixed.timing.copy()
-        held[:, 1] &= free[:, READOUT]  # (a readout the bound held at zero)
-        fixed = replace(fixed, timing=held)
-    problem = BundleProblem.from_dense(wand, uv_used, clocks.placements(used))
+    # 3. and 4. The placements set aside so far, and the final adjustment of them all.
+    result, fixed, clocks, used, uv_used = _every_placement(rig, uv, result, fixed, reference, clocks, used, uv_used)
+    problem = BundleProblem.from_dense(rig.wand, uv_used, clocks.placements(used))
     narrow_notes: list[str] = []
     if fixed.pinned is not None:
         result, fixed, narrow_notes = _narrow_principal_points(rig, problem, result, fixed, reference)
-    check_geometry(result.state.points(wand))
-    check_camera_views(rig, uv, uv_used)
-    check_uncertainty(rig, result)
-    points = np.isfinite(uv_used[..., 0]).sum(axis=(0, 2))  # (C,) image points per camera
-    warnings = narrow_notes + check_given_intrinsics(rig, result, free_mask(n_cameras, reference, fixed), points)
-    for model, spec in zip(result.state.models, rig.cameras, strict=True):
-        if turns_over_in_image(model, spec.max_view_angle):
-            warnings.append(
-                f"{spec.name}: r(theta) turns over at {np.degrees(radius_limit(model)):.0f} deg, inside the "
-                f"image and below max_view_angle_deg {spec.max_view_angle_deg:g}: check the rig description"
-            )
-    seen = some_views(uv[used])
-    views_rejected = (seen & ~some_views(uv_used)).sum(axis=0)
-    pulls = () if saturated is None else saturated_pull(
-        rig, uv_used, saturated[used], clocks.placements(used), result, free_mask(n_cameras, reference, fixed)
-    )  # fmt: skip
-    warnings += [pull.line() for pull in pulls]
+
+    # 5. What cannot be right, then the result.
+    pulls = _checked(rig, uv, uv_used, used, result, clocks, free_mask(len(rig.cameras), reference, fixed), saturated)
+    warnings = narrow_notes + _warnings(rig, result, fixed, reference, uv_used) + [pull.line() for pull in pulls]
+    views_rejected = (some_views(uv[used]) & ~some_views(uv_used)).sum(axis=0)
     markers = free_placements(result.state, problem, uv_used)  # (the used placements' markers, freely)
     calibration = assemble(
         rig,
@@ -245,6 +182,141 @@ def refine_calibration(
         points=markers,
     )
     return calibration, markers
+
+
+def _starting_models(
+    rig: RigSpec, models: tuple[CameraModel, ...], reference: int
+) -> tuple[tuple[CameraModel, ...], NDArray[np.bool_], Pinned | None]:
+    """The cameras the adjustments start from, the (C, 20) parameters the calibration estimates and the narrow
+    cameras' pins: narrow pinholes with their principal point held at the centre (at a prior), given
+    intrinsics as given, estimated ones from the low-order model."""
+    narrow = narrow_cameras(rig)
+    pinned = narrow_pins(rig, narrow) if narrow.any() else None
+    models = tuple(narrow_start(m, rig.cameras[c]) if narrow[c] else m for c, m in enumerate(models))
+    full = default_free_mask(len(rig.cameras), reference, models)
+    full[np.ix_(held_intrinsics(rig), INTRINSICS)] = False
+    if pinned is not None:
+        full &= ~pinned.mask
+    models = tuple(
+        m if spec.intrinsics is not None else low
+        for m, low, spec in zip(models, low_order(models), rig.cameras, strict=True)
+    )
+    return models, full, pinned
+
+
+def _gated(
+    rig: RigSpec,
+    uv: FloatArray,
+    models: tuple[CameraModel, ...],
+    poses: tuple[Pose, ...],
+    points: FloatArray,
+    min_placements: int,
+) -> NDArray[np.int64]:
+    """The placements whose starting triangulation ``points`` (P, 3, 3) reconstructs the wand's length (the gate)
+    and that the starting cameras can project."""
+    errors = ac_length_errors(points, rig.wand)
+    threshold = gate_threshold(errors, rig.wand)
+    keep = np.flatnonzero(gate_placements(rig, uv, errors, threshold) & ~unprojectable(models, poses, uv, points))
+    log.info("gate |AC| within %.1f mm: %d placements kept, %d set aside", threshold, keep.size, len(uv) - keep.size)
+    require(keep.size, min_placements, f"reconstruct to the wand length within {threshold:.1f} mm")
+    return keep
+
+
+def _cleaned(
+    wand: WandSpec,
+    uv: FloatArray,
+    robust: BundleResult,
+    sigma: float,
+    clocks: ClockModel,
+    keep: NDArray[np.int64],
+    min_placements: int,
+) -> tuple[NDArray[np.int64], FloatArray, BundleState, ClockModel]:
+    """The robust pass's views with its outliers rejected: the placements still seen twice, their views, their
+    state, and the clocks with the wand's motion from where the robust cameras put every placement."""
+    clean = uv[keep]  # (a copy: its rejected views are set NaN)
+    rejected = rejected_views(clean, robust.residuals, VIEW_GATE_SIGMAS * sigma)
+    clean[rejected] = np.nan
+    still = enough_views(clean)
+    log.info("robust pass: sigma %.3f px, %d views rejected, %d placements left", sigma, rejected.sum(), still.sum())
+    require(int(still.sum()), min_placements, "keep two clean views after outlier rejection")
+    if clocks.modelled:
+        placed = _fitted_points(wand, robust.state, uv, clocks, keep, HUBER_SIGMAS * sigma)
+        clocks = refresh_motion(clocks, placed, choose=True)
+    return keep[still], clean[still], subset_state(robust.state, still), clocks
+
+
+def _every_placement(
+    rig: RigSpec,
+    uv: FloatArray,
+    result: BundleResult,
+    fixed: FixedParameters,
+    reference: int,
+    clocks: ClockModel,
+    used: NDArray[np.int64],
+    uv_used: FloatArray,
+) -> tuple[BundleResult, FixedParameters, ClockModel, NDArray[np.int64], FloatArray]:
+    """The placements set aside so far brought back with their clean views where they fit the solution, and the
+    final adjustment of them all (with more than the coarse ones, the model order decided again on all of them
+    on its way; with timing, on the refreshed motion). Returns the result, its fixed parameters, the clocks,
+    the placements used and their views."""
+    free = free_mask(len(rig.cameras), reference, fixed)
+    decided_on = used.size
+    aside = np.setdiff1d(np.flatnonzero(clocks.placeable(len(uv))), used)
+    admitted, left_out, admitted_state = readmit(rig, uv, aside, result, clocks.placements(aside))
+    if admitted.any():
+        log.info("%d more placements fit the solution: admitted", admitted.sum())
+        uv_used = appended(uv_used, uv, aside[admitted])
+        uv_used[used.size :][left_out] = np.nan  # (their rejected views)
+        used = np.concatenate([used, aside[admitted]])
+    if not (admitted.any() or clocks.modelled):  # with timing, the refreshed motion changes the problem
+        return result, fixed, clocks, used, uv_used
+    state = BundleState(
+        result.state.models,
+        result.state.poses,
+        np.concatenate([result.state.wand_a, admitted_state.wand_a]),
+        np.concatenate([result.state.wand_direction, admitted_state.wand_direction]),
+        result.state.timing,
+    )
+    order = OrderOnAllPlacements(rig, fixed, reference, decided_on) if used.size > decided_on else None
+    result, clocks, free = _final_adjustment(rig, uv, uv_used, used, state, clocks, free, order)
+    fixed = order.decision if order is not None else fixed
+    held = fixed.timing.copy()
+    held[:, 1] &= free[:, READOUT]  # (a readout the bound held at zero)
+    return result, replace(fixed, timing=held), clocks, used, uv_used
+
+
+def _checked(
+    rig: RigSpec,
+    uv: FloatArray,
+    uv_used: FloatArray,
+    used: NDArray[np.int64],
+    result: BundleResult,
+    clocks: ClockModel,
+    free: NDArray[np.bool_],
+    saturated: NDArray[np.bool_] | None,
+) -> tuple[CentreBias, ...]:
+    """The result checked for what cannot determine a calibration (raised), and what the saturated points pull."""
+    check_geometry(result.state.points(rig.wand))
+    check_camera_views(rig, uv, uv_used)
+    check_uncertainty(rig, result)
+    if saturated is None:
+        return ()
+    return tuple(saturated_pull(rig, uv_used, saturated[used], clocks.placements(used), result, free))
+
+
+def _warnings(
+    rig: RigSpec, result: BundleResult, fixed: FixedParameters, reference: int, uv_used: FloatArray
+) -> list[str]:
+    """What the result should say of given intrinsics that do not fit, and of lens curves that turn over."""
+    points = np.isfinite(uv_used[..., 0]).sum(axis=(0, 2))  # (C,) image points per camera
+    warnings = check_given_intrinsics(rig, result, free_mask(len(rig.cameras), reference, fixed), points)
+    for model, spec in zip(result.state.models, rig.cameras, strict=True):
+        if turns_over_in_image(model, spec.max_view_angle):
+            warnings.append(
+                f"{spec.name}: r(theta) turns over at {np.degrees(radius_limit(model)):.0f} deg, inside the "
+                f"image and below max_view_angle_deg {spec.max_view_angle_deg:g}: check the rig description"
+            )
+    return warnings
 
 
 def _narrow_principal_points(

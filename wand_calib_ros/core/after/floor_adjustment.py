@@ -111,101 +111,20 @@ def adjust_floor(
     Raises:
         DegenerateDataError: the floor's views do not determine the floor frame.
     """
-    n_cameras = len(models)
     if tool_mm is None:
         assert lay_of_frame is not None and positions_mm is not None and lay_starts is not None
-        n_lays = len(lay_starts)
-    else:
-        n_lays = 0
     std = camera_std(covariance)
-    free_mask = np.zeros((n_cameras, N_CAMERA_PARAMS), dtype=bool)
+    free_mask = np.zeros((len(models), N_CAMERA_PARAMS), dtype=bool)
     free_mask[:, STILL_PARAMETERS] = std[:, STILL_PARAMETERS] > 0
     free = np.flatnonzero(free_mask.reshape(-1))
-    prior = _prior(covariance, free)
-    n_free = free.size
-    n_unknowns = n_free + 6 + 3 * max(n_lays - 1, 0)
-    seen = np.isfinite(uv).all(axis=-1)  # (F, C, K)
-    frame, camera, marker = np.nonzero(seen)
-    observed = uv[frame, camera, marker]
-
-    def unpack(x: FloatArray) -> tuple[list[tuple[CameraModel, Pose]], Pose, FloatArray]:
-        flat = np.zeros(n_cameras * N_CAMERA_PARAMS)
-        flat[free] = x[:n_free]
-        delta = flat.reshape(n_cameras, N_CAMERA_PARAMS)
-        cameras = [moved_camera(models[c], poses[c], delta[c]) for c in range(n_cameras)]
-        w = x[n_free : n_free + 6]
-        floor = Pose(rotation_from_rotvec(w[:3]) @ start.rotation, start.translation + w[3:])
-        lays = np.zeros((max(n_lays, 1), 3))
-        if n_lays:
-            lays = np.array(lay_starts, dtype=float)
-            lays[1:] += x[n_free + 6 :].reshape(-1, 3)
-        return cameras, floor, lays
-
-    rows_of = [np.flatnonzero(camera == c) for c in range(n_cameras)]
-    owner = free // N_CAMERA_PARAMS  # the camera of each free camera parameter
-
-    def reference_points(floor: Pose, lays: FloatArray) -> FloatArray:
-        """(M, 3) each observation's marker in the reference frame."""
-        if tool_mm is None:
-            assert positions_mm is not None and lay_of_frame is not None
-            return floor.apply(_lay_points(lays, positions_mm)[lay_of_frame[frame], marker])
-        return floor.apply(tool_mm[marker])
-
-    def residuals(x: FloatArray) -> FloatArray:
-        """Floor views over sigma (2M, camera by camera in observation order), then the prior."""
-        cameras, floor, lays = unpack(x)
-        reference = reference_points(floor, lays)
-        projected = np.empty_like(observed)
-        for c, rows in enumerate(rows_of):
-            if rows.size:
-                model, pose = cameras[c]
-                projected[rows] = project(model, pose.apply(reference[rows]))
-        return np.concatenate([((projected - observed) / sigma_px).reshape(-1), prior @ x[:n_free]])
-
-    steps = np.concatenate([std.reshape(-1)[free] * 1e-3, np.full(3, 1e-7), np.full(3, 1e-4),
-                            np.tile([1e-4, 1e-4, 1e-7], max(n_lays - 1, 0))])  # fmt: skip
-    x = np.zeros(n_unknowns)
-    information = np.eye(n_unknowns)
-    n_views = 2 * observed.shape[0]
-    for _ in range(MAX_ITERATIONS):
-        r = residuals(x)
-        if not np.all(np.isfinite(r)):
-            raise DegenerateDataError("the floor frames' views cannot be projected with the calibrated cameras")
-        jacobian = np.zeros((r.size, n_unknowns))
-        jacobian[n_views:, :n_free] = prior  # the prior is linear in the camera steps
-        _, floor, lays = unpack(x)
-        reference = reference_points(floor, lays)
-        base = r[:n_views].reshape(-1, 2)
-        for i in range(n_free):  # a camera parameter moves only that camera's views
-            rows = rows_of[owner[i]]
-            if not rows.size:
-                continue
-            moved = x.copy()
-            moved[i] += steps[i]
-            flat = np.zeros(n_cameras * N_CAMERA_PARAMS)
-            flat[free] = moved[:n_free]
-            c = int(owner[i])
-            model, pose = moved_camera(models[c], poses[c], flat.reshape(n_cameras, N_CAMERA_PARAMS)[c])
-            change = (project(model, pose.apply(reference[rows])) - observed[rows]) / sigma_px - base[rows]
-            column = np.zeros((observed.shape[0], 2))
-            column[rows] = change / steps[i]
-            jacobian[:n_views, i] = column.reshape(-1)
-        for i in range(n_free, n_unknowns):  # the floor and the lays move every view
-            moved = x.copy()
-            moved[i] += steps[i]
-            jacobian[:, i] = (residuals(moved) - r) / steps[i]
-        information = jacobian.T @ jacobian
-        try:
-            step = -np.linalg.solve(information, jacobian.T @ r)
-        except np.linalg.LinAlgError:
-            raise DegenerateDataError("the floor frames' views do not determine the floor") from None
-        x = x + step
-        scale = np.sqrt(np.clip(np.diag(np.linalg.pinv(information)), 1e-300, None))
-        if np.all(np.abs(step) < SETTLED * scale):
-            break
+    frame, camera, marker = np.nonzero(np.isfinite(uv).all(axis=-1))  # the views seen: (F, C, K) -> (M,) each
+    problem = _FloorProblem(models, poses, start, free, _prior(covariance, free), std, sigma_px, frame, camera, marker,
+                            uv[frame, camera, marker], lay_of_frame, positions_mm, lay_starts, tool_mm)  # fmt: skip
+    x, information = _gauss_newton(problem)
     covariance_x = np.linalg.pinv(information)
-    cameras, floor, lays = unpack(x)
-    floor_views = residuals(x)[:n_views]
+    cameras, floor, lays = problem.unpack(x)
+    floor_views = problem.residuals(x)[: problem.n_views]
+    n_free = problem.n_free
     rotation_cov = covariance_x[n_free : n_free + 3, n_free : n_free + 3]
     normal = floor.rotation[:, 2]
     across = np.eye(3) - np.outer(normal, normal)  # a rotation about the normal leaves it
@@ -220,3 +139,159 @@ def adjust_floor(
         tuple(model for model, _ in cameras),
         tuple(pose for _, pose in cameras),
     )
+
+
+@dataclass(frozen=True, eq=False)
+class _FloorProblem:
+    """The joint adjustment's residuals on a flat vector of unknowns x: the free camera parameters' steps, the
+    floor frame's (rotation vector, translation) and each lay's after the first (x, y, psi).
+
+    Attributes:
+        models, poses: the calibrated cameras.
+        start: the floor frame at x = 0.
+        free: (n,) the free camera parameters' indices into the (C*20,) rig order.
+        prior: (r, n) the whitening matrix of the calibration's prior (:func:`_prior`).
+        std: (C, 20) the calibration's standard deviations.
+        sigma_px: the calibration's pixel noise.
+        frame, camera, marker: (M,) each floor view's frame, camera and marker.
+        observed: (M, 2) its pixels.
+        lay_of_frame, positions_mm, lay_starts, tool_mm: as :func:`adjust_floor` has them.
+    """
+
+    models: tuple[CameraModel, ...]
+    poses: tuple[Pose, ...]
+    start: Pose
+    free: NDArray[np.intp]
+    prior: FloatArray
+    std: FloatArray
+    sigma_px: float
+    frame: NDArray[np.intp]
+    camera: NDArray[np.intp]
+    marker: NDArray[np.intp]
+    observed: FloatArray
+    lay_of_frame: NDArray[np.intp] | None
+    positions_mm: FloatArray | None
+    lay_starts: FloatArray | None
+    tool_mm: FloatArray | None
+
+    @property
+    def n_free(self) -> int:
+        return int(self.free.size)
+
+    @property
+    def n_lays(self) -> int:
+        return 0 if self.lay_starts is None or self.tool_mm is not None else len(self.lay_starts)
+
+    @property
+    def n_unknowns(self) -> int:
+        return self.n_free + 6 + 3 * max(self.n_lays - 1, 0)
+
+    @property
+    def n_views(self) -> int:
+        """Residual rows of the floor views (two per view); the prior's follow."""
+        return 2 * self.observed.shape[0]
+
+    def rows_of(self, camera: int) -> NDArray[np.intp]:
+        """The views of ``camera``."""
+        return np.flatnonzero(self.camera == camera)
+
+    def moved(self, x: FloatArray, camera: int) -> tuple[CameraModel, Pose]:
+        """``camera`` moved by its free parameters' steps in ``x``."""
+        flat = np.zeros(len(self.models) * N_CAMERA_PARAMS)
+        flat[self.free] = x[: self.n_free]
+        delta = flat.reshape(len(self.models), N_CAMERA_PARAMS)
+        return moved_camera(self.models[camera], self.poses[camera], delta[camera])
+
+    def unpack(self, x: FloatArray) -> tuple[list[tuple[CameraModel, Pose]], Pose, FloatArray]:
+        """The cameras, the floor frame and the (L, 3) lays at ``x``."""
+        cameras = [self.moved(x, c) for c in range(len(self.models))]
+        w = x[self.n_free : self.n_free + 6]
+        floor = Pose(rotation_from_rotvec(w[:3]) @ self.start.rotation, self.start.translation + w[3:])
+        lays = np.zeros((max(self.n_lays, 1), 3))
+        if self.n_lays:
+            lays = np.array(self.lay_starts, dtype=float)
+            lays[1:] += x[self.n_free + 6 :].reshape(-1, 3)
+        return cameras, floor, lays
+
+    def reference_points(self, floor: Pose, lays: FloatArray) -> FloatArray:
+        """(M, 3) each view's marker in the reference frame."""
+        if self.tool_mm is None:
+            assert self.positions_mm is not None and self.lay_of_frame is not None
+            return floor.apply(_lay_points(lays, self.positions_mm)[self.lay_of_frame[self.frame], self.marker])
+        return floor.apply(self.tool_mm[self.marker])
+
+    def residuals(self, x: FloatArray) -> FloatArray:
+        """Floor views over sigma (2M, camera by camera in observation order), then the prior."""
+        cameras, floor, lays = self.unpack(x)
+        reference = self.reference_points(floor, lays)
+        projected = np.empty_like(self.observed)
+        for c in range(len(self.models)):
+            rows = self.rows_of(c)
+            if rows.size:
+                model, pose = cameras[c]
+                projected[rows] = project(model, pose.apply(reference[rows]))
+        return np.concatenate(
+            [((projected - self.observed) / self.sigma_px).reshape(-1), self.prior @ x[: self.n_free]]
+        )
+
+    def steps(self) -> FloatArray:
+        """(n_unknowns,) the numeric derivatives' steps: 1e-3 of a camera parameter's standard deviation, 1e-7 rad
+        and 1e-4 mm for the floor frame and the lays."""
+        return np.concatenate([self.std.reshape(-1)[self.free] * 1e-3, np.full(3, 1e-7), np.full(3, 1e-4),
+                               np.tile([1e-4, 1e-4, 1e-7], max(self.n_lays - 1, 0))])  # fmt: skip
+
+    def jacobian(self, x: FloatArray, r: FloatArray) -> FloatArray:
+        """(2M + r, n_unknowns) the residuals' Jacobian at ``x`` (residuals ``r``) by forward differences: a
+        camera parameter moves only its own camera's views, the prior is linear, the floor and lays move all."""
+        n_free, n_views, steps = self.n_free, self.n_views, self.steps()
+        jacobian = np.zeros((r.size, self.n_unknowns))
+        jacobian[n_views:, :n_free] = self.prior
+        _, floor, lays = self.unpack(x)
+        reference = self.reference_points(floor, lays)
+        base = r[:n_views].reshape(-1, 2)
+        owner = self.free // N_CAMERA_PARAMS  # the camera of each free camera parameter
+        for i in range(n_free):
+            rows = self.rows_of(int(owner[i]))
+            if not rows.size:
+                continue
+            moved = x.copy()
+            moved[i] += steps[i]
+            model, pose = self.moved(moved, int(owner[i]))
+            change = (project(model, pose.apply(reference[rows])) - self.observed[rows]) / self.sigma_px - base[rows]
+            column = np.zeros((self.observed.shape[0], 2))
+            column[rows] = change / steps[i]
+            jacobian[:n_views, i] = column.reshape(-1)
+        for i in range(n_free, self.n_unknowns):
+            moved = x.copy()
+            moved[i] += steps[i]
+            jacobian[:, i] = (self.residuals(moved) - r) / steps[i]
+        return jacobian
+
+
+def _gauss_newton(problem: _FloorProblem) -> tuple[FloatArray, FloatArray]:
+    """The unknowns x that minimise the problem's residuals, and the information matrix J^T J there.
+
+    Undamped Gauss-Newton, not the bundle adjustment's Levenberg-Marquardt: a few dense unknowns started from the
+    two-stage fit, the prior keeping the cameras where the calibration put them. Stops when no unknown moves by
+    more than SETTLED of its standard deviation, or after MAX_ITERATIONS.
+
+    Raises:
+        DegenerateDataError: the views cannot be projected, or do not determine the floor.
+    """
+    x = np.zeros(problem.n_unknowns)
+    information = np.eye(problem.n_unknowns)
+    for _ in range(MAX_ITERATIONS):
+        r = problem.residuals(x)
+        if not np.all(np.isfinite(r)):
+            raise DegenerateDataError("the floor frames' views cannot be projected with the calibrated cameras")
+        jacobian = problem.jacobian(x, r)
+        information = jacobian.T @ jacobian
+        try:
+            step = -np.linalg.solve(information, jacobian.T @ r)
+        except np.linalg.LinAlgError:
+            raise DegenerateDataError("the floor frames' views do not determine the floor") from None
+        x = x + step
+        scale = np.sqrt(np.clip(np.diag(np.linalg.pinv(information)), 1e-300, None))
+        if np.all(np.abs(step) < SETTLED * scale):
+            break
+    return x, information
