@@ -9,7 +9,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wand_calib_ros.core.adjust.narrow_field import narrow_fields
-from wand_calib_ros.core.adjust.timing import align_views, offset_warnings, rate_warnings, timing_input
+from wand_calib_ros.core.adjust.timing import (
+    TimingInput,
+    align_views,
+    offset_warnings,
+    rate_warnings,
+    timing_input,
+)
 from wand_calib_ros.core.after.world_frame import floor_of
 from wand_calib_ros.core.errors import CalibrationFailedError, CoreError, InsufficientDataError
 from wand_calib_ros.core.initialise.incremental import place_cameras
@@ -89,6 +95,37 @@ def calibrate(
     Raises:
         WandCalibError subclasses with a message naming the problem.
     """
+    obs, floor = _selected(rig, observations, options.floor_frames)
+    check_rig(rig)
+    check_views(rig, obs)
+    timing = timing_input(rig, obs, offsets=options.time_offsets, rolling_shutter=options.rolling_shutter)
+    views = _views(rig, obs, timing, options)
+    if options.start is not None:
+        result, uv = _solve(rig, views, _warm(rig, views.reference, options.start))
+    elif all(views.given) and not narrow_fields(rig).all():  # a pair needs only its relative pose (an essential
+        # matrix hardly fixes it at a few degrees across: narrow rigs start from the paper's pairs and their wand fits)
+        known = tuple(spec.intrinsics for spec in rig.cameras if spec.intrinsics is not None)
+        result, uv = _solve(rig, views, _placed(rig, views.aligned, views.reference, options.pair, known))
+    else:
+        result, uv = _from_pairs_or_placed(rig, views, options)
+    if floor is not None:
+        result = _with_floor(rig, result, floor, options.floor_origin)
+    warnings = [*result.warnings, *rate_warnings(obs, timing.line), *offset_warnings(result)]
+    result = replace(result, quality=judge(result, noise_wand_error(result, rig.camera_names, uv)))
+    if result.timing is not None and result.timing.time_offsets == "estimated":
+        return replace(result, warnings=tuple(warnings))
+    offsets = clock_offsets(result, obs)  # not modelled: say when the residuals show them
+    return replace(result, clock_offsets=offsets, warnings=(*warnings, *clock_warnings(offsets)))
+
+
+def _selected(
+    rig: RigSpec, observations: WandObservations, floor_frames: tuple[int, ...]
+) -> tuple[WandObservations, WandObservations | None]:
+    """The rig's cameras' observations, in the rig's order, and the floor's frames apart from them (None: none).
+
+    Raises:
+        InsufficientDataError: fewer than two cameras, a camera without observations, or another wand.
+    """
     names = rig.camera_names
     if len(names) < 2:
         raise InsufficientDataError(f"a wand calibration needs at least two cameras; the rig has {len(names)}")
@@ -100,11 +137,35 @@ def calibrate(
         raise InsufficientDataError(
             f"the observations have {obs.uv.shape[2]} points per view, the rig's wand {rig.wand.n_points} markers"
         )
-    obs, floor = _split_floor(obs, options.floor_frames)
-    check_rig(rig)
-    check_views(rig, obs)
-    timing = timing_input(rig, obs, offsets=options.time_offsets, rolling_shutter=options.rolling_shutter)
-    complete = obs.complete
+    return _split_floor(obs, floor_frames)
+
+
+@dataclass(frozen=True, eq=False)
+class _Views:
+    """The views a calibration starts from and refines on.
+
+    Attributes:
+        uv: (P, C, K, 2) the usable placements' views, partial ones included (a two-marker wand's labels
+            followed per camera).
+        aligned: (P, C, K, 2) those moved to their placement's time (free-running cameras), for the starts.
+        saturated: (P, C, K) which points the detector measured on saturated spots (None: not known).
+        reference: the reference camera's index.
+        timing: the timing input of the usable placements.
+        given: (C,) which cameras' intrinsics the rig gives.
+    """
+
+    uv: NDArray[np.float64]
+    aligned: NDArray[np.float64]
+    saturated: NDArray[np.bool_] | None
+    reference: int
+    timing: TimingInput
+    given: tuple[bool, ...]
+
+
+def _views(rig: RigSpec, obs: WandObservations, timing: TimingInput, options: CalibrationOptions) -> _Views:
+    """The placements seen whole by two cameras at least (at most ``max_placements`` of them, spread), with every
+    point seen of them, and the reference camera they share the most with."""
+    names, complete = rig.camera_names, obs.complete
     _require_whole_views(names, complete)
     usable = np.flatnonzero(complete.sum(axis=1) >= 2)  # a placement seen by one camera only constrains nothing
     if options.max_placements is not None and usable.size > options.max_placements:
@@ -120,61 +181,55 @@ def calibrate(
     if rig.wand.n_points == 2:  # a two-marker wand's labels are the detector's: per camera, follow the marker
         uv = continuous_in_image(uv)
     aligned = align_views(uv, line)  # free-running views moved to their placement's time, for the starts
-    given = [spec.intrinsics is not None for spec in rig.cameras]
+    given = tuple(spec.intrinsics is not None for spec in rig.cameras)
     if any(given):
         log.info("intrinsics given for %s", ", ".join(n for n, g in zip(names, given, strict=True) if g))
+    return _Views(uv, aligned, saturated, reference, replace(timing, line=line), given)
 
-    def solve(init: RigInitialisation) -> tuple[CalibrationResult, NDArray[np.float64]]:
-        """Step 4 from a start: the two-marker wand's labels settled, the refinement, its plausibility."""
-        init = replace(init, models=model_starts(rig, init.models))
-        views, start_uv = uv, aligned
-        if rig.wand.n_points == 2:  # one label per marker in every view and over time, from the started cameras
-            views = consistent_labels(init.models, init.poses, uv, narrow_fields(rig))
-            start_uv = align_views(views, line)
-        result, points = refine_calibration(
-            rig,
-            views,
-            init.models,
-            init.poses,
-            reference=reference,
-            initial_projections=tuple("given" if g else p for g, p in zip(given, init.projections, strict=True)),
-            lens_trials=init.trials,
-            timing=replace(timing, line=line),
-            start_uv=start_uv,
-            saturated=saturated,
-        )
-        return replace(result, warnings=(*result.warnings, *check_result(rig, result, views, points))), views
 
-    if options.start is not None:
-        result, uv = solve(_warm(rig, reference, options.start))
-    elif all(given) and not narrow_fields(rig).all():  # a pair needs only its relative pose (an essential matrix
-        # hardly fixes it at a few degrees across: narrow rigs start from the paper's pairs and their wand fits)
-        known = tuple(spec.intrinsics for spec in rig.cameras if spec.intrinsics is not None)
-        result, uv = solve(_placed(rig, aligned, reference, options.pair, known))
-    else:
+def _solve(rig: RigSpec, views: _Views, init: RigInitialisation) -> tuple[CalibrationResult, NDArray[np.float64]]:
+    """Step 4 from a start: the two-marker wand's labels settled, the refinement, its plausibility. Returns the
+    result and the views it refined (relabelled for a two-marker wand)."""
+    init = replace(init, models=model_starts(rig, init.models))
+    uv, start_uv = views.uv, views.aligned
+    if rig.wand.n_points == 2:  # one label per marker in every view and over time, from the started cameras
+        uv = consistent_labels(init.models, init.poses, views.uv, narrow_fields(rig))
+        start_uv = align_views(uv, views.timing.line)
+    result, points = refine_calibration(
+        rig,
+        uv,
+        init.models,
+        init.poses,
+        reference=views.reference,
+        initial_projections=tuple("given" if g else p for g, p in zip(views.given, init.projections, strict=True)),
+        lens_trials=init.trials,
+        timing=views.timing,
+        start_uv=start_uv,
+        saturated=views.saturated,
+    )
+    return replace(result, warnings=(*result.warnings, *check_result(rig, result, uv, points))), uv
+
+
+def _from_pairs_or_placed(
+    rig: RigSpec, views: _Views, options: CalibrationOptions
+) -> tuple[CalibrationResult, NDArray[np.float64]]:
+    """The calibration from the paper's pairwise start; where that fails and the cameras can be placed one by one
+    from their given or nominal intrinsics, from those (the paper's error raised should that fail too)."""
+    try:
+        return _solve(rig, views, _paper(rig, views.aligned, options))
+    except (DisconnectedRigError, CalibrationFailedError, InsufficientDataError) as error:
+        reason = _unplaceable(rig, views.aligned, options)
+        if reason is not None:
+            if isinstance(error, DisconnectedRigError):
+                raise DisconnectedRigError(f"{reason}; and the paper's pairwise start: {error}") from None
+            raise
+        log.info("%s: the cameras are placed one by one from their given or nominal intrinsics instead", error)
+        starts = tuple(spec.intrinsics or nominal_model(spec) for spec in rig.cameras)
         try:
-            result, uv = solve(_paper(rig, aligned, options))
-        except (DisconnectedRigError, CalibrationFailedError, InsufficientDataError) as error:
-            reason = _unplaceable(rig, aligned, options)
-            if reason is not None:
-                if isinstance(error, DisconnectedRigError):
-                    raise DisconnectedRigError(f"{reason}; and the paper's pairwise start: {error}") from None
-                raise
-            log.info("%s: the cameras are placed one by one from their given or nominal intrinsics instead", error)
-            starts = tuple(spec.intrinsics or nominal_model(spec) for spec in rig.cameras)
-            try:
-                result, uv = solve(_placed(rig, aligned, reference, options.pair, starts, nominal=True))
-            except CoreError as placed_error:
-                log.info("placing the cameras one by one failed too: %s", placed_error)
-                raise error from None
-    if floor is not None:
-        result = _with_floor(rig, result, floor, options.floor_origin)
-    warnings = [*result.warnings, *rate_warnings(obs, timing.line), *offset_warnings(result)]
-    result = replace(result, quality=judge(result, noise_wand_error(result, names, uv)))
-    if result.timing is not None and result.timing.time_offsets == "estimated":
-        return replace(result, warnings=tuple(warnings))
-    offsets = clock_offsets(result, obs)  # not modelled: say when the residuals show them
-    return replace(result, clock_offsets=offsets, warnings=(*warnings, *clock_warnings(offsets)))
+            return _solve(rig, views, _placed(rig, views.aligned, views.reference, options.pair, starts, nominal=True))
+        except CoreError as placed_error:
+            log.info("placing the cameras one by one failed too: %s", placed_error)
+            raise error from None
 
 
 def _initialise(rig: RigSpec, uv: NDArray[np.float64], graph: VisionGraph, options: PairOptions) -> RigInitialisation:

@@ -166,10 +166,46 @@ def assemble(
 ) -> CalibrationResult:
     """The calibration of an adjustment's ``result`` on the observations ``problem``, ``points`` (P, K, 3) its
     placements' markers as :func:`free_placements` gives them (the wand lengths' statistics)."""
-    state = result.state
-    max_theta = max_off_axis(result, problem)
     free = free_mask(problem.n_cameras, reference, fixed)
     reported = free if fixed.pinned is None else free | (fixed.pinned.std > 0)  # (and those held at a prior)
+    cameras = _cameras(rig, problem, result, fixed, reported, initial_projections, rejected_views, warnings)
+    lengths = np.linalg.norm(points[:, -1] - points[:, 0], axis=-1)
+    lengths = lengths[np.isfinite(lengths)]
+    order = [reference] + [c for c in range(len(cameras)) if c != reference]
+    return CalibrationResult(
+        reference_camera=rig.cameras[reference].name,
+        cameras=tuple(cameras[c] for c in order),
+        wand=rig.wand,
+        wand_length_rms_mm=float(np.sqrt(np.mean((rig.wand.L - lengths) ** 2))),
+        wand_length_mean_mm=float(np.mean(lengths)),
+        wand_length_std_mm=float(np.std(lengths)),
+        sigma_px=result.sigma,
+        dof=result.dof,
+        placements_used=problem.n_placements,
+        placements_rejected=rejected,
+        iterations=result.iterations,
+        lens_trials=lens_trials,
+        warnings=tuple(warnings),
+        timing=timing_summary(rig, clocks, fixed),
+        camera_covariance=result.camera_covariance,
+        systematic=systematic,
+    )
+
+
+def _cameras(
+    rig: RigSpec,
+    problem: BundleProblem,
+    result: BundleResult,
+    fixed: FixedParameters,
+    reported: NDArray[np.bool_],
+    initial_projections: tuple[str, ...],
+    rejected_views: NDArray[np.int64],
+    warnings: list[str],
+) -> list[CameraCalibration]:
+    """Each camera's calibration in the rig's order, with the ``reported`` (C, 20) standard deviations; what each
+    camera's coverage, weak parameters and rejected views should say is added to ``warnings``."""
+    state = result.state
+    max_theta = max_off_axis(result, problem)
     n_cameras = problem.n_cameras
     counts = np.bincount(problem.camera, minlength=n_cameras)
     squares = np.bincount(problem.camera, squared_norms(result.residuals), minlength=n_cameras)
@@ -210,27 +246,7 @@ def assemble(
                 "estimated" if spec.intrinsics is None else "given" if spec.intrinsics_fixed else "given_start",
             )
         )
-    lengths = np.linalg.norm(points[:, -1] - points[:, 0], axis=-1)
-    lengths = lengths[np.isfinite(lengths)]
-    order = [reference] + [c for c in range(len(cameras)) if c != reference]
-    return CalibrationResult(
-        reference_camera=rig.cameras[reference].name,
-        cameras=tuple(cameras[c] for c in order),
-        wand=rig.wand,
-        wand_length_rms_mm=float(np.sqrt(np.mean((rig.wand.L - lengths) ** 2))),
-        wand_length_mean_mm=float(np.mean(lengths)),
-        wand_length_std_mm=float(np.std(lengths)),
-        sigma_px=result.sigma,
-        dof=result.dof,
-        placements_used=problem.n_placements,
-        placements_rejected=rejected,
-        iterations=result.iterations,
-        lens_trials=lens_trials,
-        warnings=tuple(warnings),
-        timing=timing_summary(rig, clocks, fixed),
-        camera_covariance=result.camera_covariance,
-        systematic=systematic,
-    )
+    return cameras
 
 
 def timing_summary(rig: RigSpec, clocks: ClockModel, fixed: FixedParameters) -> TimingSummary | None:

@@ -20,6 +20,7 @@ from wand_calib_ros.core.adjust.bundle_problem import (
     TIME_OFFSET,
     BundleProblem,
     BundleState,
+    ObservationTiming,
 )
 from wand_calib_ros.core.adjust.normal_equations import (
     CHUNK_OBSERVATIONS,
@@ -158,13 +159,7 @@ def _linearise_rows(
     world = placed[_A : _A + 3] + offsets * placed[_DIRECTION : _DIRECTION + 3]  # (3, n) reference frame
     along_time = None
     if problem.timing is not None:  # carried along the wand's motion to the instant the camera saw it
-        obs = problem.timing
-        tau = obs.time[first:stop] - cam[_TIMING] + cam[_TIMING + 1] * obs.row[first:stop]
-        velocity, acceleration = obs.velocity[first:stop].T, obs.acceleration[first:stop].T
-        jerk = obs.jerk[first:stop].T
-        half = 0.5 * tau * tau
-        world = world + tau * (velocity + half / 3.0 * jerk) + half * acceleration
-        along_time = velocity + tau * acceleration + half * jerk  # d world / d tau
+        world, along_time = _moved_in_time(world, cam, problem.timing, first, stop)
     n = stop - first
     rot = cam[_ROT : _ROT + 9]
     rotated = np.empty((n, 3))  # R X
@@ -178,42 +173,69 @@ def _linearise_rows(
     if not jacobians:
         return res, None, None
     assert d_camera is not None and d_intrinsics is not None
-    timing = carried[carried < LENS.start]
-    q0, q1, q2 = rotated.T
-    d_point = d_camera.transpose(1, 2, 0)  # (2, 3, n): d(u, v) / d(x, y, z), camera frame
-    e1, e2 = placed[_E1 : _E1 + 3], placed[_E2 : _E2 + 3]
     width = N_GEOMETRIC + carried.size
     jc = np.empty((n, 2, width + 1)) if cameras else None
     jp = np.empty((n, 2, N_PLACEMENT_PARAMS + 1))
     jp[:, :, N_PLACEMENT_PARAMS] = res
     if jc is not None:
-        jc[:, :, :N_INTRINSIC] = d_intrinsics
-        jc[:, :, N_INTRINSIC + 3 : N_GEOMETRIC] = d_camera  # translation
-        lens = carried[carried >= LENS.start]
-        if lens.size:
-            if d_extra is None:
-                raise ValueError("lens terms are carried only for pinhole cameras")
-            jc[:, :, N_GEOMETRIC + timing.size : width] = d_extra[:, :, lens - LENS.start]
-        jc[:, :, width] = res
+        _camera_columns(jc, d_intrinsics, d_camera, d_extra, carried, res)
+    d_point = d_camera.transpose(1, 2, 0)  # (2, 3, n): d(u, v) / d(x, y, z), camera frame
+    timing = carried[carried < LENS.start]
+    row = None if problem.timing is None else problem.timing.row[first:stop]
+    q0, q1, q2 = rotated.T
     for i, (p0, p1, p2) in enumerate(d_point):
         w0 = p0 * rot[0] + p1 * rot[3] + p2 * rot[6]  # d uv_i / d world point: d_point R
         w1 = p0 * rot[1] + p1 * rot[4] + p2 * rot[7]
         w2 = p0 * rot[2] + p1 * rot[5] + p2 * rot[8]
         jp[:, i, 0], jp[:, i, 1], jp[:, i, 2] = w0, w1, w2
-        jp[:, i, 3] = offsets * (w0 * e1[0] + w1 * e1[1] + w2 * e1[2])
-        jp[:, i, 4] = offsets * (w0 * e2[0] + w1 * e2[1] + w2 * e2[2])
+        jp[:, i, 3] = offsets * (w0 * placed[_E1] + w1 * placed[_E1 + 1] + w2 * placed[_E1 + 2])
+        jp[:, i, 4] = offsets * (w0 * placed[_E2] + w1 * placed[_E2 + 1] + w2 * placed[_E2 + 2])
         if jc is None:
             continue
         jc[:, i, N_INTRINSIC] = q1 * p2 - q2 * p1  # rotation
         jc[:, i, N_INTRINSIC + 1] = q2 * p0 - q0 * p2
         jc[:, i, N_INTRINSIC + 2] = q0 * p1 - q1 * p0
         if timing.size:
-            if along_time is None or problem.timing is None:
+            if along_time is None or row is None:
                 raise ValueError("timing parameters need the observations' timing")
             along = w0 * along_time[0] + w1 * along_time[1] + w2 * along_time[2]  # d uv_i / d tau
             for column, parameter in enumerate(timing, start=N_GEOMETRIC):
-                jc[:, i, column] = -along if parameter == TIME_OFFSET else problem.timing.row[first:stop] * along
+                jc[:, i, column] = -along if parameter == TIME_OFFSET else row * along
     return res, jc, jp
+
+
+def _moved_in_time(
+    world: FloatArray, cam: FloatArray, timing: ObservationTiming, first: int, stop: int
+) -> tuple[FloatArray, FloatArray]:
+    """(3, n) the points ``world`` of the observations ``first:stop`` carried along the wand's motion to the
+    instants their cameras (parameters ``cam``, (28, n)) saw them, and (3, n) d world / d tau there."""
+    tau = timing.time[first:stop] - cam[_TIMING] + cam[_TIMING + 1] * timing.row[first:stop]
+    velocity, acceleration = timing.velocity[first:stop].T, timing.acceleration[first:stop].T
+    jerk = timing.jerk[first:stop].T
+    half = 0.5 * tau * tau
+    moved = world + tau * (velocity + half / 3.0 * jerk) + half * acceleration
+    return moved, velocity + tau * acceleration + half * jerk
+
+
+def _camera_columns(
+    jc: FloatArray,
+    d_intrinsics: FloatArray,
+    d_camera: FloatArray,
+    d_extra: FloatArray | None,
+    carried: IntArray,
+    res: FloatArray,
+) -> None:
+    """Fill the camera Jacobian ``jc`` (n, 2, 13 + len(carried) + 1)'s intrinsic, translation, lens-term and
+    residual columns (the rotation and timing columns are the point's: :func:`_linearise_rows`)."""
+    width = jc.shape[2] - 1
+    jc[:, :, :N_INTRINSIC] = d_intrinsics
+    jc[:, :, N_INTRINSIC + 3 : N_GEOMETRIC] = d_camera  # translation
+    lens = carried[carried >= LENS.start]
+    if lens.size:
+        if d_extra is None:
+            raise ValueError("lens terms are carried only for pinhole cameras")
+        jc[:, :, N_GEOMETRIC + carried.size - lens.size : width] = d_extra[:, :, lens - LENS.start]
+    jc[:, :, width] = res
 
 
 def residuals(state: BundleState, problem: BundleProblem) -> FloatArray:

@@ -171,67 +171,24 @@ def initialise_pair(
         InsufficientDataError: fewer than ``options.min_placements`` placements.
         DegenerateDataError: the motion cannot determine the calibration.
     """
+    uv1 = _checked_and_matched(specs, uv0, uv1, wand, options, known)
     n = uv0.shape[0]
-    if n < options.min_placements:
-        raise InsufficientDataError(
-            f"cameras '{specs[0].name}' and '{specs[1].name}' both see the whole wand in only {n} placements; "
-            f"need at least {options.min_placements}"
-        )
-    for spec, uv in zip(specs, (uv0, uv1), strict=True):
-        check_motion(spec, uv)
-    starts0, starts1 = camera_starts(specs[0], known[0]), camera_starts(specs[1], known[1])
-    if wand.n_points == 2:
-        focal_px = min(float(np.min(start[1].focal_px)) for start in (starts0[0], starts1[0]))
-        uv1 = match_pair(
-            (starts0[0][1], starts1[0][1]),
-            uv0,
-            uv1,
-            threshold_rad=options.ransac_threshold_px / focal_px,
-            rng=np.random.default_rng(options.seed),
-        )
-    screening = spread_subset(n, options.screening_placements)
-    s0, s1 = uv0[screening], uv1[screening]
-    spread = spread_subset(n, options.pair_placements)  # the pair's bundle adjustment draws on these
+    screening, spread = spread_subset(n, options.screening_placements), spread_subset(n, options.pair_placements)
     started = known[0] is not None and known[1] is not None
+    screen = _Screening(specs, wand, options, uv0[screening], uv1[screening], uv0[spread], uv1[spread], spread, started)
     trials: list[LensTrial] = []
     tried: dict[tuple[str, str], tuple[WandFit, NDArray[np.int64]] | None] = {}
 
     def attempt(start0: Start, start1: Start) -> float:
-        """Steps 2-3 (screening) for one pair of starts; returns its wand-length RMS (inf on failure)."""
+        """Steps 2-3 (screening) for one pair of starts, once; returns its wand-length RMS (inf on failure)."""
         names = (start0[0], start1[0])
         if names not in tried:
-            models = (start0[1], start1[1])
-            try:
-                step2 = _step2(models, s0, s1, wand, options)
-                agree = step2.inliers.reshape(-1, wand.n_points).all(axis=1)
-                if started:  # both lenses from earlier pairs: the pair's adjustment refines them, not Step 3
-                    fit = wand_fit(models, step2.pose, s0[agree], s1[agree], wand)
-                else:
-                    fit = optimise_wand_lengths(
-                        models,
-                        step2.pose,
-                        s0[agree],
-                        s1[agree],
-                        wand,
-                        max_evaluations=options.screening_evaluations,
-                        tolerance=1e-4,
-                    )
-                folded = [s.name for s, m in zip(specs, fit.models, strict=True) if monotonic_limit(m.k) < FOLDED_RAD]
-                if folded:  # r(theta) falls from (nearly) the centre on: no lens images like that
-                    raise DegenerateDataError(f"the lens curve of {', '.join(folded)} turns over at the image centre")
-            except CoreError as error:
-                trials.append(LensTrial(names, float("nan"), str(error)))
-                log.info("lens start %s: failed (%s)", "/".join(names), error)
-                tried[names] = None
-            else:
-                trials.append(LensTrial(names, fit.rms_mm))
-                log.info("lens start %s: wand-length RMS %.3f mm", "/".join(names), fit.rms_mm)
-                # The spread placements that agree with this start's epipolar geometry.
-                agree = _epipolar_agreement(models, step2.essential, uv0[spread], uv1[spread], options)
-                tried[names] = (fit, spread[agree])
+            trial, tried[names] = _screened(screen, start0, start1)
+            trials.append(trial)
         outcome = tried[names]
         return np.inf if outcome is None else outcome[0].rms_mm
 
+    starts0, starts1 = camera_starts(specs[0], known[0]), camera_starts(specs[1], known[1])
     if replace(specs[1], name=specs[0].name) == specs[0] and known == (None, None):
         # Two cameras of one data sheet carry the same kind of lens: each projection on both.
         best0, best1 = min(zip(starts0, starts1, strict=True), key=lambda starts: attempt(*starts))
@@ -253,6 +210,83 @@ def initialise_pair(
     # on a larger spread of the placements that agree with its epipolar geometry.
     models, pose = _pair_bundle(screened, uv0[use], uv1[use], wand)
     return PairInitialisation(models, pose, screened, names, tuple(trials))
+
+
+def _checked_and_matched(
+    specs: tuple[CameraSpec, CameraSpec],
+    uv0: FloatArray,
+    uv1: FloatArray,
+    wand: WandSpec,
+    options: PairOptions,
+    known: tuple[tuple[str, CameraModel] | None, tuple[str, CameraModel] | None],
+) -> FloatArray:
+    """(N, K, 2) camera 1's pixels, its labels matched to camera 0's for a two-marker wand, once the pair's
+    placements are checked to be enough and its motion to determine a calibration."""
+    n = uv0.shape[0]
+    if n < options.min_placements:
+        raise InsufficientDataError(
+            f"cameras '{specs[0].name}' and '{specs[1].name}' both see the whole wand in only {n} placements; "
+            f"need at least {options.min_placements}"
+        )
+    for spec, uv in zip(specs, (uv0, uv1), strict=True):
+        check_motion(spec, uv)
+    if wand.n_points != 2:
+        return uv1
+    first = (camera_starts(specs[0], known[0])[0][1], camera_starts(specs[1], known[1])[0][1])
+    focal_px = min(float(np.min(model.focal_px)) for model in first)
+    threshold_rad = options.ransac_threshold_px / focal_px
+    return match_pair(first, uv0, uv1, threshold_rad=threshold_rad, rng=np.random.default_rng(options.seed))
+
+
+@dataclass(frozen=True, eq=False)
+class _Screening:
+    """What a pair's lens starts are screened on.
+
+    Attributes:
+        specs: the two cameras' descriptions.
+        wand: the wand lengths.
+        options: the pair's settings.
+        s0, s1: (S, K, 2) the screening placements' pixels in each camera.
+        spread0, spread1: (A, K, 2) the pixels of the placements the pair's bundle adjustment draws on.
+        spread: (A,) those placements' indices.
+        started: both lenses come from earlier pairs (Step 3 is skipped).
+    """
+
+    specs: tuple[CameraSpec, CameraSpec]
+    wand: WandSpec
+    options: PairOptions
+    s0: FloatArray
+    s1: FloatArray
+    spread0: FloatArray
+    spread1: FloatArray
+    spread: NDArray[np.int64]
+    started: bool
+
+
+def _screened(
+    screen: _Screening, start0: Start, start1: Start
+) -> tuple[LensTrial, tuple[WandFit, NDArray[np.int64]] | None]:
+    """Steps 2-3 on the screening placements for one pair of starts: its score, and its wand-length fit with the
+    spread placements that agree with its epipolar geometry (None: it failed)."""
+    names, models = (start0[0], start1[0]), (start0[1], start1[1])
+    wand, options, s0, s1 = screen.wand, screen.options, screen.s0, screen.s1
+    try:
+        step2 = _step2(models, s0, s1, wand, options)
+        agree = step2.inliers.reshape(-1, wand.n_points).all(axis=1)
+        if screen.started:  # both lenses from earlier pairs: the pair's adjustment refines them, not Step 3
+            fit = wand_fit(models, step2.pose, s0[agree], s1[agree], wand)
+        else:
+            fit = optimise_wand_lengths(models, step2.pose, s0[agree], s1[agree], wand,
+                                        max_evaluations=options.screening_evaluations, tolerance=1e-4)  # fmt: skip
+        folded = [s.name for s, m in zip(screen.specs, fit.models, strict=True) if monotonic_limit(m.k) < FOLDED_RAD]
+        if folded:  # r(theta) falls from (nearly) the centre on: no lens images like that
+            raise DegenerateDataError(f"the lens curve of {', '.join(folded)} turns over at the image centre")
+    except CoreError as error:
+        log.info("lens start %s: failed (%s)", "/".join(names), error)
+        return LensTrial(names, float("nan"), str(error)), None
+    log.info("lens start %s: wand-length RMS %.3f mm", "/".join(names), fit.rms_mm)
+    agreeing = _epipolar_agreement(models, step2.essential, screen.spread0, screen.spread1, options)
+    return LensTrial(names, fit.rms_mm), (fit, screen.spread[agreeing])
 
 
 def _pair_bundle(
