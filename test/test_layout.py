@@ -12,7 +12,7 @@ import pytest
 PACKAGE = Path(__file__).resolve().parents[1] / "wand_calib_ros"
 
 #: Top-level layers, lowest first: each may import itself and those before it.
-LAYERS = ("errors", "core", "io", "report", "collection", "detection", "sim", "commands", "cli", "nodes")
+LAYERS = ("errors", "core", "io", "report", "detection", "collection", "sim", "commands", "cli", "nodes")
 #: The core's parts, lowest first (``errors`` is shared by all).
 CORE_LAYERS = ("errors", "parallel", "model", "adjust", "judge", "initialise", "after", "refine", "pipeline")
 

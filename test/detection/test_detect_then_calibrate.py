@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 from rigs import true_views
 
+from wand_calib_ros.collection.recording import detect_recording
 from wand_calib_ros.core.pipeline import calibrate
-from wand_calib_ros.detection.recording import detect_recording
 from wand_calib_ros.io.bags import ImageFrame
 from wand_calib_ros.sim.render import RenderOptions, render_recording
 from wand_calib_ros.sim.scenarios import paper_fisheye_scenario

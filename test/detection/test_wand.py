@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from rigs import true_views
 
+from wand_calib_ros.collection.recording import detect_recording
 from wand_calib_ros.core.model.rig import WandObservations
 from wand_calib_ros.detection.blobs import Blobs
-from wand_calib_ros.detection.recording import detect_recording
 from wand_calib_ros.detection.tracking import track_labels
 from wand_calib_ros.detection.wand import WandDetection, WandOptions, identify_wand
 from wand_calib_ros.io.bags import ImageFrame

@@ -105,7 +105,7 @@ def points_rig(
             context=ros.context,
             parameter_overrides=[*common, Parameter("write_report", value=False)],
             before_calibrate=collector.flush,
-            after_calibrate=collector.after_calibrate if watch else None,
+            after_calibrate=collector.session.after_calibrate if watch else None,
         )
     )
     names = scenario.rig.camera_names
@@ -121,7 +121,7 @@ def points_rig(
                 points = frame[c] if np.all(np.isfinite(frame[c])) else None
                 publishers[name].publish(points_message(points, Header(stamp=stamp, frame_id=name)))
             time.sleep(0.002)
-        assert wait_until(lambda: min(collector.received.values()) == sent[0], 20)
+        assert wait_until(lambda: min(collector.session.received.values()) == sent[0], 20)
 
     return PointsRig(collector, play)
 
@@ -138,7 +138,7 @@ def publish_images(ros: Ros, collector: Any, recording: Any, names: tuple[str, .
     for camera, stamp, pixels in recording.frames:
         publishers[camera].publish(array_to_image(pixels, stamp, camera))
         time.sleep(0.005)
-    assert wait_until(lambda: sum(collector.received.values()) == len(recording.frames), 20)
+    assert wait_until(lambda: sum(collector.session.received.values()) == len(recording.frames), 20)
 
 
 @pytest.fixture

@@ -72,7 +72,7 @@ def test_collect_calibrate_and_publish(ros: Ros, tmp_path: Path) -> None:
     assert abs(infos[-1].k[0] - truth.focal_px[0]) < 0.5
     assert abs(infos[-1].k[2] - truth.principal_point[0]) < 1.0
     # Every image was accounted for, and nothing the labeller held back was lost at /calibrate.
-    stream = collector.streams["cam0"]
+    stream = collector.session.streams["cam0"]
     assert stream.stats.detected + sum(stream.stats.rejected.values()) == 150
     assert not stream.labeller.flush()
 
@@ -131,7 +131,7 @@ def test_calibrate_answers_clearly_when_busy_short_of_data_or_reset(ros: Ros, tm
 
     data = simulate(scenario, 0.5, np.random.default_rng(0), n=30)
     for k, uv in enumerate(data.observations.uv):
-        collector.buffer.offer(uv, np.full(len(scenario.cameras), 1.7e9 + k / 30.0))
+        collector.session.buffer.offer(uv, np.full(len(scenario.cameras), 1.7e9 + k / 30.0))
     short = client.call(Trigger.Request(), timeout_sec=30)
     assert not short.success
     assert "coverage insufficient" in short.message and "cam0: 30 of 100 placements" in short.message
@@ -140,7 +140,7 @@ def test_calibrate_answers_clearly_when_busy_short_of_data_or_reset(ros: Ros, tm
     assert reset.wait_for_service(timeout_sec=5)
     assert reset.call(Trigger.Request(), timeout_sec=10).success
     assert len(read_observations(next((tmp_path / "out").glob("observations.*.bak.csv"))).frames) == 30
-    assert not collector.buffer.frames
+    assert not collector.session.buffer.frames
 
 
 def test_a_two_led_wand_live_from_images_to_the_calibration(ros: Ros, tmp_path: Path) -> None:

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from conftest import Ros, publish_images
 
-from wand_calib_ros.detection.recording import detect_recording
+from wand_calib_ros.collection.recording import detect_recording
 from wand_calib_ros.io.bags import ImageFrame
 from wand_calib_ros.io.rig_yaml import save_rig
 from wand_calib_ros.sim.render import RenderOptions, render_recording
@@ -63,7 +63,7 @@ def test_detectors_feed_a_points_collector(ros: Ros, tmp_path: Path) -> None:
     # The stored frames are the offline detector's (float32 points on the wire).
     frames = [ImageFrame(camera, stamp, image, "mono8") for camera, stamp, image in recording.frames]
     offline = detect_recording(frames, scenario.rig).observations
-    stored = collector.buffer.observations()
+    stored = collector.session.buffer.observations()
     assert len(stored.frames) >= 0.9 * len(offline.frames)
     for uv in stored.uv:
         seen = np.isfinite(uv)

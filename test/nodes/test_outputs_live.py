@@ -49,7 +49,7 @@ def test_collector_and_calibrator_write_through_links_with_the_umask(ros: Ros, t
     # the links stay; their targets hold what was written
     assert (out / "observations.csv").is_symlink() and (out / "result.yaml").is_symlink()
     kept = read_observations(elsewhere / "buffer.csv")
-    assert len(kept.frames) == len(rig.collector.buffer.frames) > 300
+    assert len(kept.frames) == len(rig.collector.session.buffer.frames) > 300
     assert set(read_result(elsewhere / "result.yaml")[1]) == {"cam0", "cam1"}
     assert _mode(elsewhere / "result.yaml") == 0o640  # an existing file keeps its permissions
     # new files take the umask's: the buffer, the lock, camera_info (was 0600 through mkstemp)

@@ -71,7 +71,8 @@ def test_replayed_bag_calibrates_as_well_as_the_true_projections(ros: Ros, tmp_p
             parameter_overrides=[common[0], Parameter("bag", value=str(bag)), Parameter("rate", value=4.0)],
         )
     )
-    assert wait_until(lambda: sum(collector.received.values()) == len(recording.frames), 20), collector.received
+    received = collector.session.received
+    assert wait_until(lambda: sum(received.values()) == len(recording.frames), 20), received
     assert replay.published == len(recording.frames)
 
     client = ros.helper.create_client(Trigger, "calibrate")

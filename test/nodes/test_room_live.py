@@ -12,7 +12,7 @@ import pytest
 import yaml
 from conftest import Ros, wait_until
 
-from wand_calib_ros.detection.recording import detect_recording
+from wand_calib_ros.collection.recording import detect_recording
 from wand_calib_ros.io.bags import ImageFrame
 from wand_calib_ros.io.images import decode_compressed
 from wand_calib_ros.io.rig_yaml import save_rig
@@ -63,7 +63,7 @@ def test_a_room_sent_as_jpeg_is_detected_live_as_offline(ros: Ros, tmp_path: Pat
         message.header.stamp, message.header.frame_id = time_message(stamp), camera
         publishers[camera].publish(message)
         time.sleep(0.004)
-    assert wait_until(lambda: sum(collector.received.values()) == len(recording.frames), 20)
+    assert wait_until(lambda: sum(collector.session.received.values()) == len(recording.frames), 20)
     collector.flush()
 
     # The stored views are the offline detector's (the same stream, decoded alike).
@@ -73,7 +73,7 @@ def test_a_room_sent_as_jpeg_is_detected_live_as_offline(ros: Ros, tmp_path: Pat
         image, encoding = decode_compressed(payload, fmt)
         frames.append(ImageFrame(camera, stamp, image, encoding))
     offline = detect_recording(frames, scenario.rig).observations
-    stored = collector.buffer.observations()
+    stored = collector.session.buffer.observations()
     assert stored.complete.shape == offline.complete.shape
     assert np.array_equal(stored.complete, offline.complete)  # in the same frames: none lost on the way
     assert offline.stamps is not None and stored.stamps is not None
@@ -103,4 +103,4 @@ def test_a_room_sent_as_jpeg_is_detected_live_as_offline(ros: Ros, tmp_path: Pat
     assert client.wait_for_service(timeout_sec=5)
     response = client.call(Trigger.Request(), timeout_sec=10)
     assert response.success and "keep the wand out of sight" in response.message
-    assert all(stream.taking_mask for stream in collector.streams.values())
+    assert all(stream.taking_mask for stream in collector.session.streams.values())

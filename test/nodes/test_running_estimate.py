@@ -52,10 +52,10 @@ def test_a_running_estimate_appears_while_waving_and_auto_calibrate_ends_the_ses
             context=ros.context,
             parameter_overrides=[*common, Parameter("write_report", value=False)],
             before_calibrate=collector.flush,
-            after_calibrate=collector.after_calibrate,
+            after_calibrate=collector.session.after_calibrate,
         )
     )
-    collector.calibrate_now = calibrator.calibrate_now  # as build() wires them in one process
+    collector.session.calibrate_now = calibrator.calibrate_now  # as build() wires them in one process
     preliminary = ros.collect(CameraInfo, "wand_calib/preliminary/cam1/camera_info", LATCHED)
     preliminary_markers = ros.collect(MarkerArray, "wand_calib/preliminary/markers", LATCHED)
     final = ros.collect(CameraInfo, "wand_calib/cam1/camera_info", LATCHED)
@@ -76,7 +76,7 @@ def test_a_running_estimate_appears_while_waving_and_auto_calibrate_ends_the_ses
             if first_estimate is None and preliminary:
                 first_estimate = time.monotonic()
             time.sleep(max(0.0, started + complete_sent / FPS - time.monotonic()))
-    assert wait_until(lambda: sum(collector.received.values()) == len(recording.frames), 20)  # none dropped
+    assert wait_until(lambda: sum(collector.session.received.values()) == len(recording.frames), 20)  # none dropped
     assert wait_until(lambda: bool(final), 60), [s.message for s in diagnostics[-1].status]
     if first_estimate is None:
         first_estimate = time.monotonic()

@@ -1,6 +1,6 @@
-"""A camera's time line through the real collector with images (the paper's rig): a stream that pauses and
-resumes, a clock step under every camera, the same bag replayed after /reset and stretches of unusable images lose
-nothing, and what is said of them is true."""
+"""A camera's time line through the real collector with real image messages (the paper's rig): stretches of
+truncated images lose none of the good ones between them. The time line's other cases (a pause, a clock step
+under every camera, a take replayed after /reset) are the collection session's: ``test/collection/test_session.py``."""
 
 from __future__ import annotations
 
@@ -20,7 +20,6 @@ rclpy = pytest.importorskip("rclpy")
 
 from rclpy.parameter import Parameter  # noqa: E402
 from sensor_msgs.msg import Image  # noqa: E402
-from std_srvs.srv import Trigger  # noqa: E402
 
 from wand_calib_ros.nodes.collector import CollectorNode  # noqa: E402
 from wand_calib_ros.nodes.messages import array_to_image  # noqa: E402
@@ -89,19 +88,19 @@ def _play(
         publishers = {n: ros.helper.create_publisher(Image, f"/{n}/image_raw", 100) for n in names}
         collector._test_publishers = publishers  # type: ignore[attr-defined]
         assert wait_until(lambda: all(p.get_subscription_count() for p in publishers.values()), 10)
-    before = sum(collector.received.values())
+    before = sum(collector.session.received.values())
     for k, (camera, stamp, pixels) in enumerate(frames, start=1):
         message = array_to_image(pixels, stamp, camera)
         arrivals.send()  # (one image in flight at a time: each is taken at its own arrival)
         publishers[camera].publish(spoil(camera, stamp, message) if spoil is not None else message)
-        assert wait_until(lambda k=k: sum(collector.received.values()) - before >= k, 5, step_s=0.0005)
-    assert wait_until(lambda: sum(collector.received.values()) - before == len(frames), 30)
+        assert wait_until(lambda k=k: sum(collector.session.received.values()) - before >= k, 5, step_s=0.0005)
+    assert wait_until(lambda: sum(collector.session.received.values()) - before == len(frames), 30)
 
 
 def _stored_frames(collector: CollectorNode, stamps_ns: list[int], shift_ns: int = 0) -> int:
     """How many of the given frames' stamps (cam0's, plus ``shift_ns``) the buffer holds with every camera's view."""
     collector.flush()
-    stored = collector.buffer.observations()
+    stored = collector.session.buffer.observations()
     assert stored.stamps is not None
     whole = stored.complete.all(axis=1)
     kept = {round(s, 4) for s in stored.stamps[whole, 0]}
@@ -125,66 +124,6 @@ def _by_frame(recording: Recording) -> list[list[tuple[str, int, np.ndarray]]]:
     return frames
 
 
-def _first_half_played(
-    ros: Ros, tmp_path: Path, recording: Recording
-) -> tuple[CollectorNode, Arrivals, list[list[tuple[str, int, np.ndarray]]], list[int]]:
-    """A collector that has taken the recording's first HALF frames as its cameras send them: the collector, its
-    arrival clock, the frames still to send and the first half's stamps (cam0's)."""
-    collector, arrivals = _collector(ros, tmp_path)
-    frames = _by_frame(recording)
-    _play(ros, collector, arrivals, [image for frame in frames[:HALF] for image in frame])
-    return collector, arrivals, frames[HALF:], [frame[0][1] for frame in frames[:HALF]]
-
-
-@pytest.mark.parametrize("pause_s", [5, 30])
-def test_a_paused_stream_loses_nothing_and_is_not_called_a_jump(
-    ros: Ros, tmp_path: Path, recording: Recording, pause_s: int, capfd: pytest.CaptureFixture[str]
-) -> None:
-    collector, arrivals, rest, first = _first_half_played(ros, tmp_path, recording)
-    arrivals.pause_ns += pause_s * 10**9  # the bag paused: nothing arrives for pause_s, its stamps then go on
-    _play(ros, collector, arrivals, [image for frame in rest for image in frame])
-    second = [frame[0][1] for frame in rest]
-    assert _stored_frames(collector, first) >= KEPT * _clean_count(recording, range(10, HALF))
-    assert _stored_frames(collector, second) >= KEPT * _clean_count(recording, range(HALF + 10, FRAMES))
-    log = capfd.readouterr().err
-    assert "jumped" not in log and "new segment" not in log
-    calibrates_as_kept(ros, tmp_path, collector)
-
-
-@pytest.mark.parametrize("step_s", [-30, 30])
-def test_a_clock_step_under_every_camera_is_one_shift_for_all(
-    ros: Ros, tmp_path: Path, recording: Recording, step_s: int, capfd: pytest.CaptureFixture[str]
-) -> None:
-    collector, arrivals, rest, first = _first_half_played(ros, tmp_path, recording)
-    stepped = [(camera, stamp + step_s * 10**9, pixels) for frame in rest for camera, stamp, pixels in frame]
-    _play(ros, collector, arrivals, stepped[1:])  # (the step falls between cam0's and cam1's image of a frame)
-    assert _stored_frames(collector, first) >= KEPT * _clean_count(recording, range(10, HALF))
-    stored = collector.buffer.observations()
-    whole = int(stored.complete.all(axis=1).sum()) - _stored_frames(collector, first)
-    assert whole >= KEPT * _clean_count(recording, range(HALF + 10, FRAMES))
-    log = capfd.readouterr().err
-    way = "back" if step_s < 0 else "ahead"
-    assert log.count("jumped") == 1 and f"every camera's stamps jumped 30.0 s {way} together" in log  # said once
-    calibrates_as_kept(ros, tmp_path, collector)
-
-
-def test_the_same_bag_replayed_after_reset_is_a_new_take_stored_in_full(
-    ros: Ros, tmp_path: Path, recording: Recording
-) -> None:
-    collector, arrivals = _collector(ros, tmp_path)
-    images = [image for frame in _by_frame(recording) for image in frame]
-    _play(ros, collector, arrivals, images)
-    collector.flush()
-    first = int(collector.buffer.observations().complete.all(axis=1).sum())
-    client = ros.helper.create_client(Trigger, "reset")
-    assert client.wait_for_service(timeout_sec=5) and client.call(Trigger.Request(), timeout_sec=10).success
-    _play(ros, collector, arrivals, images)  # its stamps start over
-    collector.flush()
-    again = int(collector.buffer.observations().complete.all(axis=1).sum())
-    assert first >= KEPT * _clean_count(recording, range(10, FRAMES)) and again >= KEPT * first
-    calibrates_as_kept(ros, tmp_path, collector)
-
-
 def test_stretches_of_unusable_images_never_make_the_good_ones_late(
     ros: Ros, tmp_path: Path, recording: Recording, capfd: pytest.CaptureFixture[str]
 ) -> None:
@@ -203,6 +142,6 @@ def test_stretches_of_unusable_images_never_make_the_good_ones_late(
     clean = _clean_count(recording, range(10, FRAMES)) - _clean_count(recording, range(40, 70))
     clean -= _clean_count(recording, range(120, 150))
     assert _stored_frames(collector, good) >= KEPT * clean
-    assert collector.sync.stats.late.get("cam1", 0) == 0
+    assert collector.session.sync.stats.late.get("cam1", 0) == 0
     assert "truncated" in capfd.readouterr().err
     calibrates_as_kept(ros, tmp_path, collector)

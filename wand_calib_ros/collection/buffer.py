@@ -23,11 +23,13 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from wand_calib_ros.collection.floor import FLOOR_FILE
 from wand_calib_ros.collection.recovery import TornTail, cut_torn_tail, move_aside
 from wand_calib_ros.core.model.rig import RigSpec, WandObservations
 from wand_calib_ros.io.errors import FormatError
 from wand_calib_ros.io.observations_csv import header, observation_rows, read_rig_observations
 from wand_calib_ros.io.outputs import check_writable
+from wand_calib_ros.io.session_csv import ESTIMATES_FILE, EVENTS_FILE
 
 FloatArray = NDArray[np.float64]
 
@@ -38,6 +40,10 @@ BUFFER_FILE = "observations.csv"
 GRID = 8
 #: The longest time (s) an appended frame stays in the operating system's cache only.
 SYNC_INTERVAL_S = 1.0
+
+
+#: The files beside a buffer that belong to its take: /reset moves them aside with it.
+SIBLINGS = (FLOOR_FILE, ESTIMATES_FILE, EVENTS_FILE)
 
 
 @dataclass
@@ -171,7 +177,8 @@ class ObservationBuffer:
         return WandObservations(np.array(self.frames, dtype=np.int64), self.rig.camera_names, uv, stamps, flags)
 
     def reset(self) -> Path | None:
-        """Move the file to a new timestamped backup (one never replaces another) and start empty.
+        """Move the file to a new timestamped backup (one never replaces another) and start empty. The take's
+        history beside it (:data:`SIBLINGS`: its floor frames, estimates and events) is moved aside with it.
 
         Returns:
             The backup, or None when nothing was stored (the file is only restarted).
@@ -179,6 +186,10 @@ class ObservationBuffer:
         backup = None
         if self.path.exists() and has_rows(self.path):
             backup = move_aside(self.path, "bak")
+        for name in SIBLINGS:
+            kept = self.path.with_name(name)
+            if kept.exists():
+                move_aside(kept, "bak")
         self.frames, self.uv, self.stamps, self.saturated, self.stats = [], [], [], [], BufferStats()
         self._cells = np.zeros((len(self.rig.cameras), GRID, GRID), dtype=np.int64)
         self._start_file()

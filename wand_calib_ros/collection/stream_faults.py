@@ -33,6 +33,21 @@ class Said:
     line: str
 
 
+class SaidOnce:
+    """The causes said so far per camera: each is said once."""
+
+    def __init__(self) -> None:
+        self._said: dict[str, set[str]] = {}
+
+    def first(self, camera: str, cause: str) -> bool:
+        """Whether ``cause`` is new for ``camera`` (it counts as said from now on)."""
+        said = self._said.setdefault(camera, set())
+        if cause in said:
+            return False
+        said.add(cause)
+        return True
+
+
 def image_problem(reason: str, shape: tuple[int, ...] | None, encoding: str, size: tuple[int, int]) -> str | None:
     """What is wrong with an image the detector refused (None: nothing a user must fix).
 

@@ -59,6 +59,11 @@ class SyncedFrame:
     reported: NDArray[np.bool_]
     stamps_ns: NDArray[np.int64]
 
+    @property
+    def stamps_s(self) -> FloatArray:
+        """(C,) each view's stamp in seconds (NaN where a camera has no image in the frame)."""
+        return np.where(self.reported, self.stamps_ns / 1e9, np.nan)
+
 
 @dataclass
 class SyncStats:

@@ -89,10 +89,10 @@ def _image_topics(pattern: str, names: tuple[str, ...]) -> dict[str, str]:
 def run(args: argparse.Namespace) -> int:
     import cv2
 
+    from wand_calib_ros.collection.recording import detect_recording
     from wand_calib_ros.detection.consistency import settle_labels
     from wand_calib_ros.detection.health import save_what_cameras_saw
     from wand_calib_ros.detection.masks import mask_of
-    from wand_calib_ros.detection.recording import detect_recording
     from wand_calib_ros.io.bags import count_images, read_image_frames
     from wand_calib_ros.io.observations_csv import write_observations
     from wand_calib_ros.io.rig_yaml import load_camera_masks, load_rig

@@ -13,27 +13,24 @@ Each camera's images go through a :class:`CameraStream`:
    (:mod:`~wand_calib_ros.detection.tracking`); the static lights learned from what is left.
 
 An ambiguous A/C labelling is settled by the track, otherwise the view is rejected as
-"ambiguous" rather than risk swapped labels. For recordings, images of different cameras are
-grouped into frames by nearest stamps, with the same synchroniser the live collector uses.
+"ambiguous" rather than risk swapped labels. A recording's cameras are put on their time lines and
+grouped into frames by :mod:`wand_calib_ros.collection.recording`, a live rig's by the collection
+session (:mod:`wand_calib_ros.collection.session`).
 """
 
 from __future__ import annotations
 
-import heapq
 from collections import Counter, deque
-from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.collection.sync import frames_to_observations, group_by_stamps
-from wand_calib_ros.collection.timeline import Order, TimeLines
 from wand_calib_ros.core.initialise.intrinsics_init import nominal_bearings
 from wand_calib_ros.core.model.bearings import BearingTable
 from wand_calib_ros.core.model.camera_model import CameraModel
-from wand_calib_ros.core.model.rig import CameraSpec, RigSpec, WandObservations
+from wand_calib_ros.core.model.rig import CameraSpec, WandObservations
 from wand_calib_ros.detection.background import Background, box_sums, estimate_background, masked
 from wand_calib_ros.detection.blobs import ENCODINGS, BlobOptions, Blobs, distances, find_blobs, to_gray
 from wand_calib_ros.detection.errors import ImageError
@@ -42,14 +39,9 @@ from wand_calib_ros.detection.masks import Mask, MaskTaker, StaticSources
 from wand_calib_ros.detection.structure import StaticStructure
 from wand_calib_ros.detection.tracking import Released, StreamLabeller
 from wand_calib_ros.detection.wand import WandDetection, WandOptions, identify_wand
-from wand_calib_ros.io.bags import ImageFrame
 
 #: A camera's background is estimated again every this many images.
 BACKGROUND_REFRESH = 8
-#: A recording's images are put in stamp order within this much of it (s): a bag stores them as they arrived, a
-#: little out of their stamps' order, and only this much of it is held in memory. An image still behind its
-#: camera's newest after that is not searched (its time line says so: :mod:`wand_calib_ros.collection.timeline`).
-REORDER_S = 2.0
 #: The wand is kept out of the static structure this far (px) beyond its spots' extent and its track's gate.
 WAND_MARGIN_PX = 4.0
 #: The value a saturated pixel of each encoding reads (a 12-bit camera's mono16 is scaled to 16 bits).
@@ -263,10 +255,10 @@ class CameraStream:
         self._taker = None
         return "taking_mask"
 
-    def passed_over(self, order: Order) -> str:
+    def passed_over(self, repeated: bool) -> str:
         """Count an image its camera's time line did not place next (behind a newer one, or its previous stamp
-        again: it is not searched); its reason."""
-        reason = "repeated_stamp" if order == "repeat" else "late"
+        again: ``repeated``; it is not searched); its reason."""
+        reason = "repeated_stamp" if repeated else "late"
         self.stats.images += 1
         self.stats.rejected[reason] += 1
         return reason
@@ -371,90 +363,3 @@ def _reordered(
     """(K,) the flags of the ``found`` (K, 2) points in the order of the same points ``labelled`` (A and C exchanged
     or not)."""
     return np.asarray(flags[distances(labelled, found).argmin(axis=1)])
-
-
-def in_stamp_order(frames: Iterable[ImageFrame], window_ns: int) -> Iterator[ImageFrame]:
-    """The frames in stamp order, holding only those within ``window_ns`` of the newest stamp seen so far (a
-    frame stamped further back than that comes out as soon as it arrives, out of order)."""
-    held: list[tuple[int, int, ImageFrame]] = []  # (stamp, arrival, frame): a heap
-    newest: int | None = None
-    for arrival, frame in enumerate(frames):
-        heapq.heappush(held, (frame.stamp_ns, arrival, frame))
-        newest = frame.stamp_ns if newest is None else max(newest, frame.stamp_ns)
-        while held[0][0] < newest - window_ns:
-            yield heapq.heappop(held)[2]
-    while held:
-        yield heapq.heappop(held)[2]
-
-
-def detect_recording(
-    frames: Iterable[ImageFrame],
-    rig: RigSpec,
-    *,
-    tolerance_ns: int = 0,
-    blob_options: BlobOptions = BlobOptions(),
-    inspect: Callable[[ImageFrame, Blobs | None, WandDetection | None, str | None], None] | None = None,
-    masks: Mapping[str, Mask] | None = None,
-) -> Detections:
-    """Wand observations of a recording, with per-camera counts (detected, rejected by reason).
-
-    Images are searched in stamp order (within REORDER_S: a recording is read as it goes, only that much of it in
-    memory) and grouped into frames by nearest stamps (:func:`wand_calib_ros.collection.sync.group_by_stamps`,
-    hardware-triggered or free-running cameras alike); frame ids count every frame of the recording
-    and each view keeps its image's stamp.
-
-    Args:
-        frames: decoded images of the rig's cameras, roughly in time order.
-        rig: the rig description (image sizes, wand lengths).
-        tolerance_ns: images further apart than this never form a frame (0: half the frame period).
-        blob_options: blob extraction settings.
-        inspect: called for every image with its blobs, detection and rejection reason
-            (progress reports, debug overlays).
-        masks: per camera the pixels to ignore (the rig file's ``mask``), if any.
-    """
-    wand_options = WandOptions.for_rig(rig)
-    given = masks or {}
-    streams = {
-        c.name: CameraStream(c, wand_options, blob_options, max_hold_ns=None, mask=given.get(c.name))
-        for c in rig.cameras
-    }
-    outcomes: list[tuple[str, Labelled]] = []
-    timelines = TimeLines(rig.camera_names)
-    for frame in in_stamp_order(frames, int(REORDER_S * 1e9)):
-        stream = streams[frame.camera]
-        placed = timelines.place(frame.camera, frame.stamp_ns, None)  # (a file's stamps are all there is)
-        if placed.order != "next":
-            skipped = stream.passed_over(placed.order)
-            if inspect is not None:
-                inspect(frame, None, None, skipped)
-            continue
-        blobs, detection, reason = stream.detect(frame.image, frame.encoding, frame.stamp_ns)
-        if inspect is not None:
-            inspect(frame, blobs, detection, reason)
-        outcomes += [(frame.camera, out) for out in stream.label(frame.stamp_ns, detection, reason)]
-    outcomes += [(name, out) for name, stream in streams.items() for out in stream.flush()]
-    detections = [(c, out.stamp_ns, out.points) for c, out in outcomes]
-    grouped = group_by_stamps(rig.camera_names, detections, tolerance_ns, n_points=rig.wand.n_points)
-    observations = frames_to_observations(grouped, rig.camera_names, rig.wand.n_points)
-    frame_of = {
-        (int(c), int(f.stamps_ns[c])): k for k, f in enumerate(grouped) for c in np.flatnonzero(f.reported)
-    }  # fmt: skip
-    index = {name: i for i, name in enumerate(rig.camera_names)}
-    ambiguous = [
-        Unsettled(frame_of[(index[camera], out.stamp_ns)], camera, out.unsettled, out.stamp_ns / 1e9, out.saturated)
-        for camera, out in outcomes
-        if out.unsettled is not None and (index[camera], out.stamp_ns) in frame_of
-    ]
-    tracks = np.full((len(grouped), len(rig.camera_names)), -1, dtype=np.int64)
-    saturated = np.zeros((len(grouped), len(rig.camera_names), rig.wand.n_points), dtype=bool)
-    for camera, out in outcomes:
-        row = frame_of.get((index[camera], out.stamp_ns))
-        if out.points is not None and row is not None:
-            tracks[row, index[camera]] = out.track
-            if out.saturated is not None and out.saturated.size == rig.wand.n_points:
-                saturated[row, index[camera]] = out.saturated
-    stats = {name: stream.stats for name, stream in streams.items()}
-    reports = {name: stream.report() for name, stream in streams.items()}
-    ignored: dict[str, Mask | None] = {name: stream.mask for name, stream in streams.items()}
-    observations = replace(observations, saturated=saturated[observations.frames])
-    return Detections(observations, stats, ambiguous, tracks[observations.frames], reports, ignored)

@@ -33,13 +33,14 @@ from sensor_msgs.msg import Image
 from std_msgs.msg import Header
 from std_srvs.srv import Trigger
 
+from wand_calib_ros.collection.session import OVERLAY_PERIOD_S
 from wand_calib_ros.detection.masks import mask_of
 from wand_calib_ros.detection.overlay import draw_overlay
 from wand_calib_ros.detection.recording import CameraStream, Labelled
 from wand_calib_ros.detection.wand import WandOptions
 from wand_calib_ros.io.rig_yaml import load_camera_endpoints, load_camera_masks, load_rig
 from wand_calib_ros.nodes import messages
-from wand_calib_ros.nodes.collector import DEBUG_PERIOD_S, POINTS_QOS
+from wand_calib_ros.nodes.collector import POINTS_QOS
 from wand_calib_ros.nodes.images import IMAGE_TRANSPORT, CameraImages
 from wand_calib_ros.nodes.params import (
     IMAGE_QOS,
@@ -97,7 +98,7 @@ class DetectorNode(Node):
         blobs, detection, reason = self.stream.detect(pixels, encoding, stamp_ns)
         self._publish(self.stream.label(stamp_ns, detection, reason))
         now = time.monotonic()
-        if pixels is not None and now - self._shown >= DEBUG_PERIOD_S and self.debug_image.get_subscription_count():
+        if pixels is not None and now - self._shown >= OVERLAY_PERIOD_S and self.debug_image.get_subscription_count():
             self._shown = now
             picture = draw_overlay(pixels, encoding, blobs, detection, reason, self.stream.mask)
             self.debug_image.publish(messages.array_to_image(picture, stamp_ns, self.frame_id, "bgr8"))

@@ -9,11 +9,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from wand_calib_ros.collection.recording import detect_recording
 from wand_calib_ros.core.judge.metrics import camera_errors, rereference
 from wand_calib_ros.core.model.result import CalibrationResult
 from wand_calib_ros.core.model.rig import RigSpec, WandObservations
 from wand_calib_ros.detection.consistency import settle_labels
-from wand_calib_ros.detection.recording import Detections, detect_recording
+from wand_calib_ros.detection.recording import Detections
 from wand_calib_ros.io.bags import ImageFrame
 from wand_calib_ros.io.images import decode_compressed
 from wand_calib_ros.sim.room import CameraTruth, RoomRecording, clearly_visible

@@ -6,7 +6,7 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from wand_calib_ros.detection.recording import REORDER_S, detect_recording, in_stamp_order
+from wand_calib_ros.collection.recording import REORDER_S, detect_recording, in_stamp_order
 from wand_calib_ros.io.bags import ImageFrame
 from wand_calib_ros.sim.render import RenderOptions, render_recording
 from wand_calib_ros.sim.scenarios import paper_fisheye_scenario

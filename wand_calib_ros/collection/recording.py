@@ -1,0 +1,116 @@
+"""A recording's images through each camera's detector, on their cameras' time lines, grouped into frames.
+
+Images are searched in stamp order (within REORDER_S: a recording is read as it goes, only that much of it in
+memory), each camera's by its own :class:`~wand_calib_ros.detection.recording.CameraStream`, and grouped into
+frames by nearest stamps with the synchroniser the live collection uses
+(:func:`~wand_calib_ros.collection.sync.group_by_stamps`).
+"""
+
+from __future__ import annotations
+
+import heapq
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from dataclasses import replace
+
+import numpy as np
+
+from wand_calib_ros.collection.sync import frames_to_observations, group_by_stamps
+from wand_calib_ros.collection.timeline import TimeLines
+from wand_calib_ros.core.model.rig import RigSpec
+from wand_calib_ros.detection.blobs import BlobOptions, Blobs
+from wand_calib_ros.detection.masks import Mask
+from wand_calib_ros.detection.recording import CameraStream, Detections, Labelled, Unsettled
+from wand_calib_ros.detection.wand import WandDetection, WandOptions
+from wand_calib_ros.io.bags import ImageFrame
+
+#: A recording's images are put in stamp order within this much of it (s): a bag stores them as they arrived, a
+#: little out of their stamps' order, and only this much of it is held in memory. An image still behind its
+#: camera's newest after that is not searched (its time line says so: :mod:`wand_calib_ros.collection.timeline`).
+REORDER_S = 2.0
+
+
+def in_stamp_order(frames: Iterable[ImageFrame], window_ns: int) -> Iterator[ImageFrame]:
+    """The frames in stamp order, holding only those within ``window_ns`` of the newest stamp seen so far (a
+    frame stamped further back than that comes out as soon as it arrives, out of order)."""
+    held: list[tuple[int, int, ImageFrame]] = []  # (stamp, arrival, frame): a heap
+    newest: int | None = None
+    for arrival, frame in enumerate(frames):
+        heapq.heappush(held, (frame.stamp_ns, arrival, frame))
+        newest = frame.stamp_ns if newest is None else max(newest, frame.stamp_ns)
+        while held[0][0] < newest - window_ns:
+            yield heapq.heappop(held)[2]
+    while held:
+        yield heapq.heappop(held)[2]
+
+
+def detect_recording(
+    frames: Iterable[ImageFrame],
+    rig: RigSpec,
+    *,
+    tolerance_ns: int = 0,
+    blob_options: BlobOptions = BlobOptions(),
+    inspect: Callable[[ImageFrame, Blobs | None, WandDetection | None, str | None], None] | None = None,
+    masks: Mapping[str, Mask] | None = None,
+) -> Detections:
+    """Wand observations of a recording, with per-camera counts (detected, rejected by reason).
+
+    Images are searched in stamp order (within REORDER_S: a recording is read as it goes, only that much of it in
+    memory) and grouped into frames by nearest stamps (:func:`wand_calib_ros.collection.sync.group_by_stamps`,
+    hardware-triggered or free-running cameras alike); frame ids count every frame of the recording
+    and each view keeps its image's stamp.
+
+    Args:
+        frames: decoded images of the rig's cameras, roughly in time order.
+        rig: the rig description (image sizes, wand lengths).
+        tolerance_ns: images further apart than this never form a frame (0: half the frame period).
+        blob_options: blob extraction settings.
+        inspect: called for every image with its blobs, detection and rejection reason
+            (progress reports, debug overlays).
+        masks: per camera the pixels to ignore (the rig file's ``mask``), if any.
+    """
+    wand_options = WandOptions.for_rig(rig)
+    given = masks or {}
+    streams = {
+        c.name: CameraStream(c, wand_options, blob_options, max_hold_ns=None, mask=given.get(c.name))
+        for c in rig.cameras
+    }
+    outcomes: list[tuple[str, Labelled]] = []
+    timelines = TimeLines(rig.camera_names)
+    for frame in in_stamp_order(frames, int(REORDER_S * 1e9)):
+        stream = streams[frame.camera]
+        placed = timelines.place(frame.camera, frame.stamp_ns, None)  # (a file's stamps are all there is)
+        if placed.order != "next":
+            skipped = stream.passed_over(placed.order == "repeat")
+            if inspect is not None:
+                inspect(frame, None, None, skipped)
+            continue
+        blobs, detection, reason = stream.detect(frame.image, frame.encoding, frame.stamp_ns)
+        if inspect is not None:
+            inspect(frame, blobs, detection, reason)
+        outcomes += [(frame.camera, out) for out in stream.label(frame.stamp_ns, detection, reason)]
+    outcomes += [(name, out) for name, stream in streams.items() for out in stream.flush()]
+    detections = [(c, out.stamp_ns, out.points) for c, out in outcomes]
+    grouped = group_by_stamps(rig.camera_names, detections, tolerance_ns, n_points=rig.wand.n_points)
+    observations = frames_to_observations(grouped, rig.camera_names, rig.wand.n_points)
+    frame_of = {
+        (int(c), int(f.stamps_ns[c])): k for k, f in enumerate(grouped) for c in np.flatnonzero(f.reported)
+    }  # fmt: skip
+    index = {name: i for i, name in enumerate(rig.camera_names)}
+    ambiguous = [
+        Unsettled(frame_of[(index[camera], out.stamp_ns)], camera, out.unsettled, out.stamp_ns / 1e9, out.saturated)
+        for camera, out in outcomes
+        if out.unsettled is not None and (index[camera], out.stamp_ns) in frame_of
+    ]
+    tracks = np.full((len(grouped), len(rig.camera_names)), -1, dtype=np.int64)
+    saturated = np.zeros((len(grouped), len(rig.camera_names), rig.wand.n_points), dtype=bool)
+    for camera, out in outcomes:
+        row = frame_of.get((index[camera], out.stamp_ns))
+        if out.points is not None and row is not None:
+            tracks[row, index[camera]] = out.track
+            if out.saturated is not None and out.saturated.size == rig.wand.n_points:
+                saturated[row, index[camera]] = out.saturated
+    stats = {name: stream.stats for name, stream in streams.items()}
+    reports = {name: stream.report() for name, stream in streams.items()}
+    ignored: dict[str, Mask | None] = {name: stream.mask for name, stream in streams.items()}
+    observations = replace(observations, saturated=saturated[observations.frames])
+    return Detections(observations, stats, ambiguous, tracks[observations.frames], reports, ignored)
