@@ -18,6 +18,7 @@ import io
 import logging
 import math
 from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TextIO
 
@@ -233,6 +234,104 @@ def _ends_with_newline(path: Path) -> bool:
         return handle.read(1) == b"\n"
 
 
+@dataclass(frozen=True)
+class _Header:
+    """Where the row-by-row reader finds each column.
+
+    Attributes:
+        index: the columns frame, camera, point, u, v.
+        stamp: the stamp column (None: none).
+        flag: the saturated column (None: none).
+        cells: the cells of the header (a row may not have more).
+    """
+
+    index: tuple[int, ...]
+    stamp: int | None
+    flag: int | None
+    cells: int
+
+    @property
+    def width(self) -> int:
+        """The fewest cells a row must have."""
+        return max([*self.index] + [i for i in (self.stamp, self.flag) if i is not None]) + 1
+
+
+def _header(path: Path, cells: list[str] | None) -> _Header:
+    """The columns of the header row ``cells`` (None: the file is empty)."""
+    if cells is None:
+        raise FormatError(path, "empty file; expected the header frame,camera,point,u,v")
+    names = [h.strip() for h in cells]
+    missing = [c for c in COLUMNS if c not in names]
+    if missing:
+        raise FormatError(
+            path, f"missing column(s) {', '.join(missing)}; expected header frame,camera,point,u,v", row=1
+        )
+    stamp = names.index(STAMP) if STAMP in names else None
+    flag = names.index(SATURATED) if SATURATED in names else None
+    return _Header(tuple(names.index(c) for c in COLUMNS), stamp, flag, len(names))
+
+
+def _point_row(
+    path: Path,
+    row_number: int,
+    row: list[str],
+    header: _Header,
+    labels: tuple[str, ...],
+    sizes: dict[str, tuple[int, int]],
+) -> tuple[int, str, str, float, float]:
+    """One row's frame, camera, point and u, v, each checked (a point in its camera's image, when its size is known)."""
+    if len(row) < header.width:
+        raise FormatError(path, f"expected at least {header.width} columns, got {len(row)}", row=row_number)
+    if len(row) > header.cells:
+        raise FormatError(
+            path,
+            f"{len(row)} cells where the header has {header.cells} (a decimal comma? write 12.5, not 12,5)",
+            row=row_number,
+        )
+    frame_text, camera, point, u_text, v_text = (row[i].strip() for i in header.index)
+    try:
+        frame = int(frame_text)
+    except ValueError:
+        raise FormatError(path, f"frame must be an integer, got {frame_text!r}", row=row_number) from None
+    if not -(2**63) <= frame < 2**63:
+        raise FormatError(path, f"frame {frame_text} is out of range (a frame id is a 64-bit integer)", row=row_number)
+    if point not in labels:
+        named = f"{', '.join(labels[:-1])} or {labels[-1]}"
+        raise FormatError(path, f"point must be {named} (the wand's markers), got {point!r}", row=row_number)
+    try:
+        u, v = float(u_text), float(v_text)
+    except ValueError:
+        raise FormatError(path, f"u, v must be numbers, got {u_text!r}, {v_text!r}", row=row_number) from None
+    if not (math.isfinite(u) and math.isfinite(v)):
+        raise FormatError(
+            path,
+            f"camera '{camera}' frame {frame} point {point}: u, v must be finite, got {u_text}, {v_text}",
+            row=row_number,
+        )
+    size = sizes.get(camera)
+    if size is not None and not (
+        -0.5 - IMAGE_MARGIN_PX <= u <= size[0] - 0.5 + IMAGE_MARGIN_PX
+        and -0.5 - IMAGE_MARGIN_PX <= v <= size[1] - 0.5 + IMAGE_MARGIN_PX
+    ):
+        raise FormatError(
+            path,
+            f"camera '{camera}' frame {frame} point {point}: ({u_text}, {v_text}) lies outside its "
+            f"{size[0]}x{size[1]} image (image_size in the rig description: the right camera? the right size?)",
+            row=row_number,
+        )
+    return frame, camera, point, u, v
+
+
+def _flag(path: Path, row_number: int, camera: str, frame: int, point: str, text: str) -> bool:
+    """A row's saturated cell: 0 or 1."""
+    if text not in ("0", "1"):
+        raise FormatError(
+            path, f"camera '{camera}' frame {frame} point {point}: saturated must be 0 or 1, got {text!r}",
+            row=row_number,
+        )  # fmt: skip
+    return text == "1"
+
+
 def _parse(
     handle: TextIO,
     path: Path,
@@ -240,20 +339,9 @@ def _parse(
     sizes: dict[str, tuple[int, int]],
     labels: tuple[str, ...] = POINT_LABELS,
 ) -> WandObservations:
+    """The observations of a CSV read row by row, every row checked (the first fault raised, naming its row)."""
     reader = csv.reader(handle)
-    header = next(reader, None)
-    if header is None:
-        raise FormatError(path, "empty file; expected the header frame,camera,point,u,v")
-    header = [h.strip() for h in header]
-    missing = [c for c in COLUMNS if c not in header]
-    if missing:
-        raise FormatError(
-            path, f"missing column(s) {', '.join(missing)}; expected header frame,camera,point,u,v", row=1
-        )
-    index = [header.index(c) for c in COLUMNS]
-    stamp_index = header.index(STAMP) if STAMP in header else None
-    flag_index = header.index(SATURATED) if SATURATED in header else None
-    width = max(index + [i for i in (stamp_index, flag_index) if i is not None]) + 1
+    header = _header(path, next(reader, None))
     label_index = {label: i for i, label in enumerate(labels)}
     frames: dict[int, int] = {}
     cameras: dict[str, int] = {name: i for i, name in enumerate(known)} if known is not None else {}
@@ -264,47 +352,7 @@ def _parse(
     for row_number, row in enumerate(reader, start=2):
         if not row or all(not cell.strip() for cell in row):
             continue
-        if len(row) < width:
-            raise FormatError(path, f"expected at least {width} columns, got {len(row)}", row=row_number)
-        if len(row) > len(header):
-            raise FormatError(
-                path,
-                f"{len(row)} cells where the header has {len(header)} (a decimal comma? write 12.5, not 12,5)",
-                row=row_number,
-            )
-        frame_text, camera, point, u_text, v_text = (row[i].strip() for i in index)
-        try:
-            frame = int(frame_text)
-        except ValueError:
-            raise FormatError(path, f"frame must be an integer, got {frame_text!r}", row=row_number) from None
-        if not -(2**63) <= frame < 2**63:
-            raise FormatError(
-                path, f"frame {frame_text} is out of range (a frame id is a 64-bit integer)", row=row_number
-            )
-        if point not in label_index:
-            named = f"{', '.join(labels[:-1])} or {labels[-1]}"
-            raise FormatError(path, f"point must be {named} (the wand's markers), got {point!r}", row=row_number)
-        try:
-            u, v = float(u_text), float(v_text)
-        except ValueError:
-            raise FormatError(path, f"u, v must be numbers, got {u_text!r}, {v_text!r}", row=row_number) from None
-        if not (math.isfinite(u) and math.isfinite(v)):
-            raise FormatError(
-                path,
-                f"camera '{camera}' frame {frame} point {point}: u, v must be finite, got {u_text}, {v_text}",
-                row=row_number,
-            )
-        size = sizes.get(camera)
-        if size is not None and not (
-            -0.5 - IMAGE_MARGIN_PX <= u <= size[0] - 0.5 + IMAGE_MARGIN_PX
-            and -0.5 - IMAGE_MARGIN_PX <= v <= size[1] - 0.5 + IMAGE_MARGIN_PX
-        ):
-            raise FormatError(
-                path,
-                f"camera '{camera}' frame {frame} point {point}: ({u_text}, {v_text}) lies outside its "
-                f"{size[0]}x{size[1]} image (image_size in the rig description: the right camera? the right size?)",
-                row=row_number,
-            )
+        frame, camera, point, u, v = _point_row(path, row_number, row, header, labels, sizes)
         if camera not in cameras:
             if known is not None:
                 raise FormatError(path, f"unknown camera '{camera}'; the rig has {', '.join(known)}", row=row_number)
@@ -314,43 +362,51 @@ def _parse(
             raise FormatError(path, f"camera '{camera}' frame {frame} point {point} appears twice", row=row_number)
         seen.add(key)
         entries.append((*key, u, v))
-        if flag_index is not None:
-            flag = row[flag_index].strip()
-            if flag not in ("0", "1"):
-                raise FormatError(
-                    path, f"camera '{camera}' frame {frame} point {point}: saturated must be 0 or 1, got {flag!r}",
-                    row=row_number,
-                )  # fmt: skip
-            flags.append(flag == "1")
-        if stamp_index is not None:
-            stamp = _stamp(path, row_number, camera, frame, row[stamp_index].strip())
+        if header.flag is not None:
+            flags.append(_flag(path, row_number, camera, frame, point, row[header.flag].strip()))
+        if header.stamp is not None:
+            stamp = _stamp(path, row_number, camera, frame, row[header.stamp].strip())
             first = view_stamps.setdefault(key[:2], (stamp, row_number))
             if first[0] != stamp:
                 raise FormatError(
                     path,
                     f"camera '{camera}' frame {frame}: stamp {float(stamp)!r} differs from {float(first[0])!r} in row "
-                    f"{first[1]}; "
-                    "the points of one image share its stamp",
+                    f"{first[1]}; the points of one image share its stamp",
                     row=row_number,
                 )
     if not entries:
         raise FormatError(path, "no observations after the header")
+    stamps = view_stamps if header.stamp is not None else None
+    return _parsed(path, frames, cameras, entries, stamps, flags if header.flag is not None else None, len(labels))
+
+
+def _parsed(
+    path: Path,
+    frames: dict[int, int],
+    cameras: dict[str, int],
+    entries: list[tuple[int, int, int, float, float]],
+    view_stamps: dict[tuple[int, int], tuple[float, int]] | None,
+    flags: list[bool] | None,
+    n_points: int,
+) -> WandObservations:
+    """The observations of the rows read: (frame row, camera, point, u, v) ``entries``, frames in the order of
+    their ids; each view's stamp (with its first row) and each point's saturation flag, where the file has them."""
     frame_ids = np.array(sorted(frames, key=frames.__getitem__), dtype=np.int64)
-    uv = np.full((len(frames), len(cameras), len(labels), 2), np.nan)
+    uv = np.full((len(frames), len(cameras), n_points, 2), np.nan)
     table = np.array(entries)
     f, c, p = (table[:, i].astype(np.int64) for i in range(3))
     uv[f, c, p] = table[:, 3:]
     order = np.argsort(frame_ids, kind="stable")
     names = tuple(sorted(cameras, key=cameras.__getitem__))
     stamps = None
-    if stamp_index is not None:
+    if view_stamps is not None:
         stamps = np.full((len(frames), len(cameras)), np.nan)
         for (frame_row, camera_index), (stamp, _) in view_stamps.items():
             stamps[frame_row, camera_index] = stamp
         stamps = stamps[order]
         _check_stamp_order(path, frame_ids[order], names, stamps, view_stamps, order)
     saturated = None
-    if flag_index is not None:
+    if flags is not None:
         saturated = np.zeros(uv.shape[:3], dtype=bool)
         saturated[f, c, p] = flags
         saturated = saturated[order]
