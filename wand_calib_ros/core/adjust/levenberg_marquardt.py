@@ -167,8 +167,8 @@ class Workspace:
 
     def linearise(self, state: BundleState) -> FloatArray:
         """(M, 2) the residuals of ``state``, its normal equations the current ones (in the current arrays)."""
+        self._reduced = None  # (before: its V^-1 need not outlive the arrays it was reduced from)
         res, self.normal = evaluate(state, self.problem, self.layout, self.carried, self.loss_scale, self.normal)
-        self._reduced = None
         return res
 
     def reduced(self) -> ReducedSystem:
