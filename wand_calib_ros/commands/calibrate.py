@@ -132,6 +132,8 @@ def _print_summary(result: CalibrationResult, output: Path) -> None:
             f"normal +- {world.normal_std_deg:.3f} deg, origin +- {world.origin_std_mm:.2f} mm",
             file=where,
         )
+    for line in () if result.timing is None else result.timing.clocks:
+        print(f"  clock: {line}", file=where)
     if result.quality is not None:
         print(f"  {result.quality.line()}", file=where)
     for warning in result.warnings:

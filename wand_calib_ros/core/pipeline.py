@@ -18,6 +18,7 @@ from wand_calib_ros.core.adjust.timing import (
 )
 from wand_calib_ros.core.after.world_frame import floor_of
 from wand_calib_ros.core.errors import CalibrationFailedError, CoreError, InsufficientDataError
+from wand_calib_ros.core.initialise.clock_alignment import ClockAlignment, align_clocks
 from wand_calib_ros.core.initialise.incremental import place_cameras
 from wand_calib_ros.core.initialise.lens_choice import model_starts, nominal_model
 from wand_calib_ros.core.initialise.multi_camera import RigInitialisation, initialise_rig
@@ -36,7 +37,7 @@ from wand_calib_ros.core.judge.metrics import rereference
 from wand_calib_ros.core.judge.plausibility import check_result, check_rig, check_views
 from wand_calib_ros.core.judge.quality import judge, noise_wand_error
 from wand_calib_ros.core.model.camera_model import CameraModel
-from wand_calib_ros.core.model.result import CalibrationResult
+from wand_calib_ros.core.model.result import CalibrationResult, TimingSummary
 from wand_calib_ros.core.model.rig import RigSpec, WandObservations, spread_subset
 from wand_calib_ros.core.model.views import whole_views
 from wand_calib_ros.core.refine import refine_calibration
@@ -97,6 +98,9 @@ def calibrate(
     """
     obs, floor = _selected(rig, observations, options.floor_frames)
     check_rig(rig)
+    obs, clocks = align_clocks(rig, obs)
+    for line in clocks.lines:
+        log.info(line)
     check_views(rig, obs)
     timing = timing_input(rig, obs, offsets=options.time_offsets, rolling_shutter=options.rolling_shutter)
     views = _views(rig, obs, timing, options)
@@ -112,10 +116,24 @@ def calibrate(
         result = _with_floor(rig, result, floor, options.floor_origin)
     warnings = [*result.warnings, *rate_warnings(obs, timing.line), *offset_warnings(result)]
     result = replace(result, quality=judge(result, noise_wand_error(result, rig.camera_names, uv)))
+    result = _with_clocks(result, clocks, rig.camera_names, timing.line.frame_period)
     if result.timing is not None and result.timing.time_offsets == "estimated":
         return replace(result, warnings=tuple(warnings))
     offsets = clock_offsets(result, obs)  # not modelled: say when the residuals show them
     return replace(result, clock_offsets=offsets, warnings=(*warnings, *clock_warnings(offsets)))
+
+
+def _with_clocks(
+    result: CalibrationResult, clocks: ClockAlignment, names: tuple[str, ...], frame_period: float
+) -> CalibrationResult:
+    """The result with the clock offsets the wand's motion lined up added to its cameras' time offsets (the
+    calibration estimated what was left within a frame or two), and said in its timing."""
+    if not clocks.moved.any():
+        return result
+    coarse = dict(zip(names, clocks.relative_to(names.index(result.reference_camera)), strict=True))
+    cameras = tuple(replace(c, time_offset=c.time_offset + float(coarse[c.name])) for c in result.cameras)
+    timing = result.timing or TimingSummary(clocks.unit, "fixed", {c.name: "fixed" for c in cameras}, frame_period)
+    return replace(result, cameras=cameras, timing=replace(timing, clocks=clocks.lines))
 
 
 def _selected(

@@ -218,13 +218,16 @@ def _timing_dict(result: CalibrationResult) -> dict[str, Any]:
             "rolling_shutter": {c.name: "fixed" for c in result.cameras},
             "note": "views of a frame taken as simultaneous",
         }
-    return {
+    described: dict[str, Any] = {
         "unit": timing.unit,
         "time_offsets": timing.time_offsets,
         "rolling_shutter": dict(timing.rolling_shutter),
         f"frame_period_{timing.unit}": float(timing.frame_period),
         "notes": list(timing.notes),
     }
+    if timing.clocks:
+        described["clocks"] = list(timing.clocks)
+    return described
 
 
 #: libyaml's emitter where PyYAML has it: the same text as the pure-Python one, 4x faster (a result file

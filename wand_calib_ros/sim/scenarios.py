@@ -137,6 +137,7 @@ def paper_fisheye_scenario(
         Pose.identity(),
         _euler_pose((28.65, 28.65, 28.65), (-700.0, 100.0, 200.0)),
         _euler_pose((57.3, 57.3, 57.3), (-1200.0, -200.0, 700.0)),
+        _euler_pose((-28.65, -28.65, 28.65), (700.0, -100.0, 200.0)),  # (not the paper's: a fourth for paper4)
     ]
     cameras = []
     for i in range(n_cameras):
@@ -238,6 +239,13 @@ def paper_three_camera_scenario(**kwargs: float | tuple[float, float]) -> Scenar
     """The paper's three-fisheye simulation (camera 2 at Euler (57.3, 57.3, 57.3) deg, T = [-1200, -200, 700] mm)."""
     scenario = paper_fisheye_scenario(n_cameras=3, **kwargs)  # type: ignore[arg-type]
     return Scenario("paper3", scenario.wand, scenario.cameras, scenario.volume, scenario.n_placements)
+
+
+def paper_four_camera_scenario(**kwargs: float | tuple[float, float]) -> Scenario:
+    """The paper's three fisheyes and a fourth mirrored to camera 1's other side (Euler (-28.65, -28.65, 28.65) deg,
+    T = [700, -100, 200] mm): four cameras that all see the wand's volume."""
+    scenario = paper_fisheye_scenario(n_cameras=4, **kwargs)  # type: ignore[arg-type]
+    return Scenario("paper4", scenario.wand, scenario.cameras, scenario.volume, scenario.n_placements)
 
 
 def small_room_scenario() -> Scenario:
@@ -474,6 +482,7 @@ def action_pair_scenario(*, n_placements: int = 322) -> Scenario:
 SCENARIOS: dict[str, Callable[..., Scenario]] = {
     "paper": paper_fisheye_scenario,
     "paper3": paper_three_camera_scenario,
+    "paper4": paper_four_camera_scenario,
     "small_room": small_room_scenario,
     "conventional": conventional_pair_scenario,
     "mixed": mixed_pair_scenario,

@@ -104,6 +104,8 @@ class TimingSummary:
         rolling_shutter: per camera name "estimated" or "fixed" (at zero or the rig description's readout_ms).
         frame_period: the recording's frame period in the unit (1 for frames).
         notes: why something was not estimated, in plain words.
+        clocks: the cameras whose clocks disagreed by more than a frame or two, as the wand's motion lined them up
+            (their ``time_offset`` holds the whole offset), in plain words.
     """
 
     unit: str
@@ -111,6 +113,7 @@ class TimingSummary:
     rolling_shutter: dict[str, str]
     frame_period: float
     notes: tuple[str, ...] = ()
+    clocks: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
