@@ -623,3 +623,33 @@ def test_help_and_argument_errors_answer_before_any_heavy_import() -> None:
     )
     done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
     assert done.stdout.strip().splitlines()[-1] == "[]"
+
+
+def test_a_camera_whose_clock_is_seconds_ahead_is_lined_up_and_said(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    from dataclasses import replace
+
+    from wand_calib_ros.io.rig_yaml import save_rig
+    from wand_calib_ros.sim.clocks import TakeOptions, film, observe, take_trajectory
+    from wand_calib_ros.sim.scenarios import SCENARIOS
+
+    scenario = SCENARIOS["paper3"]()
+    options = TakeOptions()
+    clocks = options.clocks(3, np.random.default_rng(2))
+    clocks = (clocks[0], replace(clocks[1], latency_s=clocks[1].latency_s + 2.3), clocks[2])  # cam1 2.3 s ahead
+    takes = film(scenario, take_trajectory(scenario, options, np.random.default_rng(1)), clocks, 20.0,
+                 np.random.default_rng(3))  # fmt: skip
+    sim = tmp_path / "take"
+    sim.mkdir()
+    save_rig(scenario.rig, sim / "cameras.yaml")
+    write_observations(
+        observe(scenario.rig.camera_names, takes, 0.25, np.random.default_rng(4)), sim / "observations.csv"
+    )
+    assert _calibrate(sim, tmp_path) == 0
+    out = capsys.readouterr().out
+    assert out.count("found from the wand's motion") == 1 and "clock: cam1's clock is 2.30" in out
+    result = yaml.safe_load((tmp_path / "result.yaml").read_text())
+    assert result["timing"]["clocks"] == [line.split("clock: ")[1] for line in out.splitlines() if "clock: " in line]
+    offsets = {name: entry["time_offset_s"] for name, entry in result["cameras"].items()}
+    truth = {f"cam{c}": clock.latency_s for c, clock in enumerate(clocks)}
+    for name, offset in offsets.items():  # the whole offset: the seconds and the sub-frame part
+        assert abs(offset - (truth[name] - truth[result["reference_camera"]])) < 0.001
