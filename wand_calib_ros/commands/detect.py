@@ -1,4 +1,5 @@
-"""``wand-calib detect``: the wand found in a rosbag2 of camera images, written as an observations CSV."""
+"""``wand-calib detect``: the wand found in a rosbag2 of camera images, or in one video file (or folder of numbered
+images) per camera, written as an observations CSV."""
 
 from __future__ import annotations
 
@@ -13,19 +14,31 @@ from wand_calib_ros.errors import WandCalibError
 from wand_calib_ros.io.outputs import check_writable, is_special, write_text
 
 if TYPE_CHECKING:
+    from collections.abc import Iterable
+
     from wand_calib_ros.core.model.rig import RigSpec
     from wand_calib_ros.detection.blobs import Blobs
     from wand_calib_ros.detection.wand import WandDetection
     from wand_calib_ros.io.bags import ImageFrame
+    from wand_calib_ros.io.videos import CameraSource
 
 log = logging.getLogger("wand_calib_ros")
 
-HELP = "detect the wand in a rosbag2 of camera images"
+HELP = "detect the wand in a rosbag2 of camera images, or in one video per camera"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The command's arguments."""
-    parser.add_argument("bag", type=Path, help="rosbag2 directory (mcap or sqlite3)")
+    parser.add_argument("bag", type=Path, nargs="?", help="rosbag2 directory (mcap or sqlite3), or --video instead")
+    parser.add_argument(
+        "--video",
+        action="append",
+        default=[],
+        metavar="CAM=PATH",
+        help="a camera's video file (mp4, mov, avi, mkv: what OpenCV's FFmpeg reads) or folder of numbered images; "
+        "once per camera, instead of a bag (the videos may start seconds apart: calibrate lines them up)",
+    )
+    parser.add_argument("--fps", type=float, help="the frame rate of folders of images (videos have their own)")
     parser.add_argument("--cameras", required=True, type=Path, help="rig description (cameras.yaml)")
     parser.add_argument("--output", required=True, type=Path, help="observations CSV to write")
     topic_arguments(parser)
@@ -86,6 +99,36 @@ def _image_topics(pattern: str, names: tuple[str, ...]) -> dict[str, str]:
     return topics
 
 
+def video_sources(args: argparse.Namespace, rig: RigSpec) -> dict[str, CameraSource]:
+    """Each camera's ``--video CAM=PATH``, checked: every camera of the rig once, no other, each file readable and
+    of its camera's size (``--fps`` for folders of images)."""
+    from wand_calib_ros.io.videos import CameraSource, check_sources
+
+    if args.bag is not None:
+        raise WandCalibError(f"give a bag ({args.bag}) or --video files, not both")
+    if args.fps is not None and not 0 < args.fps <= 1000:
+        raise WandCalibError(f"--fps must be a frame rate in Hz (0 < fps <= 1000), got {args.fps:g}")
+    sources: dict[str, CameraSource] = {}
+    for given in args.video:
+        name, sep, path = given.partition("=")
+        if not sep or not name or not path:
+            raise WandCalibError(f"--video {given!r}: write CAMERA=PATH (e.g. --video cam0=cam0.mp4)")
+        if name not in rig.camera_names:
+            raise WandCalibError(
+                f"--video {given}: no camera '{name}' in {args.cameras} ({', '.join(rig.camera_names)})"
+            )
+        if name in sources:
+            raise WandCalibError(f"--video {given}: camera '{name}' has a video already ({sources[name].path})")
+        sources[name] = CameraSource(name, Path(path), args.fps)
+    missing = [name for name in rig.camera_names if name not in sources]
+    if missing:
+        raise WandCalibError(
+            f"no --video for {', '.join(missing)}: give every camera of {args.cameras} its video (CAM=PATH)"
+        )
+    check_sources(sources, {name: rig.camera(name).image_size for name in sources})
+    return {name: sources[name] for name in rig.camera_names}
+
+
 def run(args: argparse.Namespace) -> int:
     import cv2
 
@@ -96,6 +139,7 @@ def run(args: argparse.Namespace) -> int:
     from wand_calib_ros.io.bags import count_images, read_image_frames
     from wand_calib_ros.io.observations_csv import write_observations
     from wand_calib_ros.io.rig_yaml import load_camera_masks, load_rig
+    from wand_calib_ros.io.videos import count_frames, read_source_frames
 
     if args.sync_tolerance_ms < 0 or args.debug_every < 1:
         raise WandCalibError("--sync-tolerance-ms must be 0 or more and --debug-every at least 1")
@@ -103,11 +147,18 @@ def run(args: argparse.Namespace) -> int:
     rig = load_rig(args.cameras)
     masks = {name: mask_of(spec, rig.camera(name).image_size) for name, spec in load_camera_masks(args.cameras).items()}
     check_writable([args.output])  # before reading the bag
-    topics = camera_topics(args, rig)
+    if args.video:
+        sources = video_sources(args, rig)
+        topics = {name: str(source.path) for name, source in sources.items()}
+        frames: Iterable[ImageFrame] = read_source_frames(sources)
+        expected, source = count_frames(sources), "the videos"
+    elif args.bag is None:
+        raise WandCalibError("give a bag or --video CAM=PATH for every camera")
+    else:
+        topics = camera_topics(args, rig)
+        frames, expected, source = read_image_frames(args.bag, topics), count_images(args.bag, topics), str(args.bag)
     started = time.perf_counter()
     seen: dict[str, int] = {}
-
-    expected = count_images(args.bag, topics)
     show_progress = not args.quiet and expected > 0
 
     def inspect(frame: ImageFrame, blobs: Blobs | None, detection: WandDetection | None, reason: str | None) -> None:
@@ -128,7 +179,7 @@ def run(args: argparse.Namespace) -> int:
             )
 
     detections = detect_recording(
-        read_image_frames(args.bag, topics),
+        frames,
         rig,
         tolerance_ns=int(args.sync_tolerance_ms * 1e6),
         inspect=inspect,
@@ -140,7 +191,7 @@ def run(args: argparse.Namespace) -> int:
     if not is_special(args.output):  # (nothing is written beside a terminal or a pipe)
         summary = str(save_what_cameras_saw(args.output, detections.reports, detections.masks))
     print(
-        f"detected the wand in {args.bag} -> {args.output} ({time.perf_counter() - started:.1f} s); {summary}",
+        f"detected the wand in {source} -> {args.output} ({time.perf_counter() - started:.1f} s); {summary}",
         file=sys.stderr if is_special(args.output) else sys.stdout,
     )
     for name in rig.camera_names:

@@ -54,12 +54,12 @@ MIN_OVERLAP = 0.3
 #: A lag is decided when every lag at least DISTINCT_FRAMES frame periods away fits this many times worse.
 DISTINCT = 3.0
 DISTINCT_FRAMES = 15
+#: Lags of each scan scored again on every marker.
+CANDIDATES = 3
 #: Steps a frame of the refinement between frames (seconds only: frame ids are whole frames).
 REFINE_STEPS = 8
-#: At zero lag a pair that fits this many times worse than at its best lag is not lined up; within LINED_UP of it,
-#: it is.
+#: At zero lag a pair that fits this many times worse than at its best lag is not lined up.
 MISALIGNED = 10.0
-LINED_UP = 3.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -126,23 +126,28 @@ def _lagged(spectra: NDArray[np.complex128], n: int, size: int) -> FloatArray:
 
 
 def lag_scores(
-    first: FloatArray, first_known: NDArray[np.bool_], second: FloatArray, second_known: NDArray[np.bool_]
+    first: FloatArray,
+    first_known: NDArray[np.bool_],
+    second: FloatArray,
+    second_known: NDArray[np.bool_],
+    markers: NDArray[np.int64],
 ) -> tuple[FloatArray, FloatArray]:
     """How well each lag L lines up two cameras' bearings on one time grid: (2n - 1,) the linear essential
     matrix's mean squared residual of the pairs (first at t, second at t + L), and (2n - 1,) how many pairs.
 
     The design matrix of the pairs at lag L, sum a a^T with a = vec(m1 m0^T), holds the sums of m1_a m1_b m0_c
     m0_d: the cross-correlations of the first camera's products m0_c m0_d with the second's m1_a m1_b, summed
-    over the markers in the frequency domain (36 correlations for every lag at once).
+    over the ``markers`` in the frequency domain (36 correlations for every lag at once).
 
     Args:
         first, second: (n, K, 3) each camera's bearings of the wand's markers on the grid.
         first_known, second_known: (n,) where they are known.
+        markers: the markers scanned.
     """
     n = first.shape[0]
     size = 1 << (2 * n - 1).bit_length()
     spectra: NDArray[np.complex128] | float = 0.0
-    for k in range(first.shape[1]):
+    for k in markers:
         f0 = np.conj(np.fft.rfft(_products(first[:, k], first_known), size, axis=0))
         f1 = np.fft.rfft(_products(second[:, k], second_known), size, axis=0)
         spectra = spectra + f0[:, :, None] * f1[:, None, :]  # [frequency, cd, ab]
@@ -167,27 +172,49 @@ def lag_scores(
 DIRECT_VIEWS = 2000
 
 
+def _essential_fit(first: FloatArray, second: FloatArray) -> tuple[float, FloatArray]:
+    """The linear essential matrix of (n, 3) corresponding bearings: its mean squared residual and the matrix."""
+    a = (second[:, :, None] * first[:, None, :]).reshape(-1, 9)
+    a = a[np.all(np.isfinite(a), axis=1)]
+    if a.shape[0] < 9:
+        return np.inf, np.zeros((3, 3))
+    values, vectors = np.linalg.eigh(a.T @ a)
+    return float(max(values[0], 0.0) / a.shape[0]), vectors[:, 0].reshape(3, 3)
+
+
 def _direct_score(first: FloatArray, second: FloatArray) -> float:
-    """The linear essential matrix's mean squared residual of (n, K, 3) corresponding bearings."""
+    """The linear essential matrix's mean squared residual of (n, K, 3) corresponding bearings, each view of the
+    second camera taken with its wand's labels as they are or reversed (A and C exchanged), whichever the
+    essential matrix of the reversal-invariant markers fits better: a detector's labels may be exchanged on a
+    stretch of one camera's views until the cameras are compared."""
     if first.shape[0] > DIRECT_VIEWS:
         spread = np.linspace(0, first.shape[0] - 1, DIRECT_VIEWS).astype(np.int64)
         first, second = first[spread], second[spread]
-    a = (second[..., :, None] * first[..., None, :]).reshape(-1, 9)
-    a = a[np.all(np.isfinite(a), axis=1)]
-    if a.shape[0] < 9:
-        return np.inf
-    return float(max(np.linalg.eigvalsh(a.T @ a)[0], 0.0) / a.shape[0])
+    markers = first.shape[1]
+    middle = _invariant(markers)
+    _, essential = _essential_fit(first[:, middle].reshape(-1, 3), second[:, middle].reshape(-1, 3))
+    reversed_second = second[:, ::-1]
+    as_is = np.nansum(np.einsum("nki,ij,nkj->nk", second, essential, first) ** 2, axis=1)
+    swapped = np.nansum(np.einsum("nki,ij,nkj->nk", reversed_second, essential, first) ** 2, axis=1)
+    chosen = np.where((swapped < as_is)[:, None, None], reversed_second, second)
+    return _essential_fit(first.reshape(-1, 3), chosen.reshape(-1, 3))[0]
+
+
+def _invariant(markers: int) -> NDArray[np.int64]:
+    """The markers a reversal of the wand's labels leaves in place: the middle one of an odd number (every marker
+    of an even number: none is)."""
+    return np.array([markers // 2]) if markers % 2 else np.arange(markers)
 
 
 def score_at(tracks: tuple[Track, Track], models: tuple[CameraModel, CameraModel], lag: float) -> tuple[float, int]:
     """How well the lag ``lag`` lines up two cameras: the first camera's own views against the second's track at
-    their times plus the lag; the linear essential matrix's mean squared residual, and how many pairs."""
+    their times plus the lag; the linear essential matrix's mean squared residual (:func:`_direct_score`), and
+    how many pairs of views."""
     points, known = tracks[1].at(tracks[0].times + lag)
-    if known.sum() < 9:
-        return np.inf, int(known.sum())
-    return _direct_score(unproject(models[0], tracks[0].points[known]), unproject(models[1], points[known])), int(
-        known.sum()
-    )
+    pairs = int(known.sum())
+    if pairs < 9:
+        return np.inf, pairs
+    return _direct_score(unproject(models[0], tracks[0].points[known]), unproject(models[1], points[known])), pairs
 
 
 @dataclass(frozen=True)
@@ -203,6 +230,7 @@ class PairOffset:
         at_zero: how many times worse lag zero fits (inf: too little overlap there).
         rival: that other lag.
         zero_overlap: the pairs of views scored at lag zero (the frames as they are).
+        period: the slower camera's frame period in the unit.
     """
 
     first: int
@@ -213,6 +241,7 @@ class PairOffset:
     at_zero: float
     rival: float
     zero_overlap: int
+    period: float
 
     @property
     def decided(self) -> bool:
@@ -221,8 +250,8 @@ class PairOffset:
 
     @property
     def lined_up(self) -> bool:
-        """Whether the views line up as they are: lag zero scored, and fitting about as well as the best lag."""
-        return self.zero_overlap >= MIN_OVERLAP_FRAMES and self.at_zero <= LINED_UP
+        """Whether the views line up as they are: the decided lag is within SHIFT_FRAMES frames of zero."""
+        return self.decided and abs(self.offset) <= SHIFT_FRAMES * self.period
 
     @property
     def off(self) -> bool:
@@ -241,9 +270,11 @@ def pair_offset(
     """The lag between two cameras' clocks (None: their views overlap too little at every lag).
 
     Both tracks go onto one grid at the slower camera's period (a whole number of them on a long take; frame
-    by frame with frame ids), are scored at every lag (:func:`lag_scores`), and the best lag is refined on the
-    first camera's own views against the second's track: to a frame, then (seconds) between frames, a parabola
-    through the scores of REFINE_STEPS steps a frame.
+    by frame with frame ids) and are scored at every lag (:func:`lag_scores`) twice: on every marker, and on
+    the markers a reversal of the wand's labels leaves in place (a detector's A and C may still be exchanged on
+    some views). The best CANDIDATES lags of each scan are scored again on the first camera's own views against
+    the second's track, labels exchanged where that fits (:func:`score_at`); the best is refined to a frame,
+    then (seconds) between frames, a parabola through the scores of REFINE_STEPS steps a frame.
     """
     period = max(tracks[0].period, tracks[1].period)
     start = min(tracks[0].times[0], tracks[1].times[0])
@@ -252,27 +283,50 @@ def pair_offset(
     grid = start + step * np.arange(int(np.floor(span / step)) + 1)
     on_grid = [track.at(grid) for track in tracks]
     bearings = [unproject(model, points) for model, (points, _) in zip(models, on_grid, strict=True)]
-    scores, count = lag_scores(bearings[0], on_grid[0][1], bearings[1], on_grid[1][1])
-    n = grid.size
-    lags = np.arange(-(n - 1), n) * step
+    markers = bearings[0].shape[1]
     shorter = min(tracks[0].times.size * tracks[0].period, tracks[1].times.size * tracks[1].period)
     enough = max(MIN_OVERLAP_FRAMES * period, MIN_OVERLAP * shorter) / step
-    scores = np.where(count >= enough, scores, np.inf)
-    if not np.isfinite(scores).any():
+    lags = np.arange(-(grid.size - 1), grid.size) * step
+    candidates: list[float] = []
+    for scanned in {tuple(range(markers)), tuple(_invariant(markers))}:
+        scores, count = lag_scores(bearings[0], on_grid[0][1], bearings[1], on_grid[1][1], np.array(scanned))
+        candidates += _minima(lags, np.where(count >= enough, scores, np.inf), DISTINCT_FRAMES * period)
+    if not candidates:
         return None
-    best = int(np.argmin(scores))
-    rival = int(np.argmin(np.where(np.abs(lags - lags[best]) >= DISTINCT_FRAMES * period, scores, np.inf)))
+    coarse = [_refined(tracks, models, lag, step, period, True) for lag in candidates]
+    fits = [score_at(tracks, models, lag)[0] for lag in coarse]
+    best = int(np.argmin(fits))
+    offset = _refined(tracks, models, coarse[best], period, period, frames)
+    fit, overlap = score_at(tracks, models, offset)
+    apart = [f for lag, f in zip(coarse, fits, strict=True) if abs(lag - coarse[best]) >= DISTINCT_FRAMES * period]
+    rivals = [lag for lag in coarse if abs(lag - coarse[best]) >= DISTINCT_FRAMES * period]
+    zero_fit, zero_overlap = score_at(tracks, models, 0.0)
     with np.errstate(divide="ignore", invalid="ignore"):
-        distinct = float(scores[rival] / scores[best]) if np.isfinite(scores[rival]) else np.inf
-        at_zero = float(scores[n - 1] / scores[best])
-    offset = _refined(tracks, models, float(lags[best]), step, period, frames)
-    return PairOffset(*cameras, offset, int(count[best]), distinct, at_zero, float(lags[rival]), int(count[n - 1]))
+        distinct = float(min(apart) / fit) if apart else np.inf
+        at_zero = float(zero_fit / fit)
+    rival = rivals[int(np.argmin(apart))] if apart else offset
+    return PairOffset(*cameras, offset, overlap, distinct, at_zero, float(rival), zero_overlap, period)
+
+
+def _minima(lags: FloatArray, scores: FloatArray, apart: float) -> list[float]:
+    """The lags of the CANDIDATES lowest finite scores at least ``apart`` from each other."""
+    found: list[float] = []
+    for index in np.argsort(scores):
+        if not np.isfinite(scores[index]) or len(found) == CANDIDATES:
+            break
+        if all(abs(lags[index] - lag) >= apart for lag in found):
+            found.append(float(lags[index]))
+    return found
 
 
 def _refined(
-    tracks: tuple[Track, Track], models: tuple[CameraModel, CameraModel], offset: float, step: float, period: float,
+    tracks: tuple[Track, Track],
+    models: tuple[CameraModel, CameraModel],
+    offset: float,
+    step: float,
+    period: float,
     frames: bool,
-) -> float:  # fmt: skip
+) -> float:
     """``offset`` refined within a grid ``step`` of it: frame by frame, then (``frames`` false) between frames."""
     if step > period:
         lags = offset + period * np.arange(-round(step / period), round(step / period) + 1)
@@ -371,7 +425,7 @@ def _offsets(pairs: list[PairOffset], anchor: int, n_cameras: int) -> tuple[Floa
     maximum spanning tree grown from the anchor)."""
     offsets, reached = np.zeros(n_cameras), np.zeros(n_cameras, dtype=bool)
     reached[anchor] = True
-    edges = [(p.first, p.second, 0.0, 1.0 / max(p.at_zero, 1e-12)) for p in pairs if p.lined_up]
+    edges = [(p.first, p.second, 0.0, p.distinct) for p in pairs if p.lined_up]
     edges += [(p.first, p.second, p.offset, p.distinct) for p in pairs if p.off and p.decided]
     edges.sort(key=lambda edge: -edge[3])
     grown = True
