@@ -9,6 +9,7 @@ frames by nearest stamps with the synchroniser the live collection uses
 from __future__ import annotations
 
 import heapq
+import logging
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import replace
 
@@ -16,6 +17,8 @@ import numpy as np
 
 from wand_calib_ros.collection.sync import frames_to_observations, group_by_stamps
 from wand_calib_ros.collection.timeline import TimeLines
+from wand_calib_ros.core.errors import TimingError
+from wand_calib_ros.core.initialise.clock_alignment import align_clocks
 from wand_calib_ros.core.model.rig import RigSpec
 from wand_calib_ros.detection.blobs import BlobOptions, Blobs
 from wand_calib_ros.detection.masks import Mask
@@ -27,6 +30,8 @@ from wand_calib_ros.io.bags import ImageFrame
 #: little out of their stamps' order, and only this much of it is held in memory. An image still behind its
 #: camera's newest after that is not searched (its time line says so: :mod:`wand_calib_ros.collection.timeline`).
 REORDER_S = 2.0
+
+log = logging.getLogger(__name__)
 
 
 def in_stamp_order(frames: Iterable[ImageFrame], window_ns: int) -> Iterator[ImageFrame]:
@@ -57,7 +62,9 @@ def detect_recording(
     Images are searched in stamp order (within REORDER_S: a recording is read as it goes, only that much of it in
     memory) and grouped into frames by nearest stamps (:func:`wand_calib_ros.collection.sync.group_by_stamps`,
     hardware-triggered or free-running cameras alike); frame ids count every frame of the recording
-    and each view keeps its image's stamp.
+    and each view keeps its image's stamp. Cameras whose clocks disagree by seconds (videos started by hand)
+    are grouped on their clocks as the wand's motion lines them up
+    (:func:`~wand_calib_ros.core.initialise.clock_alignment.align_clocks`), their views keeping their own stamps.
 
     Args:
         frames: decoded images of the rig's cameras, roughly in time order.
@@ -89,22 +96,49 @@ def detect_recording(
             inspect(frame, blobs, detection, reason)
         outcomes += [(frame.camera, out) for out in stream.label(frame.stamp_ns, detection, reason)]
     outcomes += [(name, out) for name, stream in streams.items() for out in stream.flush()]
-    detections = [(c, out.stamp_ns, out.points) for c, out in outcomes]
-    grouped = group_by_stamps(rig.camera_names, detections, tolerance_ns, n_points=rig.wand.n_points)
+    detections = _grouped(rig, streams, outcomes, tolerance_ns, {})
+    try:
+        _, clocks = align_clocks(rig, detections.observations)
+    except TimingError as error:  # (calibrate says it again, with what to do)
+        log.info("the cameras' clocks are not lined up: %s", error)
+        return detections
+    if not clocks.moved.any():
+        return detections
+    for line in clocks.lines:
+        log.info(line)
+    shift = {name: round(float(offset) * 1e9) for name, offset in zip(rig.camera_names, clocks.offsets, strict=True)}
+    return _grouped(rig, streams, outcomes, tolerance_ns, shift)
+
+
+def _grouped(
+    rig: RigSpec,
+    streams: Mapping[str, CameraStream],
+    outcomes: list[tuple[str, Labelled]],
+    tolerance_ns: int,
+    shift_ns: Mapping[str, int],
+) -> Detections:
+    """The cameras' labelled views grouped into frames by nearest stamps, each camera's moved by its ``shift_ns``
+    (its clock's offset) for the grouping, each view keeping its own stamp."""
+    shifted = [(c, out.stamp_ns - shift_ns.get(c, 0), out) for c, out in outcomes]
+    grouped = group_by_stamps(rig.camera_names, [(c, s, out.points) for c, s, out in shifted], tolerance_ns,
+                              n_points=rig.wand.n_points)  # fmt: skip
     observations = frames_to_observations(grouped, rig.camera_names, rig.wand.n_points)
+    if observations.stamps is not None and shift_ns:
+        moved = np.array([shift_ns.get(name, 0) / 1e9 for name in rig.camera_names])
+        observations = replace(observations, stamps=observations.stamps + moved[None, :])
     frame_of = {
         (int(c), int(f.stamps_ns[c])): k for k, f in enumerate(grouped) for c in np.flatnonzero(f.reported)
     }  # fmt: skip
     index = {name: i for i, name in enumerate(rig.camera_names)}
     ambiguous = [
-        Unsettled(frame_of[(index[camera], out.stamp_ns)], camera, out.unsettled, out.stamp_ns / 1e9, out.saturated)
-        for camera, out in outcomes
-        if out.unsettled is not None and (index[camera], out.stamp_ns) in frame_of
+        Unsettled(frame_of[(index[camera], stamp)], camera, out.unsettled, out.stamp_ns / 1e9, out.saturated)
+        for camera, stamp, out in shifted
+        if out.unsettled is not None and (index[camera], stamp) in frame_of
     ]
     tracks = np.full((len(grouped), len(rig.camera_names)), -1, dtype=np.int64)
     saturated = np.zeros((len(grouped), len(rig.camera_names), rig.wand.n_points), dtype=bool)
-    for camera, out in outcomes:
-        row = frame_of.get((index[camera], out.stamp_ns))
+    for camera, stamp, out in shifted:
+        row = frame_of.get((index[camera], stamp))
         if out.points is not None and row is not None:
             tracks[row, index[camera]] = out.track
             if out.saturated is not None and out.saturated.size == rig.wand.n_points:

@@ -133,13 +133,15 @@ def run(args: argparse.Namespace) -> int:
     import cv2
 
     from wand_calib_ros.collection.recording import detect_recording
+    from wand_calib_ros.detection.background import BackgroundOptions
+    from wand_calib_ros.detection.blobs import BlobOptions
     from wand_calib_ros.detection.consistency import settle_labels
     from wand_calib_ros.detection.health import save_what_cameras_saw
     from wand_calib_ros.detection.masks import mask_of
     from wand_calib_ros.io.bags import count_images, read_image_frames
     from wand_calib_ros.io.observations_csv import write_observations
     from wand_calib_ros.io.rig_yaml import load_camera_masks, load_rig
-    from wand_calib_ros.io.videos import count_frames, read_source_frames
+    from wand_calib_ros.io.videos import VIDEO_MIN_CONTRAST, count_frames, read_source_frames
 
     if args.sync_tolerance_ms < 0 or args.debug_every < 1:
         raise WandCalibError("--sync-tolerance-ms must be 0 or more and --debug-every at least 1")
@@ -182,6 +184,9 @@ def run(args: argparse.Namespace) -> int:
         frames,
         rig,
         tolerance_ns=int(args.sync_tolerance_ms * 1e6),
+        blob_options=BlobOptions(background=BackgroundOptions(min_contrast=VIDEO_MIN_CONTRAST))
+        if args.video
+        else BlobOptions(),
         inspect=inspect,
         masks=masks,
     )

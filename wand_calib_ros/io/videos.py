@@ -29,6 +29,11 @@ from wand_calib_ros.io.errors import FormatError
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm")
 #: Frame rates outside this range cannot be a camera's (a container that does not say gives 0 or 1000).
 FPS_RANGE = (0.5, 1000.0)
+#: A spot in a video stands at least this many grey levels above its background (the detector's
+#: ``min_contrast``): a codec's predicted frames copy a still background from image to image, so the noise
+#: measured between images is the codec's, near zero, and its block noise around a moving spot (4-8 grey levels
+#: at 4 Mbit/s in 640x480 MPEG-4) would count as spots (75-90 an image at the detector's default of 5).
+VIDEO_MIN_CONTRAST = 10.0
 
 
 @dataclass(frozen=True)
