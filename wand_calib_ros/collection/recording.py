@@ -17,8 +17,9 @@ import numpy as np
 
 from wand_calib_ros.collection.sync import frames_to_observations, group_by_stamps
 from wand_calib_ros.collection.timeline import TimeLines
+from wand_calib_ros.core.adjust.timing import frame_period
 from wand_calib_ros.core.errors import TimingError
-from wand_calib_ros.core.initialise.clock_alignment import align_clocks
+from wand_calib_ros.core.initialise.clock_alignment import Track, find_clock_offsets
 from wand_calib_ros.core.model.rig import RigSpec
 from wand_calib_ros.detection.blobs import BlobOptions, Blobs
 from wand_calib_ros.detection.masks import Mask
@@ -96,18 +97,29 @@ def detect_recording(
             inspect(frame, blobs, detection, reason)
         outcomes += [(frame.camera, out) for out in stream.label(frame.stamp_ns, detection, reason)]
     outcomes += [(name, out) for name, stream in streams.items() for out in stream.flush()]
-    detections = _grouped(rig, streams, outcomes, tolerance_ns, {})
+    return _grouped(rig, streams, outcomes, tolerance_ns, _clock_shifts(rig, outcomes))
+
+
+def _clock_shifts(rig: RigSpec, outcomes: list[tuple[str, Labelled]]) -> dict[str, int]:
+    """Per camera whose clock the wand's motion lines up with the others' (by more than a frame or two), its
+    offset in ns (empty where the clocks agree or cannot be decided: ``calibrate`` says why)."""
+    tracks = []
+    for name in rig.camera_names:
+        views = [(out.stamp_ns / 1e9, out.points) for camera, out in outcomes if camera == name]
+        whole = [(s, p) for s, p in views if p is not None and np.all(np.isfinite(p))]
+        times = np.array([s for s, _ in whole], dtype=np.float64)
+        points = np.array([p for _, p in whole], dtype=np.float64).reshape(-1, rig.wand.n_points, 2)
+        period = frame_period(times)
+        tracks.append(Track(times, points, period if np.isfinite(period) else 1.0))
     try:
-        _, clocks = align_clocks(rig, detections.observations)
-    except TimingError as error:  # (calibrate says it again, with what to do)
+        found = find_clock_offsets(rig, tuple(tracks), frames=False)
+    except TimingError as error:
         log.info("the cameras' clocks are not lined up: %s", error)
-        return detections
-    if not clocks.moved.any():
-        return detections
-    for line in clocks.lines:
+        return {}
+    for line in found.lines:
         log.info(line)
-    shift = {name: round(float(offset) * 1e9) for name, offset in zip(rig.camera_names, clocks.offsets, strict=True)}
-    return _grouped(rig, streams, outcomes, tolerance_ns, shift)
+    moved = zip(rig.camera_names, found.offsets, found.moved, strict=True)
+    return {name: round(float(offset) * 1e9) for name, offset, is_moved in moved if is_moved}
 
 
 def _grouped(

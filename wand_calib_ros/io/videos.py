@@ -13,7 +13,9 @@ cameras' frames interleaved in time order as a bag's are. Any container and code
 from __future__ import annotations
 
 import heapq
+import queue
 import re
+import threading
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -72,7 +74,7 @@ def _capture(path: Path) -> Any:
     """An opened OpenCV capture of ``path`` (FormatError: it cannot be decoded)."""
     import cv2
 
-    capture = cv2.VideoCapture(str(path))
+    capture = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG, [cv2.CAP_PROP_N_THREADS, 1])
     if not capture.isOpened():
         raise FormatError(path, "cannot be decoded as a video (a file OpenCV's FFmpeg reads: mp4, mov, avi, mkv)")
     return capture
@@ -153,11 +155,52 @@ def _frames(source: CameraSource) -> Iterator[tuple[float, NDArray[np.uint8]]]:
 
 def read_source_frames(sources: Mapping[str, CameraSource]) -> Iterator[ImageFrame]:
     """Every source's frames as mono8 images, the cameras' interleaved in time order (a camera's on a tie
-    in rig order), stamped in ns from each file's first frame."""
+    in rig order), stamped in ns from each file's first frame. They are decoded in a thread of their own,
+    PREFETCH frames ahead: decoding (0.4-0.8 ms a 640x480 frame) then runs beside the detector."""
     streams = [((_stamped(name, source)), order) for order, (name, source) in enumerate(sources.items())]
     merged = heapq.merge(*(_keyed(stream, order) for stream, order in streams))
-    for _, _, frame in merged:
+    for _, _, frame in _prefetched(merged):
         yield frame
+
+
+#: Frames decoded ahead of the one being detected.
+PREFETCH = 32
+_DONE = object()
+
+
+def _prefetched(items: Iterator[Any]) -> Iterator[Any]:
+    """``items`` produced by a thread of their own, at most PREFETCH ahead; its error raised here."""
+    ahead: queue.Queue[Any] = queue.Queue(maxsize=PREFETCH)
+    stop = threading.Event()
+
+    def produce() -> None:
+        try:
+            for item in items:
+                while not stop.is_set():
+                    try:
+                        ahead.put(item, timeout=0.1)
+                        break
+                    except queue.Full:
+                        continue
+                if stop.is_set():
+                    return
+            ahead.put(_DONE)
+        except BaseException as error:  # (raised in the consumer, where it can be handled)
+            ahead.put(error)
+
+    worker = threading.Thread(target=produce, name="video decoding", daemon=True)
+    worker.start()
+    try:
+        while True:
+            item = ahead.get()
+            if item is _DONE:
+                return
+            if isinstance(item, BaseException):
+                raise item
+            yield item
+    finally:
+        stop.set()
+        worker.join(timeout=5.0)
 
 
 def _stamped(name: str, source: CameraSource) -> Iterator[ImageFrame]:

@@ -37,10 +37,9 @@ IntArray = NDArray[np.int64]
 #: A camera's track is a continuous motion when its centre moves between consecutive images by less than this
 #: fraction of its spread.
 CONTINUOUS_STEP = 0.3
-#: Every pair of a rig of up to this many cameras is scanned; of larger rigs, only pairs between the groups that
-#: line up at lag zero (a pair within ZERO_FIT times the best pair's fit), at most CROSS_PAIRS of each two groups.
+#: Between groups of cameras whose views do not line up with each other as they are, every pair is scanned in a
+#: rig of up to ALL_PAIRS cameras, at most CROSS_PAIRS pairs of each two groups in a larger one.
 ALL_PAIRS = 6
-ZERO_FIT = 30.0
 CROSS_PAIRS = 3
 #: Cameras whose clock is off by more than this many frame periods are moved (less is the timing model's, which
 #: estimates offsets of a frame or so from the views as they are grouped).
@@ -380,43 +379,57 @@ def _describe(offset: float, unit: str) -> str:
 
 def align_clocks(rig: RigSpec, observations: WandObservations) -> tuple[WandObservations, ClockAlignment]:
     """The observations with every camera's clock lined up on the others' from the wand's motion, and the
-    offsets found (see the module docstring). Observations whose clocks agree within SHIFT_FRAMES frames are
+    offsets found (:func:`find_clock_offsets`). Observations whose clocks agree within SHIFT_FRAMES frames are
     returned as they are.
 
     Raises:
-        TimingError: a camera whose views do not line up with the others' as they are, and whose offset the
-            wand's motion cannot decide (too little overlap in time, or a motion so regular that two offsets fit
-            alike), naming it and what to do.
+        TimingError: as :func:`find_clock_offsets`.
     """
-    unit = "frames" if observations.stamps is None else "s"
-    n_cameras = len(observations.camera_names)
-    nothing = ClockAlignment(np.zeros(n_cameras), np.zeros(n_cameras, dtype=bool), unit)
-    tracks = camera_tracks(observations)
+    found = find_clock_offsets(rig, camera_tracks(observations), observations.stamps is None)
+    if not found.moved.any():
+        return observations, found
+    return shifted(observations, np.where(found.moved, found.offsets, 0.0)), found
+
+
+def find_clock_offsets(rig: RigSpec, tracks: tuple[Track, ...], frames: bool) -> ClockAlignment:
+    """Each camera's clock offset from the wand's motion, where the cameras' views do not line up as they are
+    (see the module docstring).
+
+    Args:
+        rig: the rig (its cameras' nominal lenses).
+        tracks: each camera's track (:func:`camera_tracks`), in rig order.
+        frames: the tracks' times are frame ids (else seconds).
+
+    Raises:
+        TimingError: a camera whose views do not line up with another's as they are, and whose offset the
+            wand's motion cannot decide (a motion so regular that two offsets fit alike), naming it and what to do.
+    """
+    unit = "frames" if frames else "s"
+    names = rig.camera_names
+    nothing = ClockAlignment(np.zeros(len(names)), np.zeros(len(names), dtype=bool), unit)
     usable = [c for c, track in enumerate(tracks) if track.times.size >= MIN_OVERLAP_FRAMES and _continuous(track)]
     if rig.wand.n_points < 3 or len(usable) < 2:  # (a two-marker wand's labels may differ between cameras)
-        return observations, nothing
+        return nothing
     models = _models(rig)
-    frames = unit == "frames"
     pairs = [
         found
         for i, j in _pairs_to_scan(tracks, models, usable)
         if (found := pair_offset((tracks[i], tracks[j]), (models[i], models[j]), frames, (i, j))) is not None
     ]
-    period = max(t.period for c, t in enumerate(tracks) if c in usable)
     if not any(p.off and p.decided for p in pairs):  # (the views line up as they are, or nothing says otherwise)
-        _check_undecided(observations, pairs, set())
-        return observations, nothing
-    offsets, reached = _offsets(pairs, max(usable, key=lambda c: tracks[c].times.size), n_cameras)
+        _check_undecided(names, pairs, set(), unit)
+        return nothing
+    period = max(tracks[c].period for c in usable)
+    offsets, reached = _offsets(pairs, max(usable, key=lambda c: tracks[c].times.size), len(names))
     anchor = _anchor(offsets, reached, SHIFT_FRAMES * period)
     offsets = np.where(reached, offsets - offsets[anchor], 0.0)
     moved = reached & (np.abs(offsets) > SHIFT_FRAMES * period)
-    _check_undecided(observations, pairs, {int(c) for c in np.flatnonzero(reached)})
-    names = observations.camera_names
+    _check_undecided(names, pairs, {int(c) for c in np.flatnonzero(reached)}, unit)
     lines = tuple(
         f"{names[c]}'s clock is {_describe(offsets[c], unit)} {names[anchor]}'s, found from the wand's motion"
         for c in np.flatnonzero(moved)
     )
-    return shifted(observations, np.where(moved, offsets, 0.0)), ClockAlignment(offsets, moved, unit, lines)
+    return ClockAlignment(offsets, moved, unit, lines)
 
 
 def _offsets(pairs: list[PairOffset], anchor: int, n_cameras: int) -> tuple[FloatArray, NDArray[np.bool_]]:
@@ -457,37 +470,64 @@ def _continuous(track: Track) -> bool:
 def _pairs_to_scan(
     tracks: tuple[Track, ...], models: tuple[CameraModel, ...], usable: list[int]
 ) -> list[tuple[int, int]]:
-    """The camera pairs whose lags are scanned: every pair of up to ALL_PAIRS cameras; of more, only pairs between
-    groups whose views do not line up as they are (at lag zero, no pair of a group fits more than ZERO_FIT times
-    worse than the rig's best pair), at most CROSS_PAIRS of each, those with the longest tracks."""
-    if len(usable) <= ALL_PAIRS:
-        return [(i, j) for i in usable for j in usable if i < j]
-    zero = {
-        (i, j): score_at((tracks[i], tracks[j]), (models[i], models[j]), 0.0) for i in usable for j in usable if i < j
-    }
-    scored = [score for score, count in zero.values() if count >= MIN_OVERLAP_FRAMES]
-    if not scored:
-        return []
-    group = {c: c for c in usable}  # union-find of the cameras lined up at lag zero
+    """The camera pairs whose lags are scanned: none where the cameras' views line up as they are (every camera
+    joined to the others through pairs that do, :func:`_lined_up_as_they_are`, tried longest tracks first, until
+    they are); else the pairs between the groups that do, all of them for up to ALL_PAIRS cameras, at most
+    CROSS_PAIRS of each two groups (those with the longest tracks) for more."""
+    group = {c: c for c in usable}  # union-find of the cameras lined up as they are
 
     def root(c: int) -> int:
         while group[c] != c:
             c = group[c]
         return c
 
-    for (i, j), (score, count) in zero.items():
-        if count >= MIN_OVERLAP_FRAMES and score <= ZERO_FIT * min(scored):
+    by_length = sorted(usable, key=lambda c: -tracks[c].times.size)
+    candidates = sorted(((i, j) for a, i in enumerate(by_length) for j in by_length[a + 1 :]),
+                        key=lambda pair: -min(tracks[pair[0]].times.size, tracks[pair[1]].times.size))  # fmt: skip
+    for i, j in candidates:
+        if len({root(c) for c in usable}) == 1:
+            return []
+        if root(i) != root(j) and _lined_up_as_they_are((tracks[i], tracks[j]), (models[i], models[j])):
             group[root(i)] = root(j)
     members: dict[int, list[int]] = {}
-    for c in sorted(usable, key=lambda c: -tracks[c].times.size):
+    for c in by_length:
         members.setdefault(root(c), []).append(c)
     groups = list(members.values())
+    if len(groups) == 1:
+        return []
+    limit = None if len(usable) <= ALL_PAIRS else CROSS_PAIRS
     return [
         (min(i, j), max(i, j))
         for a, first in enumerate(groups)
         for second in groups[a + 1 :]
-        for i, j in list(zip(first, second, strict=False))[:CROSS_PAIRS]
+        for i, j in [(i, j) for i in first for j in second][:limit]
     ]
+
+
+#: Lags (frame periods) of the check that views line up as they are: near zero, and clearly away from it.
+NEAR_FRAMES = np.arange(-2, 3)
+FAR_FRAMES = np.array([-120, -60, -30, -15, 15, 30, 60, 120])
+#: Views that check uses at most (spread over the track).
+CHECK_VIEWS = 300
+
+
+def _lined_up_as_they_are(tracks: tuple[Track, Track], models: tuple[CameraModel, CameraModel]) -> bool:
+    """Whether two cameras' views line up as their clocks pair them: the best fit within two frames of lag zero,
+    scored on enough views, is DISTINCT times better than at any of a few lags half a second to four seconds away
+    (a few direct scores on CHECK_VIEWS views, instead of a scan of every lag)."""
+    first = tracks[0]
+    if first.times.size > CHECK_VIEWS:
+        spread = np.linspace(0, first.times.size - 1, CHECK_VIEWS).astype(np.int64)
+        first = Track(first.times[spread], first.points[spread], first.period)
+    pair = (first, tracks[1])
+    period = max(tracks[0].period, tracks[1].period)
+    near = [score_at(pair, models, float(lag * period)) for lag in NEAR_FRAMES]
+    best, count = min(near)
+    if count < MIN_OVERLAP_FRAMES * first.times.size / max(tracks[0].times.size, 1) or not np.isfinite(best):
+        return False
+    far = [score for score, overlap in (score_at(pair, models, float(lag * period)) for lag in FAR_FRAMES)
+           if overlap >= count // 2]  # fmt: skip
+    return bool(far) and min(far) >= DISTINCT * best
 
 
 def _anchor(offsets: FloatArray, reached: NDArray[np.bool_], within: float) -> int:
@@ -497,16 +537,14 @@ def _anchor(offsets: FloatArray, reached: NDArray[np.bool_], within: float) -> i
     return int(cameras[int(np.argmax(agreeing))])
 
 
-def _check_undecided(observations: WandObservations, pairs: list[PairOffset], placed: set[int]) -> None:
+def _check_undecided(names: tuple[str, ...], pairs: list[PairOffset], placed: set[int], unit: str) -> None:
     """Raise for a camera not ``placed`` whose views clearly do not line up with another's as they are, but whose
     offset the wand's motion cannot decide (it fits two lags alike), unless they line up with a third camera's."""
     lined = {c for p in pairs if p.lined_up for c in (p.first, p.second)}
-    names = observations.camera_names
     for pair in pairs:
         if not pair.off or pair.decided or {pair.first, pair.second} <= placed or {pair.first, pair.second} <= lined:
             continue
         first, second = names[pair.first], names[pair.second]
-        unit = "s" if observations.stamps is not None else "frames"
         raise TimingError(
             f"cameras '{second}' and '{first}': their views do not line up in time as their "
             f"{'stamps' if unit == 's' else 'frame ids'} pair them, and the wand's motion fits two clock offsets "
