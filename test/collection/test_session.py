@@ -6,6 +6,7 @@ session (a few tests in ``test/nodes`` keep the real node and messages)."""
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -20,9 +21,10 @@ from wand_calib_ros.collection.estimate import Estimate
 from wand_calib_ros.collection.estimate_round import Round
 from wand_calib_ros.collection.session import CollectionSession, SessionSettings
 from wand_calib_ros.collection.stream_faults import Said
-from wand_calib_ros.core.model.rig import RigSpec
+from wand_calib_ros.core.model.rig import RigSpec, WandObservations
 from wand_calib_ros.core.pipeline import calibrate
 from wand_calib_ros.io.rig_yaml import save_rig
+from wand_calib_ros.sim.clocks import TakeOptions, film, observe, take_trajectory
 from wand_calib_ros.sim.render import Recording, RenderOptions, render_recording
 from wand_calib_ros.sim.scenarios import paper_fisheye_scenario, paper_three_camera_scenario, simulate
 
@@ -108,12 +110,13 @@ class Rig:
     def views(self) -> int:
         return int(self.session.buffer.observations().complete.sum())
 
-    def calibrates(self) -> dict[str, Any]:
-        """The stored buffer calibrates (``wand-calib calibrate`` on its file, the views' own instants)."""
+    def calibrates(self, time_offsets: str = "fixed") -> dict[str, Any]:
+        """The stored buffer calibrates (``wand-calib calibrate`` on its file; the time offsets fixed: independent
+        placements have no motion to time)."""
         self.session.flush()
         self.session.buffer.sync()
         out = self.tmp_path / "out"
-        command = ["-q", "calibrate", "--time-offsets", "fixed", "--cameras", str(self.tmp_path / "cameras.yaml")]
+        command = ["-q", "calibrate", "--time-offsets", time_offsets, "--cameras", str(self.tmp_path / "cameras.yaml")]
         command += ["--observations", str(out / "observations.csv"), "--output", str(out / "result.yaml")]
         assert cli.main(command) == 0
         return dict(yaml.safe_load((out / "result.yaml").read_text()))
@@ -396,3 +399,57 @@ def test_auto_calibrate_starts_once_when_ready_retries_after_a_failure_and_stops
     rig.session.after_calibrate(result)
     assert rig.session.feedback(rig.now_ns).rig_values["auto_calibrate"] == "calibrated"
     assert len(started) == 2
+
+
+def _free_running_take(seconds: float, seed: int) -> tuple[Any, WandObservations, tuple[Any, ...]]:
+    """paper3 waved for ``seconds`` by free-running cameras at 30 fps (0.25 px): its scenario, its views and clocks."""
+    scenario = paper_three_camera_scenario()
+    options = TakeOptions(duration_s=seconds)
+    trajectory = take_trajectory(scenario, options, np.random.default_rng(seed))
+    clocks = options.clocks(3, np.random.default_rng(seed + 1))
+    takes = film(scenario, trajectory, clocks, seconds, np.random.default_rng(seed + 2))
+    return scenario, observe(scenario.rig.camera_names, takes, 0.25, np.random.default_rng(seed + 3)), clocks
+
+
+def test_a_camera_seconds_ahead_is_held_lined_up_from_the_wand_and_then_stored_with_the_others(rigs: Any) -> None:
+    scenario, observations, clocks = _free_running_take(20.0, 5)
+    stamps = observations.stamps
+    assert stamps is not None
+    uv, ahead = observations.uv, 2_300_000_000  # cam1's clock is 2.3 s ahead from its first image
+    rig = rigs(scenario.rig, points=True, min_motion_px=0.0)
+
+    def stamp(k: int, c: int) -> int | None:
+        return None if not np.isfinite(stamps[k, c]) else round(stamps[k, c] * 1e9) + (ahead if c == 1 else 0)
+
+    rig.points(uv, stamp)
+    log = rig.log()
+    assert log.count("cam1: its stamps stand 2.3 s from the other cameras'") == 1  # said once, while held
+    found = re.findall(r"cam1's clock is (2\.\d{3}) s ahead of cam0's, found from the wand's motion", log)
+    assert len(found) == 1 and abs(float(found[0]) - 2.3) < 0.02  # (2.3 s and the free-running latencies)
+    stored = rig.session.buffer.observations()
+    assert stored.stamps is not None
+    with_cam1 = np.flatnonzero(stored.complete[:, 1] & stored.complete[:, 0])
+    first = stored.stamps[with_cam1[0], 0] - np.nanmin(stamps)
+    assert first < 8.0  # stored with the others from a few seconds into the take on
+    seen = np.isfinite(uv).all(axis=(2, 3))
+    later = np.flatnonzero(np.isfinite(stamps[:, 0]) & (stamps[:, 0] - np.nanmin(stamps) > first + 1.0))
+    kept = int(stored.complete[:, 1].sum())
+    assert kept >= 0.95 * int(seen[later, 1].sum())  # and from then on, every view of it
+    assert np.nanmedian(stored.stamps[with_cam1, 1] - stored.stamps[with_cam1, 0]) > 2.29  # its own stamps kept
+    result = rig.calibrates("auto")  # the buffer's calibration finds the offset again: the whole of it
+    latency = {f"cam{c}": clock.latency_s for c, clock in enumerate(clocks)}
+    offsets = {name: entry.get("time_offset_s", 0.0) for name, entry in result["cameras"].items()}
+    reference = result["reference_camera"]
+    truth = {n: latency[n] + (2.3 if n == "cam1" else 0.0) for n in latency}
+    for name, offset in offsets.items():
+        assert abs(offset - (truth[name] - truth[reference])) < 0.002
+
+
+def test_cameras_whose_clocks_agree_are_never_held(rigs: Any) -> None:
+    scenario, observations, _ = _free_running_take(8.0, 6)
+    stamps = observations.stamps
+    assert stamps is not None
+    rig = rigs(scenario.rig, points=True, min_motion_px=0.0)
+    rig.points(observations.uv, lambda k, c: None if not np.isfinite(stamps[k, c]) else round(stamps[k, c] * 1e9))
+    assert "held" not in rig.log() and "found from the wand's motion" not in rig.log()
+    assert rig.views() == int(np.isfinite(observations.uv).all(axis=(2, 3)).sum())

@@ -145,3 +145,23 @@ def test_stretches_of_unusable_images_never_make_the_good_ones_late(
     assert collector.session.sync.stats.late.get("cam1", 0) == 0
     assert "truncated" in capfd.readouterr().err
     calibrates_as_kept(ros, tmp_path, collector)
+
+
+def test_a_camera_seconds_ahead_is_lined_up_from_the_wand_said_once_and_calibrated_as_stored(
+    ros: Ros, tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    recording = render_recording(paper_three_camera_scenario(), 540, 30.0, RenderOptions(), np.random.default_rng(23))
+    collector, arrivals = _collector(ros, tmp_path)
+    ahead = 2_300_000_000  # cam1's clock, from its first image
+    frames = [(c, s + (ahead if c == "cam1" else 0), p) for frame in _by_frame(recording) for c, s, p in frame]
+    _play(ros, collector, arrivals, frames)
+    log = capfd.readouterr().err
+    assert log.count("cam1: its stamps stand 2.3 s from the other cameras'") == 1
+    assert log.count("cam1's clock is 2.30") == 1 and "ahead of cam0's, found from the wand's motion" in log
+    collector.flush()
+    stored = collector.session.buffer.observations()
+    assert stored.stamps is not None
+    both = np.flatnonzero(stored.complete.all(axis=1))
+    assert stored.stamps[both[0], 0] - recording.frames[0][1] / 1e9 < 8.0  # from a few seconds into the take on
+    assert both.size >= KEPT * _clean_count(recording, range(8 * 30, 540))
+    calibrates_as_kept(ros, tmp_path, collector)  # /calibrate equals the offline calibration of what it stored

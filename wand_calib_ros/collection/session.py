@@ -35,6 +35,7 @@ from wand_calib_ros.collection.coverage import CoverageStatus, CoverageThreshold
 from wand_calib_ros.collection.estimate import Estimate, RunningEstimate
 from wand_calib_ros.collection.feedback import estimate_values, timing_values
 from wand_calib_ros.collection.floor import FLOOR_FILE, FloorWindow, append_floor_frame
+from wand_calib_ros.collection.live_clocks import LiveClocks
 from wand_calib_ros.collection.lock import CollectionLock
 from wand_calib_ros.collection.stream_faults import Said, SaidOnce, StreamFaults, image_problem
 from wand_calib_ros.collection.sync import FrameSynchroniser, SyncedFrame
@@ -185,6 +186,7 @@ class CollectionSession:
             for c in rig.cameras
         }
         self.faults = StreamFaults(rig.camera_names, topics)  # silences, stamp jumps, unusable images, drops
+        self.clocks = LiveClocks(rig)  # clocks seconds apart, lined up from the wand
         self.floor = FloorWindow(settings.floor_hold_s)
         self.estimates: RunningEstimate | None = None
         if settings.estimate_period_s is not None:
@@ -245,6 +247,7 @@ class CollectionSession:
         stream = self.streams[camera]
         with self._lock:
             placed, said = self.faults.arrived(camera, stamp_ns, arrival_ns)
+            self.clocks.arrived(camera, placed.stamp_ns, arrival_ns)
             taking = stream.taking_mask
             self.received[camera] += 1
             blobs: Blobs | None
@@ -274,6 +277,7 @@ class CollectionSession:
         and offered to the frames, counted as its own detector counts an image. Returns the lines to log."""
         with self._lock:
             placed, said = self.faults.arrived(camera, stamp_ns, arrival_ns)
+            self.clocks.arrived(camera, placed.stamp_ns, arrival_ns)
             self.received[camera] += 1
             stream = self.streams[camera]
             if placed.order != "next":  # its time line passed it over
@@ -295,9 +299,14 @@ class CollectionSession:
     def _offer(self, camera: str, outcomes: list[Labelled]) -> None:
         """Synchronise released outcomes and store completed frames (caller holds the lock)."""
         for outcome in outcomes:
+            self.clocks.keep(camera, outcome.stamp_ns, outcome.points)
+            shift = self.clocks.shift_ns(camera)
+            if shift is None:  # held: its clock is not lined up yet
+                continue
+            stamp = outcome.stamp_ns - shift
             if outcome.points is not None and outcome.saturated is not None:
-                self._saturation[(camera, outcome.stamp_ns)] = outcome.saturated
-            self._store(self.sync.add(camera, outcome.stamp_ns, outcome.points))
+                self._saturation[(camera, stamp)] = outcome.saturated
+            self._store(self.sync.add(camera, stamp, outcome.points))
 
     def _flags(self, frame: SyncedFrame) -> NDArray[np.bool_]:
         """(C, K) the saturation flags of a frame's views (forgotten once asked: a view is in one frame)."""
@@ -317,7 +326,8 @@ class CollectionSession:
             if self.watch is not None:
                 self.watch.offer(frame.uv)
             flags = self._flags(frame)
-            if self.buffer.offer(frame.uv, frame.stamps_s, keep=on_floor, saturated=flags):
+            stamps = self.clocks.stored_stamps(frame.stamps_s)  # (each view's own stamp)
+            if self.buffer.offer(frame.uv, stamps, keep=on_floor, saturated=flags):
                 self.coverage.add(frame.uv)
                 if on_floor:
                     append_floor_frame(self.buffer.path.with_name(FLOOR_FILE), self.buffer.frames[-1])
@@ -412,6 +422,7 @@ class CollectionSession:
             cells = {name: self.coverage.cells[c].copy() for c, name in enumerate(self.rig.camera_names)}
             watch = self.watch
             faults, said = self.faults.check(arrival_ns)
+            said += self.clocks.step(arrival_ns)
         now = time.monotonic()
         notes = self._detection_feedback(counts, said)
         estimate = self._estimate_feedback(now, status.ready, counts, rig_values, said)
@@ -429,6 +440,7 @@ class CollectionSession:
                 counts[name]["malformed_points"] = self.malformed[name]
             counts[name] |= timing_values(self.sync, name, self.timing)
             counts[name] |= self.faults.values(name)
+            counts[name] |= self.clocks.values(name)
         return counts
 
     def _rig_values(self) -> dict[str, int | str]:

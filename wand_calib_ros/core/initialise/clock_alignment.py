@@ -230,6 +230,8 @@ class PairOffset:
         rival: that other lag.
         zero_overlap: the pairs of views scored at lag zero (the frames as they are).
         period: the slower camera's frame period in the unit.
+        apart: one of the cameras is known to keep another clock (a live camera whose stamps stand seconds from
+            the others' as they arrive): a decided lag more than SHIFT_FRAMES frames from zero is taken as it is.
     """
 
     first: int
@@ -241,6 +243,7 @@ class PairOffset:
     rival: float
     zero_overlap: int
     period: float
+    apart: bool = False
 
     @property
     def decided(self) -> bool:
@@ -254,7 +257,10 @@ class PairOffset:
 
     @property
     def off(self) -> bool:
-        """Whether the views clearly do not line up as they are (lag zero scored, and fitting far worse)."""
+        """Whether the views clearly do not line up as they are (lag zero scored, and fitting far worse; or one
+        camera known to keep another clock, and the decided lag away from zero)."""
+        if self.apart and self.decided and abs(self.offset) > SHIFT_FRAMES * self.period:
+            return True
         return self.zero_overlap >= MIN_OVERLAP_FRAMES and self.at_zero >= MISALIGNED
 
 
@@ -391,7 +397,9 @@ def align_clocks(rig: RigSpec, observations: WandObservations) -> tuple[WandObse
     return shifted(observations, np.where(found.moved, found.offsets, 0.0)), found
 
 
-def find_clock_offsets(rig: RigSpec, tracks: tuple[Track, ...], frames: bool) -> ClockAlignment:
+def find_clock_offsets(
+    rig: RigSpec, tracks: tuple[Track, ...], frames: bool, apart: frozenset[int] = frozenset()
+) -> ClockAlignment:
     """Each camera's clock offset from the wand's motion, where the cameras' views do not line up as they are
     (see the module docstring).
 
@@ -399,6 +407,7 @@ def find_clock_offsets(rig: RigSpec, tracks: tuple[Track, ...], frames: bool) ->
         rig: the rig (its cameras' nominal lenses).
         tracks: each camera's track (:func:`camera_tracks`), in rig order.
         frames: the tracks' times are frame ids (else seconds).
+        apart: cameras known to keep clocks of their own (their stamps against their arrival, live).
 
     Raises:
         TimingError: a camera whose views do not line up with another's as they are, and whose offset the
@@ -416,6 +425,7 @@ def find_clock_offsets(rig: RigSpec, tracks: tuple[Track, ...], frames: bool) ->
         for i, j in _pairs_to_scan(tracks, models, usable)
         if (found := pair_offset((tracks[i], tracks[j]), (models[i], models[j]), frames, (i, j))) is not None
     ]
+    pairs = [replace(p, apart=bool({p.first, p.second} & apart)) for p in pairs]
     if not any(p.off and p.decided for p in pairs):  # (the views line up as they are, or nothing says otherwise)
         _check_undecided(names, pairs, set(), unit)
         return nothing
