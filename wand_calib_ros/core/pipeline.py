@@ -17,7 +17,7 @@ from wand_calib_ros.core.adjust.timing import (
     timing_input,
 )
 from wand_calib_ros.core.after.world_frame import floor_of
-from wand_calib_ros.core.errors import CalibrationFailedError, CoreError, InsufficientDataError
+from wand_calib_ros.core.errors import CalibrationFailedError, CoreError, DegenerateDataError, InsufficientDataError
 from wand_calib_ros.core.initialise.clock_alignment import ClockAlignment, align_clocks
 from wand_calib_ros.core.initialise.incremental import place_cameras
 from wand_calib_ros.core.initialise.lens_choice import model_starts, nominal_model
@@ -111,7 +111,7 @@ def calibrate(
         known = tuple(spec.intrinsics for spec in rig.cameras if spec.intrinsics is not None)
         result, uv = _solve(rig, views, _placed(rig, views.aligned, views.reference, options.pair, known))
     else:
-        result, uv = _from_pairs_or_placed(rig, views, options)
+        result, uv = _from_pairs_or_placed(rig, views, options, clocks.unchecked)
     if floor is not None:
         result = _with_floor(rig, result, floor, options.floor_origin)
     warnings = [*result.warnings, *rate_warnings(obs, timing.line), *offset_warnings(result)]
@@ -229,12 +229,18 @@ def _solve(rig: RigSpec, views: _Views, init: RigInitialisation) -> tuple[Calibr
 
 
 def _from_pairs_or_placed(
-    rig: RigSpec, views: _Views, options: CalibrationOptions
+    rig: RigSpec, views: _Views, options: CalibrationOptions, unchecked: tuple[str, ...] = ()
 ) -> tuple[CalibrationResult, NDArray[np.float64]]:
     """The calibration from the paper's pairwise start; where that fails and the cameras can be placed one by one
-    from their given or nominal intrinsics, from those (the paper's error raised should that fail too)."""
+    from their given or nominal intrinsics, from those (the paper's error raised should that fail too). A start
+    that fails says too which cameras' clocks the wand's motion could not check (``unchecked``): views of different
+    instants look like a rig no geometry fits."""
     try:
         return _solve(rig, views, _paper(rig, views.aligned, options))
+    except DegenerateDataError as error:
+        if not unchecked:
+            raise
+        raise type(error)(f"{error}; and the clocks could not be checked: {'; '.join(unchecked)}") from None
     except (DisconnectedRigError, CalibrationFailedError, InsufficientDataError) as error:
         reason = _unplaceable(rig, views.aligned, options)
         if reason is not None:

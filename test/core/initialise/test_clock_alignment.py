@@ -165,3 +165,16 @@ def test_a_motion_that_repeats_itself_is_said_not_guessed() -> None:
     with pytest.raises(TimingError, match="fits two clock offsets alike") as raised:
         align_clocks(scenario.rig, moved)
     assert "cam1" in str(raised.value) and "wave the wand less evenly" in str(raised.value)
+
+
+def test_a_take_too_short_to_line_the_clocks_up_says_so_when_the_calibration_fails() -> None:
+    scenario = SCENARIOS["paper"]()
+    options = TakeOptions(duration_s=2.5)
+    clocks = options.clocks(2, np.random.default_rng(1))
+    clocks = (clocks[0], replace(clocks[1], latency_s=clocks[1].latency_s + 1.2))  # cam1 1.2 s ahead
+    takes = film(scenario, take_trajectory(scenario, options, np.random.default_rng(0)), clocks, 2.5,
+                 np.random.default_rng(2))  # fmt: skip
+    observations = observe(scenario.rig.camera_names, takes, NOISE, np.random.default_rng(3))
+    with pytest.raises(Exception, match="the clocks could not be checked") as raised:
+        calibrate(scenario.rig, observations)
+    assert "too few to line its clock up from the wand's motion" in str(raised.value)

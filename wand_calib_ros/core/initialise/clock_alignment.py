@@ -359,12 +359,15 @@ class ClockAlignment:
         moved: (C,) the cameras whose stamps (or frame ids) were moved by their offset.
         unit: "s" or "frames".
         lines: what was found, in words (one line per moved camera).
+        unchecked: the cameras whose clocks the wand's motion could not check, and why, in words (said only should
+            the calibration fail).
     """
 
     offsets: FloatArray
     moved: NDArray[np.bool_]
     unit: str
     lines: tuple[str, ...] = ()
+    unchecked: tuple[str, ...] = ()
 
     def relative_to(self, reference: int) -> FloatArray:
         """(C,) the moved cameras' offsets against the ``reference`` camera's (zero for the others)."""
@@ -415,17 +418,30 @@ def find_clock_offsets(
     """
     unit = "frames" if frames else "s"
     names = rig.camera_names
-    nothing = ClockAlignment(np.zeros(len(names)), np.zeros(len(names), dtype=bool), unit)
     usable = [c for c, track in enumerate(tracks) if track.times.size >= MIN_OVERLAP_FRAMES and _continuous(track)]
+    short = tuple(
+        f"{names[c]}: its views of the whole wand span {_span(track, unit)}, too few to line its clock up from the "
+        f"wand's motion (at least {MIN_OVERLAP_FRAMES} frames): if its clock is not the others', wave longer"
+        for c, track in enumerate(tracks)
+        if 1 < track.times.size < MIN_OVERLAP_FRAMES
+    )
+    nothing = ClockAlignment(np.zeros(len(names)), np.zeros(len(names), dtype=bool), unit, (), short)
     if rig.wand.n_points < 3 or len(usable) < 2:  # (a two-marker wand's labels may differ between cameras)
         return nothing
     models = _models(rig)
+    scanned = _pairs_to_scan(tracks, models, usable)
     pairs = [
         found
-        for i, j in _pairs_to_scan(tracks, models, usable)
+        for i, j in scanned
         if (found := pair_offset((tracks[i], tracks[j]), (models[i], models[j]), frames, (i, j))) is not None
     ]
     pairs = [replace(p, apart=bool({p.first, p.second} & apart)) for p in pairs]
+    alone = {c for pair in scanned for c in pair} - {c for p in pairs for c in (p.first, p.second)}
+    nothing = replace(nothing, unchecked=short + tuple(
+        f"{names[c]}: no other camera saw the wand at the same time for {MIN_OVERLAP_FRAMES} frames at any offset of "
+        "the clocks: wave it where this camera and another see it, for a few seconds"
+        for c in sorted(alone)
+    ))  # fmt: skip
     if not any(p.off and p.decided for p in pairs):  # (the views line up as they are, or nothing says otherwise)
         _check_undecided(names, pairs, set(), unit)
         return nothing
@@ -439,7 +455,13 @@ def find_clock_offsets(
         f"{names[c]}'s clock is {_describe(offsets[c], unit)} {names[anchor]}'s, found from the wand's motion"
         for c in np.flatnonzero(moved)
     )
-    return ClockAlignment(offsets, moved, unit, lines)
+    return ClockAlignment(offsets, moved, unit, lines, nothing.unchecked)
+
+
+def _span(track: Track, unit: str) -> str:
+    """How long a track lasts, in words."""
+    span = float(track.times[-1] - track.times[0]) if track.times.size else 0.0
+    return f"{span:.1f} s" if unit == "s" else f"{span:.0f} frames"
 
 
 def _offsets(pairs: list[PairOffset], anchor: int, n_cameras: int) -> tuple[FloatArray, NDArray[np.bool_]]:
