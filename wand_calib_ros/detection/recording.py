@@ -310,7 +310,7 @@ class CameraStream:
         if reason is not None or detection is None:
             self.stats.rejected[reason or "no_wand"] += 1
             self._gaps.append(Labelled(stamp_ns, None))
-            return self._in_order([])
+            return self._in_order(self._released(self.labeller.advance(stamp_ns)))  # (time passes for held views)
         if self.wand_options.n_points != 3 or detection.tool:  # two or a tool: the calibration labels them
             self.stats.detected += 1
             self.health.add(light)

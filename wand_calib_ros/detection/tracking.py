@@ -199,6 +199,14 @@ class StreamLabeller:
             released += self._decide()
         return released
 
+    def advance(self, stamp_ns: int) -> list[Released]:
+        """Time passes without a view (an image without the wand, or one the detector could not read): the views
+        held for ``max_hold_ns`` by ``stamp_ns`` are decided and released, as a view at that time would release
+        them (else a stretch of images without a view would hold them until the next view, past their frames)."""
+        if self.max_hold_ns is None or not self._held or stamp_ns - self._held[0][0] < self.max_hold_ns:
+            return []
+        return self._decide() if self._moved or self._still() else []
+
     def flush(self) -> list[Released]:
         """End the current track: decide and release what it holds (end of a recording, /calibrate)."""
         released = self._decide()
