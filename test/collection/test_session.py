@@ -216,7 +216,25 @@ def test_the_same_bag_replayed_after_reset_is_stored_again(rigs: Any) -> None:
     assert rig.views() == 0
     rig.points(uv, _steady)  # its stamps start over
     assert rig.views() == first == int(np.all(np.isfinite(uv), axis=(2, 3)).sum())
+    stored = rig.session.buffer.observations()
+    assert stored.stamps is not None  # the new take keeps its images' own stamps
+    assert np.allclose(np.nanmin(stored.stamps), EPOCH / 1e9) and np.nanmax(stored.stamps) < EPOCH / 1e9 + 7.0
+    assert not (rig.tmp_path / "out" / "events.csv").exists()  # nothing was shifted
     rig.calibrates()
+
+
+def test_a_clock_step_within_a_take_is_stored_moved_and_kept_in_the_events(rigs: Any) -> None:
+    scenario = paper_three_camera_scenario()
+    uv = simulate(scenario, 0.5, np.random.default_rng(15), n=200).observations.uv
+    rig = rigs(scenario.rig, points=True, min_motion_px=0.0)
+    rig.points(uv, lambda k, c: _steady(k, c) - (30 * 10**9 if k >= 100 else 0))  # the host's clock stepped back
+    stored = rig.session.buffer.observations()
+    assert stored.stamps is not None and np.all(np.diff(stored.stamps[:, 0]) > 0)  # one time line
+    events = (rig.tmp_path / "out" / "events.csv").read_text().splitlines()
+    shifted = [line for line in events if ",stamps_shifted," in line]
+    assert [line.split(",")[2] for line in shifted] == ["cam0", "cam1", "cam2"]
+    assert all("its stamps jumped -30.000 s" in line and "stored moved by +30.000 s" in line for line in shifted)
+    assert sum("every camera's stamps jumped together" in line for line in shifted) == 2  # (known from the second)
 
 
 @pytest.fixture(scope="module")

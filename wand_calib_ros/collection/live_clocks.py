@@ -57,6 +57,14 @@ class LiveClocks:
         """An image of ``camera`` stamped ``stamp_ns`` (on its time line) arrived at ``arrival_ns``."""
         self._cameras[camera].lead_ns = stamp_ns - arrival_ns
 
+    def restart(self) -> None:
+        """A new take (/reset): the cameras' stamps against their arrival learned again from their next images (a
+        replayed bag starts over); the offsets found stay (the cameras keep their clocks)."""
+        for state in self._cameras.values():
+            state.lead_ns = None
+            state.track.clear()
+        self._looked_ns = None
+
     def shift_ns(self, camera: str) -> int | None:
         """What to take off ``camera``'s stamps for the frames: its clock's offset (0 while nothing says it differs),
         or None: its views are held until its clock is lined up."""

@@ -39,6 +39,7 @@ from wand_calib_ros.collection.live_clocks import LiveClocks
 from wand_calib_ros.collection.lock import CollectionLock
 from wand_calib_ros.collection.stream_faults import Said, SaidOnce, StreamFaults, image_problem
 from wand_calib_ros.collection.sync import FrameSynchroniser, SyncedFrame
+from wand_calib_ros.collection.timeline import Placed
 from wand_calib_ros.collection.watch import BumpWatch
 from wand_calib_ros.core.model.result import CalibrationResult
 from wand_calib_ros.core.model.rig import RigSpec, WandObservations
@@ -174,12 +175,7 @@ class CollectionSession:
         )
         self.coverage = CoverageTracker(rig, settings.coverage)
         self.coverage.add(self.buffer.observations().uv)  # the frames a restart found in the buffer file
-        self.sync = FrameSynchroniser(
-            rig.camera_names,
-            tolerance_ns=settings.sync_tolerance_ns,
-            max_delay_ns=settings.label_hold_ns + SYNC_DELAY_NS,
-            n_points=rig.wand.n_points,
-        )
+        self.sync = self._synchroniser()
         wand, given = WandOptions.for_rig(rig), self._given_masks(masks)
         self.streams = {
             c.name: CameraStream(c, wand, max_hold_ns=settings.label_hold_ns, mask=given.get(c.name))
@@ -208,6 +204,15 @@ class CollectionSession:
         self._summary_images = 0  # messages received by then
         self._progress: tuple[bool, float] | None = None  # (ready, when) of the last progress line
         self._lock = threading.Lock()
+
+    def _synchroniser(self) -> FrameSynchroniser:
+        """A new synchroniser of the rig's frames (a take's)."""
+        return FrameSynchroniser(
+            self.rig.camera_names,
+            tolerance_ns=self.settings.sync_tolerance_ns,
+            max_delay_ns=self.settings.label_hold_ns + SYNC_DELAY_NS,
+            n_points=self.rig.wand.n_points,
+        )
 
     def opening(self, source: str) -> tuple[Said, ...]:
         """What to say once the collection runs, its messages coming from ``source``."""
@@ -247,6 +252,7 @@ class CollectionSession:
         stream = self.streams[camera]
         with self._lock:
             placed, said = self.faults.arrived(camera, stamp_ns, arrival_ns)
+            self._note_shift(camera, placed)
             self.clocks.arrived(camera, placed.stamp_ns, arrival_ns)
             taking = stream.taking_mask
             self.received[camera] += 1
@@ -277,6 +283,7 @@ class CollectionSession:
         and offered to the frames, counted as its own detector counts an image. Returns the lines to log."""
         with self._lock:
             placed, said = self.faults.arrived(camera, stamp_ns, arrival_ns)
+            self._note_shift(camera, placed)
             self.clocks.arrived(camera, placed.stamp_ns, arrival_ns)
             self.received[camera] += 1
             stream = self.streams[camera]
@@ -290,6 +297,17 @@ class CollectionSession:
                     stream.stats.detected += 1
                 self._offer(camera, [Labelled(placed.stamp_ns, points)])
         return said
+
+    def _note_shift(self, camera: str, placed: Placed) -> None:
+        """A jump of ``camera``'s stamps within the take moves the ones stored after it: kept in events.csv (caller
+        holds the lock)."""
+        jump = placed.jump
+        if jump is None or jump.kind == "unstamped":
+            return
+        shift = self.faults.timelines.shift_ns(camera) / 1e9
+        together = " (every camera's stamps jumped together)" if jump.shared else ""
+        line = f"its stamps jumped {jump.jump_s:+.3f} s{together}: stored moved by {shift:+.3f} s to continue the take"
+        append_event(self.buffer.path.with_name(EVENTS_FILE), time.time(), "stamps_shifted", camera, line)
 
     def unreadable_points(self, camera: str) -> None:
         """A detector's message of ``camera`` could not be read."""
@@ -378,9 +396,17 @@ class CollectionSession:
     # Services
 
     def reset(self) -> str:
-        """/reset: the buffer (and its history beside it) moved to a backup, a new take begun; what to answer."""
+        """/reset: the buffer (with what was still held, and its history beside it) moved to a backup, a new take
+        begun: new frames, the cameras' time lines started again (a take keeps its images' own stamps); what to
+        answer."""
         with self._lock:  # serialised with the frames being stored and with other resets
+            for name, stream in self.streams.items():  # what the old take still held goes into its buffer
+                self._offer(name, stream.flush())
+            self._store(self.sync.flush_all())
             backup = self.buffer.reset()
+            self.sync = self._synchroniser()
+            self.faults.timelines.restart()  # the new take's images keep their own stamps
+            self.clocks.restart()
             self._saturation.clear()
             self.floor.lays = 0
             self.take += 1

@@ -143,6 +143,16 @@ class TimeLines:
             state.stamp_ns, state.arrival_ns = continuous - state.shift_ns, arrival_ns
         return Placed(continuous, "next", jump)
 
+    def restart(self) -> None:
+        """A new take (/reset): every camera's time line starts again from its next image, its stamps taken as they
+        are (nothing before is kept to continue)."""
+        self._state = {name: _Camera() for name in self.cameras}
+        self._recent_shifts = []
+
+    def shift_ns(self, camera: str) -> int:
+        """How far a camera's stamps are moved to continue its time line now (0: as they come)."""
+        return self._state[camera].shift_ns
+
     def dropped(self, camera: str) -> int:
         """Images missing in a camera's stamps so far (gaps of more than DROP_GAP periods)."""
         return self._state[camera].dropped

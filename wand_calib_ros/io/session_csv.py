@@ -4,7 +4,9 @@
 one row per camera per round (``time`` in seconds since the epoch when the round arrived; ``frames``
 the buffer's frames it saw; the rest the round's quality figures). ``events.csv``, header
 ``time,event,camera,message``: ``moved`` (the bump watch named a camera), ``calibrated`` and
-``refined`` (a final result; camera empty, or the repaired cameras joined by ``+``). Both are
+``refined`` (a final result; camera empty, or the repaired cameras joined by ``+``), ``stamps_shifted`` (a
+camera's stamps jumped within a take and are stored moved to continue its time line; the message says by how
+much). Both are
 appended to as the session goes on and read back by the report.
 """
 
@@ -33,7 +35,7 @@ ESTIMATE_COLUMNS = (
     "grade",
 )
 EVENT_COLUMNS = ("time", "event", "camera", "message")
-EVENTS = ("moved", "calibrated", "refined")
+EVENTS = ("moved", "calibrated", "refined", "stamps_shifted")
 
 FloatArray = NDArray[np.float64]
 
