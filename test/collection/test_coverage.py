@@ -7,7 +7,7 @@ from dataclasses import replace
 import numpy as np
 
 from wand_calib_ros.collection.coverage import CoverageThresholds, CoverageTracker
-from wand_calib_ros.sim.scenarios import paper_fisheye_scenario, ring_scenario, simulate
+from wand_calib_ros.sim.scenarios import paper_fisheye_scenario, paper_three_camera_scenario, ring_scenario, simulate
 
 
 def test_a_well_waved_wand_is_ready() -> None:
@@ -98,3 +98,23 @@ def test_frames_added_at_once_count_as_added_one_by_one() -> None:
     for name in ("cells", "placements", "shared", "max_theta", "directions", "lengths"):
         assert np.array_equal(getattr(one_by_one, name), getattr(at_once, name)), name
     assert one_by_one.status().messages() == at_once.status().messages()
+
+
+def _wands(rng: np.random.Generator, n: int, u_range: tuple[float, float], half: tuple[float, float]) -> np.ndarray:
+    """(n, 3, 2) wands of every direction, their half lengths uniform in ``half``, their centres uniform in
+    ``u_range`` x the image's height."""
+    centre = np.column_stack([rng.uniform(*u_range, n), rng.uniform(60, 420, n)])
+    angle, half = rng.uniform(0, np.pi, n), rng.uniform(*half, n)
+    step = np.column_stack([np.cos(angle), np.sin(angle)]) * half[:, None]
+    return np.stack([centre - step, centre, centre + step], axis=1)
+
+
+def test_progress_is_one_short_line_per_camera_naming_its_worst_gap() -> None:
+    scenario = paper_three_camera_scenario()
+    rng = np.random.default_rng(4)
+    everywhere, right = _wands(rng, 300, (70, 570), (15, 60)), _wands(rng, 300, (600, 615), (8, 20))  # cam1: its right
+    tracker = CoverageTracker(scenario.rig)
+    tracker.add(np.stack([everywhere, right, everywhere], axis=1))
+    lines = tracker.status().progress()
+    assert len(lines) == 1 and lines[0].startswith("cam1: "), lines  # the others miss nothing: no line of theirs
+    assert lines[0].endswith("% of the image covered, left side empty") and len(lines[0]) <= 100, lines

@@ -34,6 +34,24 @@ _REGIONS = {
 }  # fmt: skip
 
 
+def _share(value: float, need: float) -> float:
+    """How much of a threshold is reached (inf where it asks for nothing)."""
+    return float(value) / need if need > 0 else np.inf
+
+
+def _empty_side(occupied: NDArray[np.bool_]) -> str:
+    """Where an image is emptiest, in words: the side (or corner, or centre) with the fewest covered cells."""
+    third = GRID // 3
+    regions = {
+        "left side empty": occupied[:, :third],
+        "right side empty": occupied[:, -third:],
+        "top empty": occupied[:third],
+        "bottom empty": occupied[-third:],
+    }
+    emptiest = min(regions, key=lambda name: float(regions[name].mean()))
+    return emptiest if not regions[emptiest].any() else emptiest.replace(" empty", " nearly empty")
+
+
 @dataclass(frozen=True)
 class CoverageThresholds:
     """What "ready" means. The defaults are what a minute of waving through the volume the cameras
@@ -62,7 +80,18 @@ class CoverageThresholds:
 
 @dataclass(frozen=True)
 class CameraCoverage:
-    """One camera's coverage and what is missing (plain words)."""
+    """One camera's coverage and what is missing (plain words).
+
+    Attributes:
+        name: the camera.
+        placements: its complete views.
+        image_fraction: the share of the image grid's cells with wand points.
+        max_theta_deg: the widest angle off its axis the wand was seen at.
+        reach_theta_deg: the widest angle its image offers.
+        missing: every threshold not met, one phrase each.
+        gap: the one furthest from being met, in a few words ("18 % of the image covered, left side empty";
+            empty when nothing is missing).
+    """
 
     name: str
     placements: int
@@ -70,6 +99,7 @@ class CameraCoverage:
     max_theta_deg: float
     reach_theta_deg: float
     missing: tuple[str, ...]
+    gap: str = ""
 
     @property
     def ok(self) -> bool:
@@ -88,6 +118,13 @@ class CoverageStatus:
     @property
     def ready(self) -> bool:
         return self.connected and all(c.ok for c in self.cameras)
+
+    def progress(self) -> list[str]:
+        """One short line per camera still missing something, naming its worst gap, and the cameras not linked."""
+        lines = [f"{c.name}: {c.gap}" for c in self.cameras if c.missing]
+        if not self.connected:
+            lines.append("not linked by shared placements: " + " | ".join(", ".join(g) for g in self.groups))
+        return lines
 
     def messages(self) -> list[str]:
         """One line per problem, e.g. "cam2: corners top-left, bottom-right uncovered"."""
@@ -146,6 +183,26 @@ class CoverageTracker:
                 theta = np.arccos(np.clip(table(seen.reshape(-1, 2))[:, 2], -1, 1))
                 self.max_theta[c] = max(self.max_theta[c], float(theta.max()))
 
+    def _worst_gap(self, c: int, occupied: NDArray[np.bool_], sectors: int, depth: float) -> str:
+        """Camera ``c``'s threshold furthest from being met (the smallest share of it reached), in a few words."""
+        t, seen = self.thresholds, bool(self.placements[c])
+        shares = {
+            f"{self.placements[c]} of {t.min_placements} views of the whole wand": _share(
+                self.placements[c], t.min_placements
+            ),
+            f"{100 * occupied.mean():.0f} % of the image covered, {_empty_side(occupied)}": _share(
+                occupied.mean(), t.min_image_fraction
+            ),
+            f"seen up to {np.degrees(self.max_theta[c]):.0f} deg off-axis, move it towards the border": _share(
+                self.max_theta[c], t.min_theta_fraction * self.reach[c]
+            ),
+            f"held in {sectors} directions, turn it": _share(sectors, t.min_directions) if seen else np.inf,
+            "always about as far, move it nearer and farther": (
+                _share(depth - 1.0, t.min_depth_ratio - 1.0) if seen else np.inf
+            ),
+        }
+        return min(shares, key=lambda line: shares[line])
+
     def _depth_ratio(self, c: int) -> float:
         """90th over 10th percentile of the camera's |AC| image lengths (1.0 without data)."""
         cumulative = np.cumsum(self.lengths[c])
@@ -199,6 +256,7 @@ class CoverageTracker:
                     float(np.degrees(self.max_theta[c])),
                     float(np.degrees(self.reach[c])),
                     tuple(missing),
+                    self._worst_gap(c, occupied, sectors, depth) if missing else "",
                 )
             )
         graph = nx.Graph()

@@ -580,4 +580,4 @@ class CollectionSession:
             return [Said("info", f"ready to calibrate ({frames} frames), but " + " | ".join(faulty))]
         if ready:
             return [Said("info", f"ready to calibrate ({frames} frames): call /calibrate")]
-        return [Said("info", "still missing: " + " | ".join(status.messages()))]
+        return [Said("info", f"still missing: {line}") for line in status.progress()]
