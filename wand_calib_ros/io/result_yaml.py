@@ -297,7 +297,16 @@ def read_result(path: str | Path) -> tuple[str, dict[str, CameraGeometry]]:
             camera without its model or pose, a rotation that is not one, ...).
     """
     path = Path(path)
-    data = result_document(path)
+    return result_geometry(result_document(path), path)
+
+
+def result_geometry(data: dict[str, Any], path: Path) -> tuple[str, dict[str, CameraGeometry]]:
+    """:func:`read_result` of a result's mapping (as :func:`result_document` returns it, or
+    :func:`result_to_dict` makes it); ``path`` names it in errors.
+
+    Raises:
+        FormatError: as :func:`read_result`.
+    """
     where = "the file"
     try:
         cameras = {}

@@ -28,7 +28,7 @@ from wand_calib_ros.core.model.camera_model import CameraModel
 from wand_calib_ros.core.model.geometry import Pose, wand_directions
 from wand_calib_ros.core.model.rig import RigSpec, WandObservations
 from wand_calib_ros.io.errors import FormatError
-from wand_calib_ros.io.result_yaml import read_result
+from wand_calib_ros.io.result_yaml import result_document, result_geometry
 from wand_calib_ros.io.session_csv import (
     ESTIMATES_FILE,
     EVENTS_FILE,
@@ -37,7 +37,6 @@ from wand_calib_ros.io.session_csv import (
     read_estimates,
     read_events,
 )
-from wand_calib_ros.io.text import read_yaml
 
 FloatArray = NDArray[np.float64]
 
@@ -151,14 +150,20 @@ def _require_fit(
             )  # fmt: skip
 
 
-def prepare(rig: RigSpec, observations: WandObservations, result_path: Path) -> ReportData:
+def prepare(
+    rig: RigSpec, observations: WandObservations, result_path: Path, document: dict[str, Any] | None = None
+) -> ReportData:
     """Recompute residuals and statistics of a result file for the report.
+
+    Args:
+        document: the result as it was written (:func:`~wand_calib_ros.io.result_yaml.result_to_dict`), when a
+            later calibration may replace ``result_path`` while the report is drawn; None: read ``result_path``.
 
     Raises:
         FormatError: the result does not describe the rig's cameras.
     """
-    reference, geometry = read_result(result_path)
-    document = read_yaml(result_path)
+    document = result_document(result_path) if document is None else document
+    reference, geometry = result_geometry(document, result_path)
     names = rig.camera_names
     missing = [n for n in names if n not in geometry]
     if missing:
