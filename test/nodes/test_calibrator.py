@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import threading
+import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 from conftest import LATCHED, Ros, wait_until
 
+from wand_calib_ros.collection.report_drawer import ReportDrawer, ReportRequest, draw_report
 from wand_calib_ros.io.observations_csv import write_observations
 from wand_calib_ros.io.rig_yaml import save_rig
 from wand_calib_ros.sim.scenarios import paper_fisheye_scenario, simulate
@@ -68,3 +71,72 @@ def test_calibrator_alone_commits_to_the_drivers(ros: Ros, tmp_path: Path) -> No
     assert list(committed["cam0"].k) == list(published[-1].k) and list(committed["cam0"].d) == list(published[-1].d)
     truth = scenario.cameras[1].model
     assert abs(committed["cam1"].k[0] - truth.focal_px[0]) < 1.0
+
+
+def test_calibrate_answers_before_its_report_and_again_while_it_is_drawn(ros: Ros, tmp_path: Path) -> None:
+    scenario = paper_fisheye_scenario()
+    data = simulate(scenario, 0.5, np.random.default_rng(5))
+    save_rig(scenario.rig, tmp_path / "cameras.yaml")
+    out = tmp_path / "out"
+    out.mkdir()
+    write_observations(data.observations, out / "observations.csv")
+    node = CalibratorNode(
+        context=ros.context,
+        parameter_overrides=[
+            Parameter("cameras_file", value=str(tmp_path / "cameras.yaml")),
+            Parameter("output_dir", value=str(out)),
+            Parameter("min_theta_fraction", value=0.5),
+        ],  # write_report as a user has it: on
+    )
+    ros.add(node)
+    assert node.reports is not None
+    release, sources = threading.Event(), []
+
+    def held(request: ReportRequest) -> None:  # the real report, once the test lets it through
+        assert release.wait(60)
+        sources.append(request.source)
+        draw_report(request)
+
+    node.reports = ReportDrawer(node._said_report, draw=held)
+    client = ros.helper.create_client(Trigger, "calibrate")
+    assert client.wait_for_service(timeout_sec=5)
+    page = out / "report" / "index.html"
+    first = client.call(Trigger.Request(), timeout_sec=120)
+    assert first.success and first.message.endswith(f"; report to follow in {page}"), first.message
+    assert not page.exists()  # answered before its report
+    second = client.call(Trigger.Request(), timeout_sec=120)  # while the first's report is drawn
+    assert second.success and second.message.endswith(f"; report to follow in {page}"), second.message
+    release.set()
+    assert node.reports.wait(60) and page.exists()
+    assert sources == ["/calibrate", "/calibrate"]  # each calibration's report, the newest last
+    assert "cam1" in page.read_text()
+
+
+def test_a_stop_waits_a_few_seconds_for_the_report_being_drawn(ros: Ros, tmp_path: Path) -> None:
+    scenario = paper_fisheye_scenario()
+    data = simulate(scenario, 0.5, np.random.default_rng(6))
+    save_rig(scenario.rig, tmp_path / "cameras.yaml")
+    out = tmp_path / "out"
+    out.mkdir()
+    write_observations(data.observations, out / "observations.csv")
+    node = CalibratorNode(
+        context=ros.context,
+        parameter_overrides=[
+            Parameter("cameras_file", value=str(tmp_path / "cameras.yaml")),
+            Parameter("output_dir", value=str(out)),
+            Parameter("min_theta_fraction", value=0.5),
+        ],
+    )
+    ros.add(node)
+    started = threading.Event()
+
+    def slow(request: ReportRequest) -> None:  # a report that takes a second longer than usual
+        started.set()
+        time.sleep(1.0)
+        draw_report(request)
+
+    node.reports = ReportDrawer(node._said_report, draw=slow)
+    assert node.calibrate_now("auto_calibrate")
+    assert started.wait(120)
+    node.close()  # Ctrl-C just after the calibration
+    assert (out / "report" / "index.html").exists() and not node.working

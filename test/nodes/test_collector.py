@@ -92,7 +92,7 @@ def test_collect_calibrate_and_publish(ros: Ros, tmp_path: Path) -> None:
         assert np.array_equal(written[name].model.intrinsic_vector(), camera.model.intrinsic_vector())
         assert np.array_equal(written[name].pose.translation, camera.pose.translation)
     assert yaml.safe_load((out / "camera_info" / "cam1.yaml").read_text())["distortion_model"] == "equidistant"
-    assert (out / "report" / "index.html").exists()
+    assert wait_until((out / "report" / "index.html").exists, 30)  # drawn after the answer
     assert (out / "export" / "anipose" / "calibration.toml").exists()
     assert (
         yaml.safe_load((out / "export" / "kalibr" / "camchain.yaml").read_text())["cam1"]["camera_model"] == "pinhole"

@@ -21,17 +21,17 @@ import numpy.random
 from wand_calib_ros.collection.buffer import BUFFER_FILE
 from wand_calib_ros.collection.coverage import CoverageStatus, CoverageThresholds, CoverageTracker
 from wand_calib_ros.collection.errors import CoverageError
+from wand_calib_ros.collection.report_drawer import ReportRequest
 from wand_calib_ros.core.after.repair import judge_moved, repair_moved, repaired_result
 from wand_calib_ros.core.judge.quality import judge, noise_wand_error
 from wand_calib_ros.core.model.result import CalibrationResult
 from wand_calib_ros.core.model.rig import RigSpec, WandObservations
 from wand_calib_ros.core.pipeline import CalibrationOptions, calibrate
-from wand_calib_ros.errors import WandCalibError
 from wand_calib_ros.io.errors import ExportError
 from wand_calib_ros.io.export import WORLD_FORMATS, export
 from wand_calib_ros.io.export.cameras import cameras_of
 from wand_calib_ros.io.outputs import check_writable
-from wand_calib_ros.io.result_yaml import calibration_paths, write_calibration
+from wand_calib_ros.io.result_yaml import calibration_paths, result_document, write_calibration
 
 log = logging.getLogger(__name__)
 
@@ -43,7 +43,6 @@ class CalibrationFiles:
     Attributes:
         result: ``result.yaml`` (the core's result contract).
         camera_info: one camera_info YAML per camera (in its own model).
-        report: the HTML report, or None when not asked for (or it failed).
         exports: the files of the other tools' formats asked for (``export/<format>/``).
         export_failures: why a format asked for could not express this calibration (e.g. a fisheye
             as DLT coefficients); the rest is written.
@@ -51,20 +50,24 @@ class CalibrationFiles:
 
     result: Path
     camera_info: tuple[Path, ...]
-    report: Path | None
     exports: tuple[Path, ...] = ()
     export_failures: tuple[str, ...] = ()
 
 
-def _write_report(rig: RigSpec, observations: WandObservations, result_path: Path, output_dir: Path) -> Path | None:
-    """``output_dir/report/index.html`` (a failure is logged, not raised: the calibration is written)."""
-    from wand_calib_ros.report.html import write_report  # matplotlib only when a report is asked for
+def report_request(
+    rig: RigSpec, observations: WandObservations, files: CalibrationFiles, output_dir: Path, source: str
+) -> ReportRequest:
+    """The report of the calibration just written to ``files``, for a :class:`ReportDrawer`: into
+    ``output_dir/report``, of the result read back as written (another calibration may replace the file
+    while the report is drawn).
 
-    try:
-        return write_report(rig, observations, result_path, output_dir / "report", output_dir / BUFFER_FILE)
-    except (OSError, ValueError, np.linalg.LinAlgError, WandCalibError) as error:
-        log.warning("the calibration is written, but its report failed: %s", error)
-        return None
+    Raises:
+        FormatError: the result file cannot be read back.
+    """
+    document = result_document(files.result)
+    return ReportRequest(
+        rig, observations, files.result, document, output_dir / "report", output_dir / BUFFER_FILE, source
+    )
 
 
 def coverage_of(rig: RigSpec, observations: WandObservations, thresholds: CoverageThresholds) -> CoverageStatus:
@@ -80,19 +83,17 @@ def run_calibration(
     output_dir: Path,
     *,
     thresholds: CoverageThresholds | None = None,
-    report: bool = True,
     options: CalibrationOptions = CalibrationOptions(),
     exports: tuple[str, ...] = (),
 ) -> tuple[CalibrationResult, CalibrationFiles]:
-    """Calibrate and write ``result.yaml``, ``camera_info/<cam>.yaml``, ``report/index.html`` and
-    ``export/<format>/`` for each of ``exports`` (formats of :mod:`wand_calib_ros.io.export`).
+    """Calibrate and write ``result.yaml``, ``camera_info/<cam>.yaml`` and ``export/<format>/`` for each of
+    ``exports`` (formats of :mod:`wand_calib_ros.io.export`); the report is drawn apart (:func:`report_request`).
 
     Args:
         rig: the rig description.
         observations: everything collected.
         output_dir: where the files go (created).
         thresholds: coverage required first (None: no check).
-        report: also write the HTML report (a failure there is logged, not raised).
         options: calibration settings.
 
     Raises:
@@ -117,8 +118,7 @@ def run_calibration(
         except ExportError as error:
             log.warning("the calibration is written, but its %s export failed: %s", name, error)
             failures.append(f"{name}: {error}")
-    report_path = _write_report(rig, observations, result_path, output_dir) if report else None
-    return result, CalibrationFiles(result_path, infos, report_path, tuple(exported), tuple(failures))
+    return result, CalibrationFiles(result_path, infos, tuple(exported), tuple(failures))
 
 
 @dataclass(frozen=True, eq=False)
@@ -131,6 +131,7 @@ class Refinement:
         lines: the judgement, one line per moved camera (``cam1 moved: residual 6.1 px, was 0.4``).
         frames: new frames used (those after the move).
         files: where the repaired calibration was written (None: nothing written).
+        after: the views after the move (what the repair's report shows; None: no camera moved).
     """
 
     result: CalibrationResult | None
@@ -138,6 +139,7 @@ class Refinement:
     lines: tuple[str, ...]
     frames: int
     files: CalibrationFiles | None
+    after: WandObservations | None = None
 
 
 def refine_calibration(
@@ -147,11 +149,10 @@ def refine_calibration(
     output_dir: Path,
     *,
     intrinsics: bool = False,
-    report: bool = False,
 ) -> Refinement:
     """Judge from the views ``new`` (taken after ``result``'s calibration, in time order) which cameras
     moved, re-estimate only those from the views after the move (their intrinsics too if asked), and
-    write the result files as :func:`run_calibration` does (the report, if asked, on the views after the move).
+    write the result files as :func:`run_calibration` does (a report would be of the views after the move).
 
     Raises:
         InsufficientDataError: too few views after the move tie a moved camera to two unmoved ones.
@@ -176,9 +177,8 @@ def refine_calibration(
     result_path = output_dir / "result.yaml"
     check_writable(calibration_paths(names, result_path, output_dir / "camera_info"))
     infos = tuple(write_calibration(repaired, result_path, output_dir / "camera_info")[1:])
-    report_path = _write_report(rig, after, result_path, output_dir) if report else None
-    files = CalibrationFiles(result_path, infos, report_path)
-    return Refinement(repaired, tuple(names[c] for c in moved), tuple(lines), int(after.frames.size), files)
+    files = CalibrationFiles(result_path, infos)
+    return Refinement(repaired, tuple(names[c] for c in moved), tuple(lines), int(after.frames.size), files, after)
 
 
 def summary(result: CalibrationResult, files: CalibrationFiles) -> str:

@@ -12,8 +12,10 @@ once a floor was set), both transient-local, ``wand_calib/markers``
 (visualization_msgs/MarkerArray for RViz: the cameras' frustums and names, the newest wand
 placements and the volume they cover, in the same parent frame; latched), the same transforms on ``/tf_static``
 (tf2_msgs/TFMessage, latched like tf2's static broadcaster) whenever tf2_msgs is
-importable (every ROS install; not the PyPI wheels), and writes ``result.yaml``, ``camera_info/<cam>.yaml`` and
-``report/index.html``. With ``commit_to_drivers`` it sends each camera's
+importable (every ROS install; not the PyPI wheels), and writes ``result.yaml`` and ``camera_info/<cam>.yaml``
+before it answers. The report (``report/index.html``, about a second of figures) is drawn after the answer,
+in a thread of its own; the answer says where it will be and the log says when it is there (a calibration
+that ends meanwhile is answered at once, its report drawn next). With ``commit_to_drivers`` it sends each camera's
 CameraInfo to its driver's ``set_camera_info`` service, as ROS
 camera_calibration's commit does.
 
@@ -54,8 +56,15 @@ from visualization_msgs.msg import MarkerArray
 
 from wand_calib_ros.collection.buffer import BUFFER_FILE, has_rows
 from wand_calib_ros.collection.floor import FLOOR_FILE, read_floor_frames
-from wand_calib_ros.collection.job import CalibrationFiles, refine_calibration, run_calibration, summary
+from wand_calib_ros.collection.job import (
+    CalibrationFiles,
+    refine_calibration,
+    report_request,
+    run_calibration,
+    summary,
+)
 from wand_calib_ros.collection.recovery import backup_path
+from wand_calib_ros.collection.report_drawer import DrawnReport, ReportDrawer
 from wand_calib_ros.core.after.rig_scene import rig_scene
 from wand_calib_ros.core.model.result import TIMING_MODES, CalibrationResult
 from wand_calib_ros.core.model.rig import WandObservations
@@ -84,7 +93,7 @@ PARAMS = (
     *RIG,
     *COVERAGE,
     Param("require_coverage", True, "refuse /calibrate until the coverage thresholds are met"),
-    Param("write_report", True, "write output_dir/report/index.html after each calibration"),
+    Param("write_report", True, "draw output_dir/report/index.html after each calibration (after its answer)"),
     Param("world_frame", "world", "parent frame of the published extrinsics once a floor was set (/set_floor)"),
     Param(
         "export_formats",
@@ -113,6 +122,9 @@ PARAMS = (
 
 #: The answer to a /calibrate the node's stop interrupted.
 STOPPED = "the calibrator was stopped (Ctrl-C or SIGTERM) during the calibration; call /calibrate after a restart"
+#: How long a stop waits for a report being drawn (ros2 launch escalates to SIGTERM after 5 s); a report
+#: cut short leaves none of its files, and the calibration's own files are written before the answer.
+REPORT_AT_STOP_S = 4.0
 
 
 class CalibratorNode(Node):
@@ -157,7 +169,7 @@ class CalibratorNode(Node):
         self.frame_ids = {name: endpoint.frame_id for name, endpoint in self.endpoints.items()}
         self.output_dir = Path(values["output_dir"]).expanduser()
         self.thresholds = coverage_thresholds(values) if values["require_coverage"] else None
-        self.write_report = bool(values["write_report"])
+        self.reports = ReportDrawer(self._said_report) if values["write_report"] else None
         self.exports = export_formats(values["export_formats"])
         self.world_frame = str(values["world_frame"])
         self.refine_intrinsics = bool(values["refine_intrinsics"])
@@ -169,6 +181,7 @@ class CalibratorNode(Node):
         self.before_calibrate = before_calibrate
         self.after_calibrate = after_calibrate
         self.take = take
+        self._logger = self.get_logger()  # (also for the report drawer's thread, after the node is destroyed)
         self._running = threading.Lock()
         self._stopping = threading.Event()
         self._worker: threading.Thread | None = None
@@ -205,7 +218,7 @@ class CalibratorNode(Node):
         return self._serve("/refine", self._refine, response)
 
     def _serve(
-        self, service: str, work: Callable[[], tuple[bool, str]], response: Trigger.Response
+        self, service: str, work: Callable[[str], tuple[bool, str]], response: Trigger.Response
     ) -> Trigger.Response:
         """Run ``work`` in its own thread (so that a stop can still answer the caller); one at a time."""
         if not self._running.acquire(blocking=False):
@@ -260,12 +273,12 @@ class CalibratorNode(Node):
     def _solve(
         self,
         service: str,
-        work: Callable[[], tuple[bool, str]],
+        work: Callable[[str], tuple[bool, str]],
         outcome: list[tuple[bool, str]],
         done: threading.Event | None = None,
     ) -> None:
         try:
-            outcome.append(work())
+            outcome.append(work(service))
         except Exception as error:  # a bug: still answer, so the caller does not wait forever
             self.get_logger().error(f"{service}: unexpected error\n{traceback.format_exc()}")
             outcome.append((False, f"unexpected error (please report): {error!r}"))
@@ -275,16 +288,37 @@ class CalibratorNode(Node):
 
     @property
     def working(self) -> bool:
-        """Whether a calibration is still computing (a stop answered its caller but could not end it)."""
-        return self._worker is not None and self._worker.is_alive()
+        """Whether a calibration is still computing or its report drawn (a stop answered its caller but could
+        not end it)."""
+        drawing = self.reports is not None and self.reports.active
+        return drawing or (self._worker is not None and self._worker.is_alive())
 
     def close(self) -> None:
-        """At exit (Ctrl-C, SIGTERM): answer a /calibrate in progress before the node goes away."""
+        """At exit (Ctrl-C, SIGTERM): answer a /calibrate in progress before the node goes away, and give a
+        report being drawn a few seconds to be written."""
         self._stopping.set()
         if self._running.acquire(timeout=5.0):
             self._running.release()
+        if self.reports is not None and self.reports.busy:
+            self._logger.info(f"stopping: waiting up to {REPORT_AT_STOP_S:.0f} s for the report being drawn")
+            if not self.reports.wait(REPORT_AT_STOP_S):
+                self._logger.warning("stopped before the report was written: wand-calib report draws it again")
 
-    def _calibrate(self) -> tuple[bool, str]:
+    def _report(self, observations: WandObservations, files: CalibrationFiles, source: str) -> str:
+        """Give the calibration just written to the report drawer; returns what the answer says of it."""
+        if self.reports is None or self._stopping.is_set():
+            return ""
+        page = self.reports.submit(report_request(self.rig, observations, files, self.output_dir, source))
+        return f"; report to follow in {page}"
+
+    def _said_report(self, drawn: DrawnReport) -> None:
+        """(From the drawer's thread.) Say that a report is ready, or why it failed."""
+        if drawn.error is None:
+            self._logger.info(drawn.line())
+        else:
+            self._logger.warning(drawn.line())
+
+    def _calibrate(self, source: str) -> tuple[bool, str]:
         if self.before_calibrate is not None:
             self.before_calibrate()
         take = self.take() if self.take is not None else None
@@ -300,7 +334,6 @@ class CalibratorNode(Node):
                 observations,
                 self.output_dir,
                 thresholds=self.thresholds,
-                report=self.write_report,
                 options=replace(self.options, floor_frames=floor),
                 exports=self.exports,
             )
@@ -313,15 +346,16 @@ class CalibratorNode(Node):
                 f"as the new take's (its files are in {kept}); wave the wand and /calibrate again"
             )
         self.result, self._calibrated_through = result, int(observations.frames.max())
-        return self._publish(result, files, observations.uv, "calibrated", ())
+        ok, answer = self._publish(result, files, observations.uv, "calibrated", ())
+        return ok, answer + self._report(observations, files, source)
 
     def _set_aside(self, files: CalibrationFiles) -> Path:
-        """Move a calibration's files (result, camera_info, report, exports) out of ``output_dir`` into a new
-        ``output_dir/reset-<time>/``; returns it."""
+        """Move a calibration's files (result, camera_info, exports; its report is not drawn) out of ``output_dir``
+        into a new ``output_dir/reset-<time>/``; returns it."""
         folder = backup_path(self.output_dir / "reset", "take")
         folder.unlink()  # (a free name: the files go into a folder of that name)
         folder.mkdir()
-        written = [files.result, *files.camera_info, *([] if files.report is None else [files.report]), *files.exports]
+        written = [files.result, *files.camera_info, *files.exports]
         tops = {p.relative_to(self.output_dir).parts[0] for p in written if p.is_relative_to(self.output_dir)}
         for name in sorted(tops):
             os.replace(self.output_dir / name, folder / name)
@@ -331,7 +365,7 @@ class CalibratorNode(Node):
         """The collector's buffer file as the rig's observations (FormatError naming the file and row)."""
         return read_rig_observations(path, self.rig)
 
-    def _refine(self) -> tuple[bool, str]:
+    def _refine(self, source: str) -> tuple[bool, str]:
         if self.result is None:
             return False, "nothing to refine: no /calibrate since this node started (offline: wand-calib refine)"
         if self.before_calibrate is not None:
@@ -348,7 +382,6 @@ class CalibratorNode(Node):
                 new,
                 self.output_dir,
                 intrinsics=self.refine_intrinsics,
-                report=self.write_report,
             )
         except WandCalibError as error:
             return False, f"refine failed: {error}"
@@ -357,7 +390,8 @@ class CalibratorNode(Node):
         self.result, self._calibrated_through = refined.result, int(new.frames.max())
         ok, answer = self._publish(refined.result, refined.files, new.uv, "refined", refined.moved)
         done = f"re-estimated {', '.join(refined.moved)} from the {refined.frames} frames after the move"
-        return ok, f"{'; '.join(refined.lines)}; {done}: {answer}"
+        assert refined.after is not None  # (a camera moved)
+        return ok, f"{'; '.join(refined.lines)}; {done}: {answer}{self._report(refined.after, refined.files, source)}"
 
     def _publish(
         self, result: CalibrationResult, files: CalibrationFiles, uv: Any, event: str, cameras: tuple[str, ...]
