@@ -45,7 +45,7 @@ from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import Image
 
 from wand_calib_ros.io.rig_yaml import save_rig
-from wand_calib_ros.nodes.launch import child_env, free_domain_id, start, stop
+from wand_calib_ros.nodes.launch import free_domain_id, start, stop
 from wand_calib_ros.nodes.messages import array_to_image
 from wand_calib_ros.nodes.runner import use_large_image_transport
 from wand_calib_ros.sim.render import RenderOptions, render_recording
@@ -146,6 +146,7 @@ def main() -> None:
     parser.add_argument("--keep", type=Path, help="keep the collector's output here (default: a temporary folder)")
     args = parser.parse_args()
     calibrate, own, succeeded = _callers(args.ros2)
+    shell = dict(os.environ)  # what the caller runs with: a user's shell, without the drivers' profile
     use_large_image_transport(os.environ)  # (the drivers'; before this process's first participant)
     scenario = paper_three_camera_scenario()
     names = scenario.rig.camera_names
@@ -165,7 +166,7 @@ def main() -> None:
         log = folder / "collector.log"
         params = {"cameras_file": str(folder / "cameras.yaml"), "output_dir": str(folder / "out")}
         collector = start("wand_calib_ros.nodes.collector", params, domain_id=domain_id, log=log)
-        env = {**child_env(domain_id), "AMENT_PREFIX_PATH": str(Path(sys.executable).parent.parent)}
+        env = {**shell, "ROS_DOMAIN_ID": str(domain_id), "AMENT_PREFIX_PATH": str(Path(sys.executable).parent.parent)}
         env.pop("_ROS_WHEELS_BOOTSTRAP_COMPLETE", None)  # the CLI's interpreter sets its library path again
         try:
             _publish(domain_id, names, frames, collector.pid)
@@ -174,25 +175,31 @@ def main() -> None:
             starts = [_timed(own, env)[0] for _ in range(args.calls + 1)]
             print(f"  the caller's own start: {' '.join(f'{s:.2f}' for s in starts)} s (the first not counted)")
             starts = starts[1:]
-            answers = []
+            answers, inside = [], []
             for _ in range(args.calls):
-                answered_at = time.time()
+                called_at = time.time()
                 seconds, text = _timed(calibrate, env)
-                answered_at += seconds
                 answers.append(seconds)
                 success = succeeded in text
                 print(f"  /calibrate: {seconds:.2f} s, success {success}")
                 if not success:
                     print("   ", text.strip().splitlines()[-1][:300])
-                time.sleep(4.0)  # the report, if it is drawn after the answer
-                for at, line in _log_lines(log):
-                    if "report" in line and at > answered_at - seconds:
-                        print(f"    log {at - answered_at:+.2f} s from the answer: {line[:150]}")
+                time.sleep(4.0)  # the report, drawn after the answer
+                lines = [(at, line) for at, line in _log_lines(log) if at > called_at]
+                began = next(at for at, line in lines if line.startswith("calibrating "))
+                said = [at for at, line in lines if line.startswith("/calibrate: ") and "report ready" not in line]
+                answered = said[0]
+                inside.append(answered - began)
+                for at, line in lines:
+                    if "report" in line:
+                        print(f"    log {at - answered:+.2f} s from the answer: {line[:150]}")
             own_start = float(np.median(starts))
             beyond = np.array(answers) - own_start
             print(
                 f"/calibrate answered {beyond.min():.2f}-{beyond.max():.2f} s beyond the caller's own start (median "
-                f"{own_start:.2f} s); whole call {min(answers):.2f}-{max(answers):.2f} s (target: 1.0 s beyond)"
+                f"{own_start:.2f} s, {min(starts):.2f}-{max(starts):.2f} s with its discovery); whole call "
+                f"{min(answers):.2f}-{max(answers):.2f} s (target: 1.0 s beyond). In the calibrator, from its "
+                f"'calibrating' line to its answer: {min(inside):.2f}-{max(inside):.2f} s"
             )
         finally:
             print(f"collector exit code {stop(collector)}")
