@@ -12,6 +12,7 @@ import matplotlib.pyplot as plt
 import networkx as nx
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.ticker import LogLocator
 
 from wand_calib_ros.core.initialise.intrinsics_init import PROJECTIONS
 from wand_calib_ros.core.model.camera_model import radial_basis, radius_mm
@@ -150,7 +151,8 @@ def distortion_curves(data: ReportData) -> Figure:
         top.set_xlim(0, spec.max_view_angle_deg)
         top.set_title(f"{name}: r(theta)")
         top.set_ylabel("image radius (px)")
-        top.legend(fontsize=6)
+        if c == 0:  # (the same lines in every camera's: one legend)
+            top.legend(fontsize=6)
         seen = float(np.degrees(np.nanmax(camera.theta))) if camera.theta.size else 0.0
         bottom.plot(np.degrees(theta), band / 2, "k")
         bottom.axvspan(seen, spec.max_view_angle_deg, color="tab:orange", alpha=0.2, label="not observed")
@@ -160,7 +162,9 @@ def distortion_curves(data: ReportData) -> Figure:
         bottom.set_ylabel("px")
         if not given:
             bottom.set_yscale("log")
-        bottom.legend(fontsize=7)
+            bottom.yaxis.set_minor_locator(LogLocator(subs=(2.0, 5.0)))  # (the default's eight per decade: 0.06 s)
+        if c == 0:
+            bottom.legend(fontsize=7)
     return _margins(figure, top=0.4, hspace=0.35, left=0.8)
 
 
