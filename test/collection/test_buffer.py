@@ -97,16 +97,21 @@ def test_a_buffer_that_never_stored_anything_reopens_empty(tmp_path: Path) -> No
     assert again.frames == [] and again.next_frame == 0
 
 
-def test_saturation_flags_are_stored_and_resumed(tmp_path: Path) -> None:
+def test_brightness_is_stored_and_resumed(tmp_path: Path) -> None:
     scenario = paper_fisheye_scenario()
     data = simulate(scenario, 0.5, np.random.default_rng(3), n=12)
     path = tmp_path / "observations.csv"
-    buffer = ObservationBuffer.open(path, scenario.rig, with_saturation=True)
-    flags = np.random.default_rng(4).random((12, 2, 3)) < 0.5
+    buffer = ObservationBuffer.open(path, scenario.rig, with_brightness=True)
+    stops = np.random.default_rng(4).uniform(-3.0, 5.0, (12, 2, 3))
     for k, uv in enumerate(data.observations.uv):
-        assert buffer.offer(uv, _stamps(k), saturated=flags[k])
+        assert buffer.offer(uv, _stamps(k), brightness=stops[k])
     on_disk = read_observations(path, scenario.rig.camera_names)
     seen = np.isfinite(data.observations.uv[..., 0])
-    assert on_disk.saturated is not None and np.array_equal(on_disk.saturated, flags & seen)
+    assert on_disk.brightness is not None
+    assert np.array_equal(np.isfinite(on_disk.brightness), seen)
+    assert np.allclose(on_disk.brightness[seen], stops[seen], atol=5e-4)  # written to 3 decimals
+    assert on_disk.saturated is not None and np.array_equal(on_disk.saturated, (stops >= 0.0) & seen)
     again = ObservationBuffer.open(path, scenario.rig)  # a restart keeps the column
-    assert again.with_saturation and np.array_equal(again.observations().saturated, flags & seen)  # type: ignore[arg-type]
+    resumed = again.observations().brightness
+    assert again.with_brightness and resumed is not None
+    assert np.array_equal(np.isfinite(resumed), seen) and np.allclose(resumed[seen], stops[seen], atol=5e-4)

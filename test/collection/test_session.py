@@ -43,7 +43,7 @@ def _settings(**changed: Any) -> SessionSettings:
     values: dict[str, Any] = {
         "capacity": 20000,
         "min_motion_px": 2.0,
-        "measure_saturation": True,
+        "measure_brightness": True,
         "sync_tolerance_ns": 0,
         "label_hold_ns": 1_000_000_000,
         "floor_hold_s": 2.0,
@@ -65,7 +65,7 @@ class Rig:
         save_rig(rig, tmp_path / "cameras.yaml")
         self.tmp_path, self.rig = tmp_path, rig
         topics = {name: f"/{name}/{'wand_points' if points else 'image_raw'}" for name in rig.camera_names}
-        changed = {"measure_saturation": not points, **settings}
+        changed = {"measure_brightness": not points, **settings}
         self.session = CollectionSession(rig, _settings(**changed), tmp_path / "out", {}, topics)
         self.said: list[Said] = []
         self.now_ns, self.pause_ns, self.frame, self.asked_ns = 10**9, 0, 0, 10**9

@@ -7,7 +7,7 @@ camera sending JPEG colour at 12 ms with three lamps; harder, 16 ms streaks, fou
 static false wand) and one beside the wand's path, a window in every camera; the three fisheyes in a small room, the
 wand 0.4-1.4 m from them, its LEDs 1-30x over full scale and blooming, a window across its path; two conventional
 cameras over a lab floor with a painted track, and over a glossy floor with broad reflections. With saturated
-spots drawn 0.5 px off on purpose, the calibration names the bias and does not call itself excellent.
+spots drawn 0.5 px off on purpose, the calibration measures the bias from the spots' brightness and corrects it.
 """
 
 from __future__ import annotations
@@ -16,7 +16,9 @@ from functools import cache
 
 import numpy as np
 import pytest
+from rigs import rms, z_scores
 
+from wand_calib_ros.core.model.result import CalibrationResult
 from wand_calib_ros.core.model.rig import WandObservations
 from wand_calib_ros.core.pipeline import calibrate
 from wand_calib_ros.sim.detection_score import (
@@ -88,11 +90,54 @@ def test_the_calibration_from_the_detections_is_at_the_floor_of_the_right_views(
         assert ratio <= 1.3, (key, ratio)
 
 
-def test_saturated_centres_drawn_off_on_purpose_are_named_and_the_result_is_not_excellent() -> None:
-    for seed in range(2):
-        scenario = scene_scenario("near_biased")
-        recording = room_take(scenario, ROOM_SCENES["near_biased"](), 6.0, np.random.default_rng(seed))
-        observations, _ = detect_room_recording(recording, scenario.rig)
-        result = calibrate(scenario.rig, observations)
-        assert result.systematic and "centres of saturated LEDs" in result.systematic[0], seed
-        assert result.quality is not None and result.quality.grade != "excellent"
+@cache
+def _near_calibrations(seed: int) -> tuple[Scenario, CalibrationResult, CalibrationResult]:
+    """The small room's take of ``seed`` calibrated from its detections: with every spot over full scale drawn
+    0.5 px further out from the principal point (a lens's coma), and without."""
+    scenario, _, biased = _take("near_biased", seed)
+    _, _, unbiased = _take("near_fisheye", seed)
+    return scenario, calibrate(scenario.rig, biased), calibrate(scenario.rig, unbiased)
+
+
+def test_saturated_centres_drawn_off_on_purpose_are_measured_and_corrected() -> None:
+    # 2-10 % of each camera's spots stay below full scale. The detector's brightness carries the bias to the
+    # adjustment: each camera reports it, the calibration's principal points, poses and curves are the unbiased
+    # take's, and the standard deviations cover their errors.
+    biased: dict[str, list[float]] = {}
+    unbiased: dict[str, list[float]] = {}
+    pooled: dict[str, list[float]] = {}
+    for seed in SEEDS:
+        scenario, with_bias, without = _near_calibrations(seed)
+        for camera in scenario.cameras:
+            reported = with_bias.camera(camera.spec.name).centre_bias
+            assert reported and min(b.radial_px for b in reported) > 0.3, (seed, camera.spec.name, reported)
+        for label, result in ((biased, with_bias), (unbiased, without)):
+            for key, values in calibration_errors(scenario, result).items():
+                label.setdefault(key, []).extend(values)
+        for key, values in z_scores(with_bias, scenario).items():
+            pooled.setdefault(key, []).extend(values)
+    for key in ("pp", "E_r", "E_t", "curve"):
+        assert rms(biased[key]) <= 1.3 * rms(unbiased[key]), (key, rms(biased[key]), rms(unbiased[key]))
+    for key in ("principal point", "rotation", "translation"):
+        assert rms(pooled[key]) <= 1.6 and np.max(np.abs(pooled[key])) <= 4.0, (key, pooled[key])
+
+
+@pytest.mark.xfail(
+    reason="issue 53, open: in the renders the centres of spots below full scale are 1.5-3x noisier than those of "
+    "saturated ones while the adjustment weighs them alike, so the bias's standard deviation is too small: cam2 "
+    "takes a growth that is not there (classes 0.13 px off), the take without bias reports one in 2 of 4 seeds "
+    "(up to 0.22 px), and the focal lengths are 1.7x the unbiased take's",
+    strict=True,
+)
+def test_biased_centres_calibrate_as_unbiased_ones_and_an_unbiased_take_reports_nothing() -> None:
+    biased: list[float] = []
+    unbiased: list[float] = []
+    for seed in SEEDS:
+        scenario, with_bias, without = _near_calibrations(seed)
+        for camera in scenario.cameras:
+            assert not without.camera(camera.spec.name).centre_bias, (seed, camera.spec.name)
+            for bias in with_bias.camera(camera.spec.name).centre_bias:
+                assert abs(bias.radial_px - 0.5) <= 0.1 and max(map(abs, bias.offset_px)) <= 0.1, (seed, bias)
+        biased.extend(calibration_errors(scenario, with_bias)["focal"])
+        unbiased.extend(calibration_errors(scenario, without)["focal"])
+    assert rms(biased) <= 1.3 * rms(unbiased), (rms(biased), rms(unbiased))

@@ -7,6 +7,7 @@ import pytest
 from rigs import true_views
 
 from wand_calib_ros.collection.recording import detect_recording
+from wand_calib_ros.core.adjust.bundle_problem import N_CAMERA_PARAMS
 from wand_calib_ros.core.model.rig import WandObservations
 from wand_calib_ros.detection.blobs import Blobs
 from wand_calib_ros.detection.tracking import track_labels
@@ -275,7 +276,7 @@ def test_an_l_frame_is_the_floor_tools_blobs_as_found_and_the_calibrated_cameras
             assert wand_only.points is None  # no tool in the rig: three blobs that are no wand are rejected
     assert np.isfinite(detected[..., 0]).sum() >= 3 * 15 * 3  # the three fisheyes see it in every frame
     models, poses = tuple(c.model for c in scenario.cameras), tuple(c.pose for c in scenario.cameras)
-    exact = np.eye(len(models) * 20) * 1e-12
+    exact = np.eye(len(models) * N_CAMERA_PARAMS) * 1e-12
     world = floor_of(models, poses, detected, exact, 0.1, positions_mm=rig.wand.positions_mm, tool_mm=l_frame).world
     estimated, true = world.world_from_reference, truth.world_from_reference
     assert np.linalg.norm(estimated.inverse().translation - true.inverse().translation) < 1.0

@@ -157,7 +157,10 @@ def test_the_fast_reader_and_the_row_by_row_reader_agree(tmp_path: Path, stamps:
     uv = rng.uniform(-5, 1020, (40, 3, 3, 2)) * rng.choice([1.0, np.nan], (40, 3, 3, 1), p=[0.8, 0.2])
     times = np.cumsum(rng.uniform(0.01, 0.05, (40, 3)), axis=0) + 1.7e9 if stamps else None
     flags = (rng.random((40, 3, 3)) < 0.4) & np.isfinite(uv[..., 0]) if stamps else None  # (with and without)
-    observations = WandObservations(np.arange(40) * 3 + 7, ("left", "c2", "right_camera"), uv, times, flags)
+    stops = np.where(np.isfinite(uv[..., 0]), rng.uniform(-3, 5, (40, 3, 3)), np.nan) if stamps else None
+    if stops is not None:
+        stops[0, 0, 0] = np.nan  # (a point whose brightness was not measured)
+    observations = WandObservations(np.arange(40) * 3 + 7, ("left", "c2", "right_camera"), uv, times, flags, stops)
     path = tmp_path / "observations.csv"
     write_observations(observations, path)
     text = path.read_text()
@@ -183,6 +186,9 @@ def test_the_fast_reader_and_the_row_by_row_reader_agree(tmp_path: Path, stamps:
     if read.saturated is not None:
         assert np.array_equal(read.saturated, slow.saturated)
         assert read.saturated.sum() == observations.saturated.sum()  # type: ignore[union-attr]
+    assert (read.brightness is None) == (slow.brightness is None) == (stops is None)
+    if read.brightness is not None:
+        assert np.array_equal(read.brightness, slow.brightness, equal_nan=True)
     fast = _parse_plain(path.read_bytes(), known, sizes)
     assert (fast is not None) == (variant in ("plain", "crlf", "bom", "extra column", "unknown cameras"))
 
@@ -241,3 +247,25 @@ def test_saturation_flags_round_trip_and_a_bad_flag_names_its_row(tmp_path: Path
     path.write_text("frame,camera,point,u,v,saturated\n0,cam0,A,1,2,1\n0,cam0,B,3,4,yes\n")
     with pytest.raises(FormatError, match=r"row 3.*saturated must be 0 or 1, got 'yes'"):
         read_observations(path)
+
+
+def test_brightness_round_trips_beside_the_flags_and_a_bad_cell_names_its_row(tmp_path: Path) -> None:
+    uv = np.arange(2 * 2 * 3 * 2, dtype=float).reshape(2, 2, 3, 2) + 10.0
+    stops = np.array([[[-1.25, 0.0, 2.5], [np.nan, 4.125, -0.5]], [[3.0, 1.0, 0.5], [-2.0, 5.5, 0.25]]])
+    observations = WandObservations(np.array([0, 1]), ("cam0", "cam1"), uv, None, stops >= 0, stops)
+    path = tmp_path / "obs.csv"
+    write_observations(observations, path)
+    assert path.read_text().splitlines()[0] == "frame,camera,point,u,v,saturated,brightness"
+    back = read_observations(path, ("cam0", "cam1"))
+    assert back.brightness is not None and np.allclose(back.brightness, stops, atol=5e-4, equal_nan=True)
+    swapped = back.with_uv(back.uv[:, :, ::-1])  # labels exchanged: each point keeps its own brightness
+    assert swapped.brightness is not None
+    assert np.array_equal(swapped.brightness, back.brightness[:, :, ::-1], equal_nan=True)
+    assert np.array_equal(back.select_frames(np.array([1])).brightness, back.brightness[1:], equal_nan=True)
+    path.write_text("frame,camera,point,u,v,brightness\n0,cam0,A,1,2,\n0,cam0,B,3,4,nan\n0,cam0,C,5,6,1.5\n")
+    read = read_observations(path)
+    assert read.brightness is not None and np.array_equal(read.brightness[0, 0], [np.nan, np.nan, 1.5], equal_nan=True)
+    for bad in ("bright", "inf", "99"):
+        path.write_text(f"frame,camera,point,u,v,brightness\n0,cam0,A,1,2,1.0\n0,cam0,B,3,4,{bad}\n")
+        with pytest.raises(FormatError, match=rf"row 3.*cam0.*brightness must be stops over full scale.*got '{bad}'"):
+            read_observations(path)

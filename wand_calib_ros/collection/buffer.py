@@ -68,9 +68,11 @@ class ObservationBuffer:
     uv: list[FloatArray] = field(default_factory=list)
     stamps: list[FloatArray] = field(default_factory=list)
     saturated: list[NDArray[np.bool_]] = field(default_factory=list)
+    brightness: list[FloatArray] = field(default_factory=list)
     stats: BufferStats = field(default_factory=BufferStats)
     with_stamps: bool = True
-    with_saturation: bool = False
+    with_saturated: bool = False
+    with_brightness: bool = False
     repaired: TornTail | None = None  #: a torn tail cut on opening
     _cells: NDArray[np.int64] | None = None
     _synced: float = 0.0  # time.monotonic() of the last fsync
@@ -83,7 +85,7 @@ class ObservationBuffer:
         capacity: int = 20_000,
         min_motion_px: float = 2.0,
         with_stamps: bool = True,
-        with_saturation: bool = False,
+        with_brightness: bool = False,
     ) -> ObservationBuffer:
         """A buffer persisted at ``path``; resumes from the file when it exists (a torn last write is
         cut, see :attr:`repaired`; any other corruption is an error).
@@ -91,14 +93,20 @@ class ObservationBuffer:
         Args:
             with_stamps: a new file stores each view's stamp (a resumed file keeps what it has: one
                 written without stamps, by an older version, is continued without them).
-            with_saturation: a new file stores each point's saturation flag (the collector's own detector measured
-                them; a resumed file keeps what it has).
+            with_brightness: a new file stores each point's saturation flag and brightness (the collector's own
+                detector measured them; a resumed file keeps what it has: an older one the flags alone).
 
         Raises:
             FormatError: the file exists but is not a buffer this rig can continue.
         """
         buffer = ObservationBuffer(
-            Path(path), rig, capacity, min_motion_px, with_stamps=with_stamps, with_saturation=with_saturation
+            Path(path),
+            rig,
+            capacity,
+            min_motion_px,
+            with_stamps=with_stamps,
+            with_saturated=with_brightness,
+            with_brightness=with_brightness,
         )
         buffer._cells = np.zeros((len(rig.cameras), GRID, GRID), dtype=np.int64)
         if buffer.path.exists():
@@ -114,11 +122,13 @@ class ObservationBuffer:
                     os.replace(buffer.repaired.original, buffer.path)
                 raise FormatError(buffer.path, f"cannot resume the buffer ({error}); move the file away") from None
             buffer.with_stamps = existing.stamps is not None
-            buffer.with_saturation = existing.saturated is not None
+            buffer.with_saturated = existing.saturated is not None
+            buffer.with_brightness = existing.brightness is not None
             stamps = existing.stamps if existing.stamps is not None else np.full(existing.uv.shape[:2], np.nan)
             flags = existing.saturated if existing.saturated is not None else np.zeros(existing.uv.shape[:3], bool)
-            for frame, uv, stamp, flag in zip(existing.frames, existing.uv, stamps, flags, strict=True):
-                buffer._remember(int(frame), uv, stamp, flag)
+            stops = existing.brightness if existing.brightness is not None else np.full(existing.uv.shape[:3], np.nan)
+            for frame, uv, stamp, flag, stop in zip(existing.frames, existing.uv, stamps, flags, stops, strict=True):
+                buffer._remember(int(frame), uv, stamp, flag, stop)
         else:
             check_writable([buffer.path])
             buffer.path.parent.mkdir(parents=True, exist_ok=True)
@@ -136,12 +146,12 @@ class ObservationBuffer:
         stamps: FloatArray | None = None,
         *,
         keep: bool = False,
-        saturated: NDArray[np.bool_] | None = None,
+        brightness: FloatArray | None = None,
     ) -> bool:
         """Consider one synchronised frame ((C, 3, 2), NaN where unseen) with its views' stamps ((C,) s,
-        NaN where a camera has no image in it) and its points' saturation flags ((C, 3), None: none saturated);
-        True when it was stored. ``keep``: store it even when the wand is still or the buffer full (the wand
-        laid on the floor)."""
+        NaN where a camera has no image in it) and its points' brightness ((C, 3) stops over full scale, NaN: not
+        measured; None: none measured); True when it was stored. ``keep``: store it even when the wand is still or
+        the buffer full (the wand laid on the floor)."""
         if stamps is None and self.with_stamps:
             raise ValueError("this buffer stores the views' stamps: offer them with the frame")
         stamps = np.full(uv.shape[0], np.nan) if stamps is None else np.asarray(stamps, dtype=np.float64)
@@ -160,9 +170,10 @@ class ObservationBuffer:
             self.stats.full += 1
             return False
         frame = self.next_frame
-        flags = np.zeros(uv.shape[:2], dtype=bool) if saturated is None else np.asarray(saturated, dtype=bool)
-        self._append_rows(frame, uv, stamps, flags)
-        self._remember(frame, uv, stamps, flags)
+        stops = np.full(uv.shape[:2], np.nan) if brightness is None else np.asarray(brightness, dtype=np.float64)
+        flags = np.nan_to_num(stops, nan=-1.0) >= 0.0
+        self._append_rows(frame, uv, stamps, flags, stops)
+        self._remember(frame, uv, stamps, flags, stops)
         self.stats.accepted += 1
         return True
 
@@ -171,10 +182,13 @@ class ObservationBuffer:
         n = len(self.rig.cameras)
         uv = np.array(self.uv) if self.uv else np.zeros((0, n, self.rig.wand.n_points, 2))
         stamps = (np.array(self.stamps) if self.stamps else np.zeros((0, n))) if self.with_stamps else None
-        flags = None
-        if self.with_saturation:
+        flags = stops = None
+        if self.with_saturated:
             flags = np.array(self.saturated) if self.saturated else np.zeros(uv.shape[:3], dtype=bool)
-        return WandObservations(np.array(self.frames, dtype=np.int64), self.rig.camera_names, uv, stamps, flags)
+        if self.with_brightness:
+            stops = np.array(self.brightness) if self.brightness else np.zeros(uv.shape[:3])
+        frames = np.array(self.frames, dtype=np.int64)
+        return WandObservations(frames, self.rig.camera_names, uv, stamps, flags, stops)
 
     def reset(self) -> Path | None:
         """Move the file to a new timestamped backup (one never replaces another) and start empty. The take's
@@ -190,14 +204,16 @@ class ObservationBuffer:
             kept = self.path.with_name(name)
             if kept.exists():
                 move_aside(kept, "bak")
-        self.frames, self.uv, self.stamps, self.saturated, self.stats = [], [], [], [], BufferStats()
+        self.frames, self.uv, self.stamps, self.saturated, self.brightness = [], [], [], [], []
+        self.stats = BufferStats()
         self._cells = np.zeros((len(self.rig.cameras), GRID, GRID), dtype=np.int64)
         self._start_file()
         return backup
 
     def _start_file(self) -> None:
         with self.path.open("w", newline="", encoding="utf-8") as handle:
-            csv.writer(handle, lineterminator="\n").writerow(header(self.with_stamps, self.with_saturation))
+            columns = header(self.with_stamps, self.with_saturated, self.with_brightness)
+            csv.writer(handle, lineterminator="\n").writerow(columns)
             self._sync(handle.fileno())
 
     def _cell_index(self, c: int, points: FloatArray) -> NDArray[np.int64]:
@@ -213,24 +229,30 @@ class ObservationBuffer:
                 return True
         return False
 
-    def _remember(self, frame: int, uv: FloatArray, stamps: FloatArray, saturated: NDArray[np.bool_]) -> None:
+    def _remember(
+        self, frame: int, uv: FloatArray, stamps: FloatArray, saturated: NDArray[np.bool_], brightness: FloatArray
+    ) -> None:
         assert self._cells is not None
         self.frames.append(frame)
         self.uv.append(np.asarray(uv, dtype=np.float64))
         self.saturated.append(saturated & np.isfinite(uv[..., 0]))
+        self.brightness.append(np.where(np.isfinite(uv[..., 0]), brightness, np.nan))
         self.stamps.append(np.where(np.any(np.isfinite(uv), axis=(1, 2)), stamps, np.nan))
         for c in np.flatnonzero(np.all(np.isfinite(uv), axis=(1, 2))):
             cells = self._cell_index(int(c), uv[c])
             np.add.at(self._cells[c], (cells[:, 1], cells[:, 0]), 1)
 
-    def _append_rows(self, frame: int, uv: FloatArray, stamps: FloatArray, saturated: NDArray[np.bool_]) -> None:
+    def _append_rows(
+        self, frame: int, uv: FloatArray, stamps: FloatArray, saturated: NDArray[np.bool_], brightness: FloatArray
+    ) -> None:
         with self.path.open("a", newline="", encoding="utf-8") as handle:
             rows = observation_rows(
                 frame,
                 self.rig.camera_names,
                 uv,
                 stamps if self.with_stamps else None,
-                saturated if self.with_saturation else None,
+                saturated if self.with_saturated else None,
+                brightness if self.with_brightness else None,
             )
             csv.writer(handle, lineterminator="\n").writerows(rows)
             handle.flush()

@@ -143,20 +143,21 @@ def _grouped(
     }  # fmt: skip
     index = {name: i for i, name in enumerate(rig.camera_names)}
     ambiguous = [
-        Unsettled(frame_of[(index[camera], stamp)], camera, out.unsettled, out.stamp_ns / 1e9, out.saturated)
+        Unsettled(frame_of[(index[camera], stamp)], camera, out.unsettled, out.stamp_ns / 1e9, out.brightness)
         for camera, stamp, out in shifted
         if out.unsettled is not None and (index[camera], stamp) in frame_of
     ]
     tracks = np.full((len(grouped), len(rig.camera_names)), -1, dtype=np.int64)
-    saturated = np.zeros((len(grouped), len(rig.camera_names), rig.wand.n_points), dtype=bool)
+    brightness = np.full((len(grouped), len(rig.camera_names), rig.wand.n_points), np.nan)
     for camera, stamp, out in shifted:
         row = frame_of.get((index[camera], stamp))
         if out.points is not None and row is not None:
             tracks[row, index[camera]] = out.track
-            if out.saturated is not None and out.saturated.size == rig.wand.n_points:
-                saturated[row, index[camera]] = out.saturated
+            if out.brightness is not None and out.brightness.size == rig.wand.n_points:
+                brightness[row, index[camera]] = out.brightness
     stats = {name: stream.stats for name, stream in streams.items()}
     reports = {name: stream.report() for name, stream in streams.items()}
     ignored: dict[str, Mask | None] = {name: stream.mask for name, stream in streams.items()}
-    observations = replace(observations, saturated=saturated[observations.frames])
+    stops = brightness[observations.frames]
+    observations = replace(observations, saturated=np.nan_to_num(stops, nan=-1.0) >= 0.0, brightness=stops)
     return Detections(observations, stats, ambiguous, tracks[observations.frames], reports, ignored)

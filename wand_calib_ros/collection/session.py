@@ -79,7 +79,7 @@ class SessionSettings:
     Attributes:
         capacity: frames stored before only coverage-adding frames are kept.
         min_motion_px: a frame whose wand moved less than this in every camera is skipped.
-        measure_saturation: the session's own detector measures the spots (images in, not a detector's points).
+        measure_brightness: the session's own detector measures the spots (images in, not a detector's points).
         sync_tolerance_ns: images further apart than this never form a frame (0: half the frame period).
         label_hold_ns: how long a camera's views wait for their A/C labels.
         floor_hold_s: after each /set_floor, frames of this long are floor frames.
@@ -92,7 +92,7 @@ class SessionSettings:
 
     capacity: int
     min_motion_px: float
-    measure_saturation: bool
+    measure_brightness: bool
     sync_tolerance_ns: int
     label_hold_ns: int
     floor_hold_s: float
@@ -171,7 +171,7 @@ class CollectionSession:
             rig,
             capacity=settings.capacity,
             min_motion_px=settings.min_motion_px,
-            with_saturation=settings.measure_saturation,
+            with_brightness=settings.measure_brightness,
         )
         self.coverage = CoverageTracker(rig, settings.coverage)
         self.coverage.add(self.buffer.observations().uv)  # the frames a restart found in the buffer file
@@ -196,7 +196,7 @@ class CollectionSession:
         self.take = 0  #: counted up by each /reset (a calibration of a cleared take is not this one's)
         self.received = dict.fromkeys(rig.camera_names, 0)  #: messages per camera
         self.malformed = dict.fromkeys(rig.camera_names, 0)  #: detector points that could not be read
-        self._saturation: dict[tuple[str, int], NDArray[np.bool_]] = {}  # released views' flags, until stored
+        self._brightness: dict[tuple[str, int], NDArray[np.float64]] = {}  # released views' brightness, until stored
         self._said = SaidOnce()
         self._moved_said: dict[str, str] = {}
         self._shown = dict.fromkeys(rig.camera_names, 0.0)  # when each camera's overlay was last drawn
@@ -322,30 +322,31 @@ class CollectionSession:
             if shift is None:  # held: its clock is not lined up yet
                 continue
             stamp = outcome.stamp_ns - shift
-            if outcome.points is not None and outcome.saturated is not None:
-                self._saturation[(camera, stamp)] = outcome.saturated
+            if outcome.points is not None and outcome.brightness is not None:
+                self._brightness[(camera, stamp)] = outcome.brightness
             self._store(self.sync.add(camera, stamp, outcome.points))
 
-    def _flags(self, frame: SyncedFrame) -> NDArray[np.bool_]:
-        """(C, K) the saturation flags of a frame's views (forgotten once asked: a view is in one frame)."""
-        flags = np.zeros(frame.uv.shape[:2], dtype=bool)
+    def _brightness_of(self, frame: SyncedFrame) -> NDArray[np.float64]:
+        """(C, K) the brightness of a frame's views' points (NaN: not measured; forgotten once asked: a view is in
+        one frame)."""
+        stops = np.full(frame.uv.shape[:2], np.nan)
         for c, name in enumerate(self.rig.camera_names):
-            found = self._saturation.pop((name, int(frame.stamps_ns[c])), None) if frame.reported[c] else None
-            if found is not None and found.shape == flags[c].shape:
-                flags[c] = found
-        if len(self._saturation) > MAX_HELD_FLAGS:  # (views no frame took: a camera's images dropped late)
-            for key in list(self._saturation)[: len(self._saturation) - MAX_HELD_FLAGS]:
-                del self._saturation[key]
-        return flags
+            found = self._brightness.pop((name, int(frame.stamps_ns[c])), None) if frame.reported[c] else None
+            if found is not None and found.shape == stops[c].shape:
+                stops[c] = found
+        if len(self._brightness) > MAX_HELD_FLAGS:  # (views no frame took: a camera's images dropped late)
+            for key in list(self._brightness)[: len(self._brightness) - MAX_HELD_FLAGS]:
+                del self._brightness[key]
+        return stops
 
     def _store(self, frames: list[SyncedFrame]) -> None:
         for frame in frames:
             on_floor = self.floor.is_open(time.monotonic())
             if self.watch is not None:
                 self.watch.offer(frame.uv)
-            flags = self._flags(frame)
+            stops = self._brightness_of(frame)
             stamps = self.clocks.stored_stamps(frame.stamps_s)  # (each view's own stamp)
-            if self.buffer.offer(frame.uv, stamps, keep=on_floor, saturated=flags):
+            if self.buffer.offer(frame.uv, stamps, keep=on_floor, brightness=stops):
                 self.coverage.add(frame.uv)
                 if on_floor:
                     append_floor_frame(self.buffer.path.with_name(FLOOR_FILE), self.buffer.frames[-1])
@@ -407,7 +408,7 @@ class CollectionSession:
             self.sync = self._synchroniser()
             self.faults.timelines.restart()  # the new take's images keep their own stamps
             self.clocks.restart()
-            self._saturation.clear()
+            self._brightness.clear()
             self.floor.lays = 0
             self.take += 1
             self.coverage = CoverageTracker(self.rig, self.coverage.thresholds)

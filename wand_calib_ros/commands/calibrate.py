@@ -134,6 +134,9 @@ def _print_summary(result: CalibrationResult, output: Path) -> None:
         )
     for line in () if result.timing is None else result.timing.clocks:
         print(f"  clock: {line}", file=where)
+    for camera in result.cameras:
+        for bias in camera.centre_bias:
+            print(f"  centre bias: {bias.line(camera.name)}", file=where)
     if result.quality is not None:
         print(f"  {result.quality.line()}", file=where)
     for warning in result.warnings:

@@ -167,6 +167,7 @@ class _Views:
             followed per camera).
         aligned: (P, C, K, 2) those moved to their placement's time (free-running cameras), for the starts.
         saturated: (P, C, K) which points the detector measured on saturated spots (None: not known).
+        brightness: (P, C, K) how bright each point's spot was, stops over full scale (None: not known).
         reference: the reference camera's index.
         timing: the timing input of the usable placements.
         given: (C,) which cameras' intrinsics the rig gives.
@@ -178,6 +179,7 @@ class _Views:
     reference: int
     timing: TimingInput
     given: tuple[bool, ...]
+    brightness: NDArray[np.float64] | None = None
 
 
 def _views(rig: RigSpec, obs: WandObservations, timing: TimingInput, options: CalibrationOptions) -> _Views:
@@ -193,6 +195,7 @@ def _views(rig: RigSpec, obs: WandObservations, timing: TimingInput, options: Ca
     uv = obs.uv if usable.size == complete.shape[0] else obs.uv[usable]
     # (a two-marker wand's views are relabelled below: their flags would not follow)
     saturated = None if obs.saturated is None or rig.wand.n_points == 2 else obs.saturated[usable]
+    brightness = None if obs.brightness is None or rig.wand.n_points == 2 else obs.brightness[usable]
     log.info("%d of %d frames show the whole wand to at least two cameras", usable.size, complete.shape[0])
     reference = reference_index(names, covisibility(complete[usable]), options.reference_camera)
     line = timing.line.subset(usable)
@@ -202,7 +205,7 @@ def _views(rig: RigSpec, obs: WandObservations, timing: TimingInput, options: Ca
     given = tuple(spec.intrinsics is not None for spec in rig.cameras)
     if any(given):
         log.info("intrinsics given for %s", ", ".join(n for n, g in zip(names, given, strict=True) if g))
-    return _Views(uv, aligned, saturated, reference, replace(timing, line=line), given)
+    return _Views(uv, aligned, saturated, reference, replace(timing, line=line), given, brightness)
 
 
 def _solve(rig: RigSpec, views: _Views, init: RigInitialisation) -> tuple[CalibrationResult, NDArray[np.float64]]:
@@ -224,6 +227,7 @@ def _solve(rig: RigSpec, views: _Views, init: RigInitialisation) -> tuple[Calibr
         timing=views.timing,
         start_uv=start_uv,
         saturated=views.saturated,
+        brightness=views.brightness,
     )
     return replace(result, warnings=(*result.warnings, *check_result(rig, result, uv, points))), uv
 

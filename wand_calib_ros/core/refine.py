@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wand_calib_ros.core.adjust.assembly import assemble, free_placements
+from wand_calib_ros.core.adjust.brightness_bias import stops_of, unmeasured_bias
 from wand_calib_ros.core.adjust.bundle_adjustment import BundleResult, bundle_adjust, camera_std
 from wand_calib_ros.core.adjust.bundle_problem import (
     INTRINSICS,
@@ -77,6 +78,7 @@ from wand_calib_ros.core.initialise.lens_choice import choose_models
 from wand_calib_ros.core.judge.centre_bias import CentreBias, saturated_pull
 from wand_calib_ros.core.judge.degeneracy import check_camera_views, check_geometry, check_uncertainty, require
 from wand_calib_ros.core.judge.plausibility import check_given_intrinsics
+from wand_calib_ros.core.model.brightness import brightness_classes
 from wand_calib_ros.core.model.camera_model import (
     CameraModel,
     radius_limit,
@@ -111,6 +113,7 @@ def refine_calibration(
     timing: TimingInput | None = None,
     start_uv: FloatArray | None = None,
     saturated: NDArray[np.bool_] | None = None,
+    brightness: FloatArray | None = None,
 ) -> tuple[CalibrationResult, FloatArray]:
     """Gate, bundle-adjust and report (paper Step 4 / Section III-B Step 2).
 
@@ -130,12 +133,15 @@ def refine_calibration(
             None: ``uv``. The adjustments model the timing on the observed pixels.
         saturated: (P, C, 3) which points of ``uv`` the detector measured on saturated spots (None: not known):
             what they pull is checked (:mod:`~wand_calib_ros.core.judge.centre_bias`).
+        brightness: (P, C, 3) each point's brightness, stops over full scale (None: not known): a centre bias
+            that grows with it is modelled where the data show one (:mod:`~wand_calib_ros.core.model.brightness`).
 
     Returns:
         The calibration, and (U, K, 3) the markers of the U placements it used, triangulated freely with its
         cameras (:func:`~wand_calib_ros.core.adjust.assembly.free_placements`; reference frame, mm).
     """
     models, full, pinned = _starting_models(rig, models, reference)
+    classes = _over_full_scale(brightness)
     points = triangulate_placements(models, poses, uv if start_uv is None else start_uv)
     clocks = start_clocks(rig, timing, points, reference)
     # Coarse to fine: outliers and the distortion model are settled on a spread subset of the placements the
@@ -150,20 +156,29 @@ def refine_calibration(
     used, uv_used, state, clocks = _cleaned(rig.wand, uv, robust, sigma, clocks, keep, min_placements)
 
     # 2. Least squares on the clean data, dropping the distortion terms (and the timing) the data do not support.
-    result, fixed = adjust_with_model_selection(rig, uv_used, state, reference, clocks, used, pinned)
+    result, fixed = adjust_with_model_selection(
+        rig, uv_used, state, reference, clocks, used, pinned, brightness=classes
+    )
     # ... in plumb_bob instead for the conventional cameras whose model the rig leaves open, where the data say so
-    result, fixed = choose_models(rig, uv_used, result, fixed, reference, clocks, used)
+    result, fixed = choose_models(rig, uv_used, result, fixed, reference, clocks, used, classes)
 
     # 3. and 4. The placements set aside so far, and the final adjustment of them all.
-    result, fixed, clocks, used, uv_used = _every_placement(rig, uv, result, fixed, reference, clocks, used, uv_used)
-    problem = BundleProblem.from_dense(rig.wand, uv_used, clocks.placements(used))
+    result, fixed, clocks, used, uv_used = _every_placement(
+        rig, uv, result, fixed, reference, clocks, used, uv_used, classes
+    )
+    problem = BundleProblem.from_dense(rig.wand, uv_used, clocks.placements(used), None, stops_of(classes, used))
     narrow_notes: list[str] = []
     if fixed.pinned is not None:
         result, fixed, narrow_notes = _narrow_principal_points(rig, problem, result, fixed, reference)
 
     # 5. What cannot be right, then the result.
-    pulls = _checked(rig, uv, uv_used, used, result, clocks, free_mask(len(rig.cameras), reference, fixed), saturated)
-    warnings = narrow_notes + _warnings(rig, result, fixed, reference, uv_used) + [pull.line() for pull in pulls]
+    # (what saturated centres pull is checked where no brightness tells the adjustment which to correct)
+    flags = saturated if classes is None else None
+    pulls = _checked(rig, uv, uv_used, used, result, clocks, free_mask(len(rig.cameras), reference, fixed), flags)
+    systematic = [pull.line() for pull in pulls]
+    if classes is not None:  # (a camera whose bright centres could not be measured: nothing tells their bias)
+        systematic += unmeasured_bias(problem, rig.camera_names)
+    warnings = narrow_notes + _warnings(rig, result, fixed, reference, uv_used) + systematic
     views_rejected = (some_views(uv[used]) & ~some_views(uv_used)).sum(axis=0)
     markers = free_placements(result.state, problem, uv_used)  # (the used placements' markers, freely)
     calibration = assemble(
@@ -178,17 +193,24 @@ def refine_calibration(
         views_rejected,
         warnings,
         clocks,
-        tuple(pull.line() for pull in pulls),
+        tuple(systematic),
         points=markers,
     )
     return calibration, markers
 
 
+def _over_full_scale(brightness: FloatArray | None) -> FloatArray | None:
+    """(P, C, 3) the points' brightness; None where no point is known to reach full scale."""
+    if brightness is None or not np.any(brightness_classes(brightness)):
+        return None
+    return brightness
+
+
 def _starting_models(
     rig: RigSpec, models: tuple[CameraModel, ...], reference: int
 ) -> tuple[tuple[CameraModel, ...], NDArray[np.bool_], Pinned | None]:
-    """The cameras the adjustments start from, the (C, 20) parameters the calibration estimates and the narrow
-    cameras' pins: narrow pinholes with their principal point held at the centre (at a prior), given
+    """The cameras the adjustments start from, the (C, N_CAMERA_PARAMS) parameters the calibration estimates and
+    the narrow cameras' pins: narrow pinholes with their principal point held at the centre (at a prior), given
     intrinsics as given, estimated ones from the low-order model."""
     narrow = narrow_cameras(rig)
     pinned = narrow_pins(rig, narrow) if narrow.any() else None
@@ -254,6 +276,7 @@ def _every_placement(
     clocks: ClockModel,
     used: NDArray[np.int64],
     uv_used: FloatArray,
+    brightness: FloatArray | None,
 ) -> tuple[BundleResult, FixedParameters, ClockModel, NDArray[np.int64], FloatArray]:
     """The placements set aside so far brought back with their clean views where they fit the solution, and the
     final adjustment of them all (with more than the coarse ones, the model order decided again on all of them
@@ -262,7 +285,7 @@ def _every_placement(
     free = free_mask(len(rig.cameras), reference, fixed)
     decided_on = used.size
     aside = np.setdiff1d(np.flatnonzero(clocks.placeable(len(uv))), used)
-    admitted, left_out, admitted_state = readmit(rig, uv, aside, result, clocks.placements(aside))
+    admitted, left_out, admitted_state = readmit(rig, uv, aside, result, clocks.placements(aside), brightness)
     if admitted.any():
         log.info("%d more placements fit the solution: admitted", admitted.sum())
         uv_used = appended(uv_used, uv, aside[admitted])
@@ -270,15 +293,13 @@ def _every_placement(
         used = np.concatenate([used, aside[admitted]])
     if not (admitted.any() or clocks.modelled):  # with timing, the refreshed motion changes the problem
         return result, fixed, clocks, used, uv_used
-    state = BundleState(
-        result.state.models,
-        result.state.poses,
-        np.concatenate([result.state.wand_a, admitted_state.wand_a]),
-        np.concatenate([result.state.wand_direction, admitted_state.wand_direction]),
-        result.state.timing,
+    state = replace(
+        result.state,
+        wand_a=np.concatenate([result.state.wand_a, admitted_state.wand_a]),
+        wand_direction=np.concatenate([result.state.wand_direction, admitted_state.wand_direction]),
     )
     order = OrderOnAllPlacements(rig, fixed, reference, decided_on) if used.size > decided_on else None
-    result, clocks, free = _final_adjustment(rig, uv, uv_used, used, state, clocks, free, order)
+    result, clocks, free = _final_adjustment(rig, uv, uv_used, used, state, clocks, free, order, brightness)
     fixed = order.decision if order is not None else fixed
     held = fixed.timing.copy()
     held[:, 1] &= free[:, READOUT]  # (a readout the bound held at zero)
@@ -482,13 +503,14 @@ def _final_adjustment(
     clocks: ClockModel,
     free: NDArray[np.bool_],
     order: OrderOnAllPlacements | None,
+    brightness: FloatArray | None,
 ) -> tuple[BundleResult, ClockModel, NDArray[np.bool_]]:
     """The final adjustment of the placements ``used`` from ``state``, the model order decided again on
     its first linearisation (``order``, if any); with timing, the wand's motion is refitted first to where the
     adjustments put them, and again while an adjustment moves a timing parameter by more than
     MOTION_SETTLED of its standard deviation (at most MOTION_ROUNDS rounds). A readout time that comes out
     negative is held at zero (its bound) and the adjustment repeated. Returns the result, the clocks and the
-    (C, 20) parameters it estimated."""
+    (C, N_CAMERA_PARAMS) parameters it estimated."""
     choose = order  # on the first round's first linearisation; later rounds keep what it decided
     for _ in range(MOTION_ROUNDS if clocks.modelled else 1):
         if clocks.modelled:
@@ -500,7 +522,7 @@ def _final_adjustment(
                 points[rest] = triangulate_placements(state.models, state.poses, aligned[rest])
             points[used] = state.points(rig.wand)
             clocks = refresh_motion(clocks, points)
-        problem = BundleProblem.from_dense(rig.wand, uv_used, clocks.placements(used))
+        problem = BundleProblem.from_dense(rig.wand, uv_used, clocks.placements(used), None, stops_of(brightness, used))
         result = bundle_adjust(state, problem, free, choose=choose)
         if choose is not None:
             free, choose = free_mask(len(rig.cameras), choose.reference, choose.decision), None

@@ -101,6 +101,8 @@ class Blobs:
         lengths: (N,) length of the blob's motion streak, px; None: not measured.
         backgrounds: (N,) the background under the blob, grey levels; None: not measured.
         contrast: (N,) how far above that background the image's threshold is there; None: not measured.
+        brightness: (N,) how bright the spot was, stops over full scale (:func:`brightness_stops`); None: not
+            measured.
     """
 
     centres: FloatArray
@@ -112,6 +114,7 @@ class Blobs:
     lengths: FloatArray | None = None
     backgrounds: FloatArray | None = None
     contrast: FloatArray | None = None
+    brightness: FloatArray | None = None
 
     def cut(self, index: list[int]) -> bool:
         """Whether any of the blobs ``index`` is cut: by the image border, a mask or a saturated light."""
@@ -139,6 +142,7 @@ class Blobs:
             pick(self.lengths),
             pick(self.backgrounds),
             pick(self.contrast),
+            pick(self.brightness),
         )
 
 
@@ -243,7 +247,7 @@ def _measure(
     above: NDArray[Any],
 ) -> list[tuple[float, ...]]:
     """The blob (or blobs) of one connected region above the threshold: (u, v, area, peak, saturated, at border,
-    cut, streak length, background, contrast) each.
+    cut, streak length, background, contrast, brightness) each.
 
     The static structure (where learned) is taken away from the window first. A bright region is looked at again
     at CORE_FRACTION of its own peak: two cores there are two spots that touch at the low threshold (two LEDs close
@@ -319,17 +323,35 @@ def _measure(
         if saturated:
             top = ceiling if part is None else _ceiling(raw, under, mine, full) - base
             spot: SpotCentre | None = saturated_centre(window, base, top, mine, least)
+            low = min(max(SATURATED_FLOOR * top, least), 0.5 * top)  # (the outline's floor, as saturated_centre's)
+            clipped = int(np.count_nonzero(mine & (raw >= full)))
+            outlined = int(np.count_nonzero(mine & (window - base >= low)))
+            stops = brightness_stops(clipped, outlined, top / low) if low > 0.0 else 0.0  # (no outline: just full)
         else:
             spot = spot_centre(window, floor if part is None else CORE_FRACTION * peak, mine, sides)
+            if spot is not None:
+                stops = math.log2(max(spot.peak, 1e-3) / max(full - static - spot.background, 1.0))
         if spot is None:
             continue
         cut = x0 + cx == 0 or y0 + cy == 0 or x0 + cx + cw == width or y0 + cy + ch == height
         size = area if part is None else int(part.sum())
         measured.append(
             (x0 + spot.u, y0 + spot.v, size, spot.peak, float(saturated), float(cut), float(hidden), spot.length_px,
-             static + spot.background, contrast)
+             static + spot.background, contrast, min(stops, 0.0) if not saturated else stops)
         )  # fmt: skip
     return measured
+
+
+def brightness_stops(clipped: int, outlined: int, ratio: float) -> float:
+    """How far over full scale a saturated spot's peak was, stops (log2 of its multiple of full scale), from its
+    clipped pixels and those of its outline (above ``1 / ratio`` of full scale over its background).
+
+    A spot of Gaussian profile and peak P clips within ``2 pi s^2 ln(P / F)`` pixels of full scale F and rises
+    above F / ratio within ``2 pi s^2 (ln(P / F) + ln(ratio))``: the two areas give ``log2(P / F) = log2(ratio)
+    clipped / (outlined - clipped)`` whatever its size s, as near the camera as far. Other profiles (a disc, a
+    streak) give a measure that still grows with the peak.
+    """
+    return math.log2(ratio) * clipped / max(outlined - clipped, 1)
 
 
 #: An unsaturated spot continues beyond its window (a brighter region's threshold hid part of it) when a side of the
@@ -454,4 +476,5 @@ def find_blobs(
         table[:, 7].copy(),
         table[:, 8].copy(),
         table[:, 9].copy(),
+        table[:, 10].copy(),
     )

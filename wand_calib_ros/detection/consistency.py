@@ -22,6 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wand_calib_ros.core.adjust.placements import triangulate_placements
+from wand_calib_ros.core.model.brightness import saturated_of
 from wand_calib_ros.core.model.result import CalibrationResult
 from wand_calib_ros.core.model.rig import RigSpec, WandObservations, WandSpec
 from wand_calib_ros.detection.recording import Detections, Unsettled
@@ -180,9 +181,9 @@ def label_across_cameras(
     row_of = {int(f): i for i, f in enumerate(observations.frames)}
     uv = observations.uv.copy()
     stamps = None if observations.stamps is None else observations.stamps.copy()
-    flags = None if observations.saturated is None else observations.saturated.copy()
+    brightness = None if observations.brightness is None else observations.brightness.copy()
     settled: list[str] = []
-    for frame, camera, points, stamp, saturated in ambiguous:
+    for frame, camera, points, stamp, stops in ambiguous:
         row = row_of.get(frame)
         if row is None:
             continue
@@ -206,10 +207,10 @@ def label_across_cameras(
             uv[row, c] = points if best == 0 else points[::-1]
             if stamps is not None:
                 stamps[row, c] = stamp
-            if flags is not None and saturated is not None:
-                flags[row, c] = saturated if best == 0 else saturated[::-1]
+            if brightness is not None and stops is not None:
+                brightness[row, c] = stops if best == 0 else stops[::-1]
             settled.append(camera)
-    return WandObservations(observations.frames, names, uv, stamps, flags), settled
+    return WandObservations(observations.frames, names, uv, stamps, saturated_of(brightness), brightness), settled
 
 
 @dataclass

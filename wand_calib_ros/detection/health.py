@@ -47,12 +47,15 @@ class ViewLight:
         saturated: a pixel reached the image's maximum value.
         lengths: motion streak length, px.
         contrast: how far above its background a pixel had to be to count there, grey levels.
+        brightness: how bright it was, stops over full scale (:func:`~wand_calib_ros.detection.blobs.brightness_stops`;
+            NaN: not measured).
     """
 
     peaks: FloatArray
     saturated: NDArray[np.bool_]
     lengths: FloatArray
     contrast: FloatArray
+    brightness: FloatArray
 
 
 def view_light(blobs: Blobs, points: FloatArray) -> ViewLight | None:
@@ -61,7 +64,10 @@ def view_light(blobs: Blobs, points: FloatArray) -> ViewLight | None:
         return None
     finite = np.all(np.isfinite(points), axis=1)
     nearest = np.argmin(distances(points[finite], blobs.centres), axis=1)
-    return ViewLight(blobs.peaks[nearest], blobs.saturated[nearest], blobs.lengths[nearest], blobs.contrast[nearest])
+    brightness = np.full(nearest.size, np.nan) if blobs.brightness is None else blobs.brightness[nearest]
+    return ViewLight(
+        blobs.peaks[nearest], blobs.saturated[nearest], blobs.lengths[nearest], blobs.contrast[nearest], brightness
+    )
 
 
 class CameraHealth:

@@ -57,14 +57,14 @@ class Unsettled(NamedTuple):
         camera: its camera.
         points: (K, 2) its points, the wand's ends in either order.
         stamp_s: its image's stamp, s.
-        saturated: (K,) which of ``points`` were saturated spots, or None: not measured.
+        brightness: (K,) how bright each of ``points`` was, stops over full scale, or None: not measured.
     """
 
     frame: int
     camera: str
     points: NDArray[np.float64]
     stamp_s: float
-    saturated: NDArray[np.bool_] | None = None
+    brightness: NDArray[np.float64] | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -121,14 +121,15 @@ class Labelled(NamedTuple):
         unsettled: (3, 2) the wand's ends and middle in either order when only the A/C labels were
             missing (other cameras may settle them), else None.
         track: the camera's track the view belongs to (-1: none): its views' labels stand or fall together.
-        saturated: (K,) which of ``points`` (or ``unsettled``) were measured on saturated spots, or None: not known.
+        brightness: (K,) how bright each of ``points`` (or ``unsettled``) was, stops over full scale
+            (:mod:`~wand_calib_ros.core.model.brightness`; 0 and more: a saturated spot), or None: not known.
     """
 
     stamp_ns: int
     points: NDArray[np.float64] | None
     unsettled: NDArray[np.float64] | None = None
     track: int = -1
-    saturated: NDArray[np.bool_] | None = None
+    brightness: NDArray[np.float64] | None = None
 
 
 class CameraStream:
@@ -314,8 +315,8 @@ class CameraStream:
         if self.wand_options.n_points != 3 or detection.tool:  # two or a tool: the calibration labels them
             self.stats.detected += 1
             self.health.add(light)
-            flags = None if light is None or detection.tool else light.saturated
-            return [*self.flush(), Labelled(stamp_ns, detection.points, saturated=flags)]
+            stops = None if light is None or detection.tool else light.brightness
+            return [*self.flush(), Labelled(stamp_ns, detection.points, brightness=stops)]
         self._pending.append((stamp_ns, detection, light))
         return self._in_order(self._released(self.labeller.push(stamp_ns, detection)))
 
@@ -340,17 +341,17 @@ class CameraStream:
         out = []
         for stamp, points, reason, track in results:
             _, detection, light = self._pending.popleft()
-            flags = None if light is None else light.saturated  # (in the order of detection.points)
+            stops = None if light is None else light.brightness  # (in the order of detection.points)
             if points is not None:
                 self.stats.detected += 1
                 self.health.add(light)
                 labelled = (
-                    flags if flags is None or detection.points is None else _reordered(flags, detection.points, points)
+                    stops if stops is None or detection.points is None else _reordered(stops, detection.points, points)
                 )
                 out.append(Labelled(stamp, points, None, track, labelled))
             elif reason == "ambiguous":
                 self.stats.rejected["ambiguous"] += 1
-                out.append(Labelled(stamp, None, detection.points, track, flags))
+                out.append(Labelled(stamp, None, detection.points, track, stops))
             else:
                 self.stats.rejected[reason or "no_wand"] += 1
                 out.append(Labelled(stamp, None))
@@ -358,8 +359,8 @@ class CameraStream:
 
 
 def _reordered(
-    flags: NDArray[np.bool_], found: NDArray[np.float64], labelled: NDArray[np.float64]
-) -> NDArray[np.bool_]:
-    """(K,) the flags of the ``found`` (K, 2) points in the order of the same points ``labelled`` (A and C exchanged
-    or not)."""
-    return np.asarray(flags[distances(labelled, found).argmin(axis=1)])
+    values: NDArray[np.float64], found: NDArray[np.float64], labelled: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """(K,) the values of the ``found`` (K, 2) points in the order of the same points ``labelled`` (A and C
+    exchanged or not)."""
+    return np.asarray(values[distances(labelled, found).argmin(axis=1)])

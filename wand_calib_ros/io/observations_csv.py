@@ -1,11 +1,13 @@
 """The observations CSV: one row per wand point seen by one camera.
 
-Header ``frame,camera,point,u,v[,stamp][,saturated]`` (extra columns are ignored): ``frame`` an
+Header ``frame,camera,point,u,v[,stamp][,saturated][,brightness]`` (extra columns are ignored): ``frame`` an
 integer id, ``camera`` a name from the rig description, ``point`` A, B or C,
 ``u, v`` pixels in the OpenCV convention ((0, 0) is the centre of the top-left
 pixel), ``stamp`` (optional) the capture stamp of that camera's image in seconds
 (the image's header stamp), ``saturated`` (optional) 1 where the point was measured on a
-saturated spot, else 0 (the detector writes it; the calibration checks such centres for a bias).
+saturated spot, else 0, ``brightness`` (optional) how bright its spot was, in stops over the image's full
+scale (log2 of its peak over full scale: 0 at full scale, 3 at 8x, negative below; ``nan`` or empty: not
+measured). The detector writes both; the calibration models a centre bias that grows with the brightness.
 Without stamps, rows sharing ``frame`` are simultaneous and consecutive ids are consecutive frames
 of one recording at a constant rate; with stamps, rows sharing ``frame`` are a grouping of images
 close in time, and each image is placed at its own stamp.
@@ -36,6 +38,10 @@ log = logging.getLogger(__name__)
 STAMP = "stamp"
 #: The optional column of per-point saturation flags (1: measured on a saturated spot, 0: not).
 SATURATED = "saturated"
+#: The optional column of per-point brightness, stops over full scale (:mod:`~wand_calib_ros.core.model.brightness`).
+BRIGHTNESS = "brightness"
+#: A brightness beyond this many stops (either way) is not one (a column of another kind).
+MAX_STOPS = 40.0
 #: How far (px) beyond its image's border a point may lie: real detections never do, but simulated
 #: pixel noise (up to 1 px, about 5 sigma over a large take) pushes points near the border out;
 #: a wrong image_size or a wrong camera is off by tens of pixels or more.
@@ -151,7 +157,7 @@ def _parse_plain(
     header = text[:end].rstrip("\r").split(",")
     if any(c not in header for c in COLUMNS):
         return None
-    fields = [*COLUMNS, *([STAMP] if STAMP in header else []), *([SATURATED] if SATURATED in header else [])]
+    fields = [*COLUMNS, *(name for name in (STAMP, SATURATED, BRIGHTNESS) if name in header)]
     # numpy's reader checks every row's cells itself when it reads them all (a decimal comma: ValueError); with
     # columns left out it ignores cells beyond them, and they are counted first
     every = header == fields
@@ -162,6 +168,7 @@ def _parse_plain(
     kinds = {"frame": "i8", "camera": f"{text_kind}{longest}", "point": f"{text_kind}2", "u": "f8", "v": "f8"}
     kinds[STAMP] = "f8"
     kinds[SATURATED] = "i8"
+    kinds[BRIGHTNESS] = "f8"
     try:
         table = np.loadtxt(
             io.BytesIO(raw),  # numpy's reader decodes bytes faster than it reads a str
@@ -181,7 +188,10 @@ def _parse_plain(
     uv_rows = np.stack([table["u"], table["v"]], axis=1)
     stamp = table[STAMP] if STAMP in header else None
     flag = table[SATURATED] if SATURATED in header else None
+    stops = table[BRIGHTNESS] if BRIGHTNESS in header else None
     if not np.all(np.isfinite(uv_rows)) or (flag is not None and not np.all((flag == 0) | (flag == 1))):
+        return None
+    if stops is not None and not np.all(np.isnan(stops) | (np.abs(stops) <= MAX_STOPS)):
         return None
     camera_text = table["camera"]
     if known is not None:
@@ -218,11 +228,14 @@ def _parse_plain(
             seen = stamps[:, c][np.isfinite(stamps[:, c])]
             if np.any(np.diff(seen) <= 0):  # stamps must increase with the frame id
                 return None
-    saturated = None
+    saturated = brightness = None
     if flag is not None:
         saturated = np.zeros(uv.shape[:3], dtype=bool)
         saturated[frame_row, camera, point] = flag == 1
-    return WandObservations(frame_ids.astype(np.int64), names, uv, stamps, saturated)
+    if stops is not None:
+        brightness = np.full(uv.shape[:3], np.nan)
+        brightness[frame_row, camera, point] = stops
+    return WandObservations(frame_ids.astype(np.int64), names, uv, stamps, saturated, brightness)
 
 
 def _ends_with_newline(path: Path) -> bool:
@@ -243,17 +256,19 @@ class _Header:
         stamp: the stamp column (None: none).
         flag: the saturated column (None: none).
         cells: the cells of the header (a row may not have more).
+        brightness: the brightness column (None: none).
     """
 
     index: tuple[int, ...]
     stamp: int | None
     flag: int | None
     cells: int
+    brightness: int | None = None
 
     @property
     def width(self) -> int:
         """The fewest cells a row must have."""
-        return max([*self.index] + [i for i in (self.stamp, self.flag) if i is not None]) + 1
+        return max([*self.index] + [i for i in (self.stamp, self.flag, self.brightness) if i is not None]) + 1
 
 
 def _header(path: Path, cells: list[str] | None) -> _Header:
@@ -268,7 +283,8 @@ def _header(path: Path, cells: list[str] | None) -> _Header:
         )
     stamp = names.index(STAMP) if STAMP in names else None
     flag = names.index(SATURATED) if SATURATED in names else None
-    return _Header(tuple(names.index(c) for c in COLUMNS), stamp, flag, len(names))
+    brightness = names.index(BRIGHTNESS) if BRIGHTNESS in names else None
+    return _Header(tuple(names.index(c) for c in COLUMNS), stamp, flag, len(names), brightness)
 
 
 def _point_row(
@@ -332,6 +348,22 @@ def _flag(path: Path, row_number: int, camera: str, frame: int, point: str, text
     return text == "1"
 
 
+def _stops(path: Path, row_number: int, camera: str, frame: int, point: str, text: str) -> float:
+    """A row's brightness cell: stops over full scale (nan or empty: not measured)."""
+    try:
+        stops = float(text) if text else math.nan
+    except ValueError:
+        stops = math.inf
+    if not (math.isnan(stops) or abs(stops) <= MAX_STOPS):
+        raise FormatError(
+            path,
+            f"camera '{camera}' frame {frame} point {point}: brightness must be stops over full scale (a number within "
+            f"+-{MAX_STOPS:g}, or nan: not measured), got {text!r}",
+            row=row_number,
+        )
+    return stops
+
+
 def _parse(
     handle: TextIO,
     path: Path,
@@ -347,6 +379,7 @@ def _parse(
     cameras: dict[str, int] = {name: i for i, name in enumerate(known)} if known is not None else {}
     entries: list[tuple[int, int, int, float, float]] = []
     flags: list[bool] = []
+    stops: list[float] = []
     seen: set[tuple[int, int, int]] = set()
     view_stamps: dict[tuple[int, int], tuple[float, int]] = {}  # (frame, camera) -> (stamp, first row)
     for row_number, row in enumerate(reader, start=2):
@@ -364,6 +397,8 @@ def _parse(
         entries.append((*key, u, v))
         if header.flag is not None:
             flags.append(_flag(path, row_number, camera, frame, point, row[header.flag].strip()))
+        if header.brightness is not None:
+            stops.append(_stops(path, row_number, camera, frame, point, row[header.brightness].strip()))
         if header.stamp is not None:
             stamp = _stamp(path, row_number, camera, frame, row[header.stamp].strip())
             first = view_stamps.setdefault(key[:2], (stamp, row_number))
@@ -377,7 +412,16 @@ def _parse(
     if not entries:
         raise FormatError(path, "no observations after the header")
     stamps = view_stamps if header.stamp is not None else None
-    return _parsed(path, frames, cameras, entries, stamps, flags if header.flag is not None else None, len(labels))
+    return _parsed(
+        path,
+        frames,
+        cameras,
+        entries,
+        stamps,
+        flags if header.flag is not None else None,
+        len(labels),
+        stops if header.brightness is not None else None,
+    )
 
 
 def _parsed(
@@ -388,9 +432,11 @@ def _parsed(
     view_stamps: dict[tuple[int, int], tuple[float, int]] | None,
     flags: list[bool] | None,
     n_points: int,
+    stops: list[float] | None = None,
 ) -> WandObservations:
     """The observations of the rows read: (frame row, camera, point, u, v) ``entries``, frames in the order of
-    their ids; each view's stamp (with its first row) and each point's saturation flag, where the file has them."""
+    their ids; each view's stamp (with its first row), each point's saturation flag and brightness, where the file
+    has them."""
     frame_ids = np.array(sorted(frames, key=frames.__getitem__), dtype=np.int64)
     uv = np.full((len(frames), len(cameras), n_points, 2), np.nan)
     table = np.array(entries)
@@ -410,7 +456,12 @@ def _parsed(
         saturated = np.zeros(uv.shape[:3], dtype=bool)
         saturated[f, c, p] = flags
         saturated = saturated[order]
-    return WandObservations(frame_ids[order], names, uv[order], stamps, saturated)
+    brightness = None
+    if stops is not None:
+        brightness = np.full(uv.shape[:3], np.nan)
+        brightness[f, c, p] = stops
+        brightness = brightness[order]
+    return WandObservations(frame_ids[order], names, uv[order], stamps, saturated, brightness)
 
 
 def _stamp(path: Path, row_number: int, camera: str, frame: int, text: str) -> float:
@@ -463,9 +514,10 @@ def observation_rows(
     uv: NDArray[np.float64],
     stamps: NDArray[np.float64] | None,
     saturated: NDArray[np.bool_] | None = None,
+    brightness: NDArray[np.float64] | None = None,
 ) -> list[list[object]]:
-    """The CSV rows of one frame: (C, K, 2) pixels (NaN: not seen), (C,) stamps in s (or None) and (C, K)
-    saturation flags (or None)."""
+    """The CSV rows of one frame: (C, K, 2) pixels (NaN: not seen), (C,) stamps in s (or None), (C, K)
+    saturation flags (or None) and (C, K) brightness in stops (or None)."""
     rows: list[list[object]] = []
     for c, name in enumerate(camera_names):
         for p, label in enumerate(ALL_POINT_LABELS[: uv.shape[1]]):
@@ -476,26 +528,34 @@ def observation_rows(
                     row.append(f"{stamps[c]:.9f}")
                 if saturated is not None:
                     row.append(int(saturated[c, p]))
+                if brightness is not None:
+                    row.append(f"{brightness[c, p]:.3f}" if np.isfinite(brightness[c, p]) else "nan")
                 rows.append(row)
     return rows
 
 
-def header(with_stamps: bool, with_saturation: bool = False) -> tuple[str, ...]:
-    """The CSV header, with the stamp column or without, and the saturation flags' column or without."""
-    return (*COLUMNS, *((STAMP,) if with_stamps else ()), *((SATURATED,) if with_saturation else ()))
+def header(with_stamps: bool, with_saturated: bool = False, with_brightness: bool = False) -> tuple[str, ...]:
+    """The CSV header, with the stamp, the saturation flags' and the brightness columns or without them."""
+    optional = ((STAMP, with_stamps), (SATURATED, with_saturated), (BRIGHTNESS, with_brightness))
+    return (*COLUMNS, *(name for name, present in optional if present))
 
 
 def write_observations(observations: WandObservations, path: str | Path) -> None:
-    """Write every finite point of ``observations`` as CSV rows (frame, camera, A/B/C order; stamps and saturation
-    flags if any)."""
-    flags = observations.saturated
+    """Write every finite point of ``observations`` as CSV rows (frame, camera, A/B/C order; stamps, saturation
+    flags and brightness if any)."""
+    flags, stops = observations.saturated, observations.brightness
     text = io.StringIO(newline="")
     writer = csv.writer(text, lineterminator="\n")
-    writer.writerow(header(observations.stamps is not None, flags is not None))
+    writer.writerow(header(observations.stamps is not None, flags is not None, stops is not None))
     for f, frame in enumerate(observations.frames):
         stamps = None if observations.stamps is None else observations.stamps[f]
         rows = observation_rows(
-            int(frame), observations.camera_names, observations.uv[f], stamps, None if flags is None else flags[f]
+            int(frame),
+            observations.camera_names,
+            observations.uv[f],
+            stamps,
+            None if flags is None else flags[f],
+            None if stops is None else stops[f],
         )
         writer.writerows(rows)
     write_text(path, text.getvalue())

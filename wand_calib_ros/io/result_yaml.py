@@ -37,9 +37,10 @@ import numpy as np
 import yaml
 
 from wand_calib_ros.core.errors import ModelError
+from wand_calib_ros.core.model.brightness import BIAS_EDGES, class_text
 from wand_calib_ros.core.model.camera_model import EQUIDISTANT, CameraModel, to_opencv
 from wand_calib_ros.core.model.geometry import Pose
-from wand_calib_ros.core.model.result import CalibrationResult
+from wand_calib_ros.core.model.result import CalibrationResult, ClassBias
 from wand_calib_ros.io.errors import FormatError
 from wand_calib_ros.io.outputs import write_together
 from wand_calib_ros.io.rig_yaml import wand_dict
@@ -146,6 +147,8 @@ def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
             entry[keys["time_offset"]] = float(camera.time_offset)
         if timing is not None and (timing.rolling_shutter.get(camera.name) == "estimated" or camera.readout != 0.0):
             entry[keys["readout"]] = float(camera.readout)
+        if camera.centre_bias:  # (absent: no bias found, or no brightness known)
+            entry["centre_bias"] = [_bias_dict(bias) for bias in camera.centre_bias]
         cameras[camera.name] = entry
     return {
         "reference_camera": result.reference_camera,
@@ -182,6 +185,20 @@ def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
             for o in result.clock_offsets
         },
         "warnings": list(result.warnings),
+    }
+
+
+def _bias_dict(bias: ClassBias) -> dict[str, Any]:
+    """One brightness class's corrected centre bias (docs/formats.md, ``centre_bias``)."""
+    return {
+        "brightness": class_text(bias.klass),
+        "from_stops": float(BIAS_EDGES[bias.klass - 1]),
+        "u_px": float(bias.offset_px[0]),
+        "v_px": float(bias.offset_px[1]),
+        "radial_px": float(bias.radial_px),
+        "std_px": [float(x) for x in bias.std_px],
+        "points": int(bias.points),
+        "shape": bias.shape,
     }
 
 

@@ -134,7 +134,7 @@ def session_settings(values: dict[str, Any]) -> SessionSettings:
     return SessionSettings(
         capacity=values["buffer_capacity"],
         min_motion_px=values["min_motion_px"],
-        measure_saturation=values["input"] == "images",  # (its own detector measures the spots)
+        measure_brightness=values["input"] == "images",  # (its own detector measures the spots)
         sync_tolerance_ns=int(values["sync_tolerance_ms"] * 1e6),
         label_hold_ns=int(values["label_hold_ms"] * 1e6),
         floor_hold_s=float(values["floor_hold_s"]),

@@ -188,8 +188,9 @@ class CameraRoom:
         reflections: broad reflections of lamps on a glossy floor.
         grain: a fixed texture of the wall or floor: its relative standard deviation (0: a smooth wall).
         grain_seed: the seed of that texture (it is the same in every image).
-        saturated_shift_px: LED spots that saturate are drawn this far (px) radially outward from the image centre,
-            a bias on purpose (a lens's coma, a sensor's blooming to one side): the truth stays where the LED is.
+        saturated_shift_px: LED spots that saturate are drawn this far (px) radially outward from the lens's axis
+            (``optical_centre``), a bias on purpose (a lens's coma): the truth stays where the LED is.
+        optical_centre: where the lens's axis meets the image (its principal point), px; None: the image centre.
     """
 
     sensor: Sensor = field(default_factory=Sensor)
@@ -209,6 +210,7 @@ class CameraRoom:
     grain: float = 0.0
     grain_seed: int = 0
     saturated_shift_px: float = 0.0
+    optical_centre: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True, eq=False)

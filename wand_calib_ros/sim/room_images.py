@@ -286,8 +286,8 @@ def render_camera(
                 continue
             peaks[i, p] = float(patch.max()) * luma
             if room.saturated_shift_px and _saturates(patch * luma, static[v0:, u0:], headroom):
-                patch, u0, v0 = _spread(_outward(paths[p][keep], size, room.saturated_shift_px), energy[p][keep],
-                                        room.optics, size, radius)  # fmt: skip
+                moved = _outward(paths[p][keep], room.optical_centre or _centre(size), room.saturated_shift_px)
+                patch, u0, v0 = _spread(moved, energy[p][keep], room.optics, size, radius)
             recorded = _response(room, room.led_colour, patch, (u0, v0))
             signal[v0 : v0 + patch.shape[0], u0 : u0 + patch.shape[1]] += recorded.astype(np.float32)
         image, encoding = _encoded(room, signal, bank, rng)
@@ -301,10 +301,14 @@ def _saturates(patch: FloatArray, static: NDArray[np.float32], headroom: float) 
     return bool(np.any(patch[: behind.shape[0], : behind.shape[1]] + behind >= headroom))
 
 
-def _outward(path: FloatArray, size: tuple[int, int], shift_px: float) -> FloatArray:
-    """(M, 2) a light's path moved ``shift_px`` away from the image centre (along the line from it)."""
-    centre = np.array([(size[0] - 1) / 2.0, (size[1] - 1) / 2.0])
-    away = path.mean(axis=0) - centre
+def _centre(size: tuple[int, int]) -> tuple[float, float]:
+    """The centre of an image of ``size`` (width, height), px."""
+    return (size[0] - 1) / 2.0, (size[1] - 1) / 2.0
+
+
+def _outward(path: FloatArray, centre: tuple[float, float], shift_px: float) -> FloatArray:
+    """(M, 2) a light's path moved ``shift_px`` away from ``centre`` (along the line from it)."""
+    away = path.mean(axis=0) - np.asarray(centre)
     return np.asarray(path + shift_px * away / max(float(np.linalg.norm(away)), 1e-9))
 
 

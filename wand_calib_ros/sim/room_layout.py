@@ -41,7 +41,7 @@ class RoomOptions:
         optics: every camera's lens (a fisheye seeing LEDs far beyond saturation blooms widely).
         window_on_path: the window's edge (where there is one) placed across the wand's path.
         floor: what lies behind the wand besides lamps and windows (:data:`Floor`).
-        saturated_shift_px: saturated LED spots drawn this far outward from the image centre (a bias on purpose).
+        saturated_shift_px: saturated LED spots drawn this far outward from the principal point (a bias on purpose).
     """
 
     sensor: Sensor = field(default_factory=Sensor)
@@ -164,6 +164,7 @@ def room_for(
             led_colour=options.led_colour,
             led_diameter_mm=options.led_diameter_mm,
             saturated_shift_px=options.saturated_shift_px,
+            optical_centre=(float(camera.model.principal_point[0]), float(camera.model.principal_point[1])),
         )
         rooms.append(room if options.floor == "wall" else _with_floor(room, options.floor, size, rng))
     return tuple(rooms)

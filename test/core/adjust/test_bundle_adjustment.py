@@ -9,11 +9,13 @@ import pytest
 
 from wand_calib_ros.core.adjust.bundle_adjustment import CameraSystem, bundle_adjust
 from wand_calib_ros.core.adjust.bundle_problem import (
+    BIAS,
     N_CAMERA_PARAMS,
     READOUT,
     TIME_OFFSET,
     BundleProblem,
     BundleState,
+    CameraBias,
     PlacementTiming,
     apply_step,
     default_free_mask,
@@ -22,6 +24,7 @@ from wand_calib_ros.core.adjust.bundle_problem import (
 from wand_calib_ros.core.adjust.levenberg_marquardt import held_placements
 from wand_calib_ros.core.adjust.linearisation import evaluate, huber_weights, linearise, residuals
 from wand_calib_ros.core.adjust.normal_equations import SCHUR_OVERHEAD, SCHUR_WASTE, block_layout, reduced_system
+from wand_calib_ros.core.model.brightness import CLASSES, LINEAR, N_BIAS, PROPORTIONAL
 from wand_calib_ros.core.model.camera_model import from_opencv_pinhole
 from wand_calib_ros.core.model.geometry import Pose
 from wand_calib_ros.sim.scenarios import paper_fisheye_scenario, simulate
@@ -44,8 +47,9 @@ def test_residuals_vanish_at_the_truth_without_noise() -> None:
     assert np.max(np.abs(residuals(state, problem))) < 1e-9
 
 
-def _with_timing(scenario, data, state, seed: int, uv=None):  # type: ignore[no-untyped-def]
-    """The same views (``uv``, default the data's) seen at random instants around their placements, the wand moving."""
+def _with_timing(scenario, data, state, seed: int, uv=None, brightness=None):  # type: ignore[no-untyped-def]
+    """The same views (``uv``, default the data's) seen at random instants around their placements, the wand moving,
+    their points of the given (P, C, 3) ``brightness``."""
     rng = np.random.default_rng(seed)
     uv = data.observations.uv if uv is None else uv
     n_placements, n_cameras = uv.shape[:2]
@@ -59,7 +63,15 @@ def _with_timing(scenario, data, state, seed: int, uv=None):  # type: ignore[no-
     timed = BundleState(
         state.models, state.poses, state.wand_a, state.wand_direction, rng.normal(0.004, 0.003, (n_cameras, 2))
     )
-    return timed, BundleProblem.from_dense(scenario.wand, uv, timing)
+    return timed, BundleProblem.from_dense(scenario.wand, uv, timing, brightness=brightness)
+
+
+def _with_bias(state: BundleState, seed: int) -> BundleState:
+    """The state with a centre bias in each camera's of three: by classes, linear from class 2, proportional
+    from class 1."""
+    values = np.random.default_rng(seed).normal(scale=0.3, size=(3, N_BIAS))
+    shapes, starts = np.array([CLASSES, LINEAR, PROPORTIONAL], dtype=np.int8), np.array([1, 2, 1], dtype=np.int8)
+    return replace(state, bias=CameraBias(values, shapes, starts))
 
 
 def _pinhole_cameras(state: BundleState) -> BundleState:
@@ -81,8 +93,10 @@ def _pinhole_cameras(state: BundleState) -> BundleState:
 @pytest.mark.parametrize("lenses", ["fisheye", "pinhole"])
 def test_jacobians_match_finite_differences(lenses: str) -> None:
     scenario, data, state, _ = _setup(1.0, 8, 1, n_cameras=3)
-    state, problem = _with_timing(scenario, data, state, 7)
-    every = np.array([TIME_OFFSET, READOUT])
+    stops = np.random.default_rng(9).uniform(-2.0, 6.0, data.observations.uv.shape[:3])
+    state, problem = _with_timing(scenario, data, state, 7, brightness=stops)
+    state = _with_bias(state, 8)
+    every = np.r_[TIME_OFFSET, READOUT, BIAS.start : BIAS.stop]
     if lenses == "pinhole":
         state = _pinhole_cameras(state)
         every = np.arange(TIME_OFFSET, N_CAMERA_PARAMS)

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from rigs import floor_errors, rms
 
+from wand_calib_ros.core.adjust.bundle_problem import N_CAMERA_PARAMS
 from wand_calib_ros.core.after.world_frame import floor_of
 from wand_calib_ros.sim.floor import floor_lays, world_errors
 from wand_calib_ros.sim.scenarios import SCENARIOS
@@ -58,7 +59,7 @@ def test_with_exact_cameras_two_lays_on_the_ring_are_what_the_floor_data_allow()
     scenario = SCENARIOS["ring6"](n_placements=10)
     models = tuple(c.model for c in scenario.cameras)
     poses = tuple(c.pose for c in scenario.cameras)
-    exact = np.eye(len(models) * 20) * 1e-12
+    exact = np.eye(len(models) * N_CAMERA_PARAMS) * 1e-12
     rows = []
     for seed in SEEDS:
         truth = floor_lays(scenario, 1.0, np.random.default_rng(seed))

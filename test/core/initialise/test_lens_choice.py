@@ -137,8 +137,8 @@ def test_timing_parameters_dropped_before_the_lens_choice_stay_dropped(monkeypat
         decided.append(args[3].timing.copy())  # (rig, uv, result, fixed, ...)
         return real_choice(*args, **kwargs)
 
-    def adjust(rig, uv, start, reference, clocks, used, pinned=None, timing=None):  # type: ignore[no-untyped-def]
-        result, fixed = real_adjust(rig, uv, start, reference, clocks, used, pinned, timing)
+    def adjust(rig, uv, start, reference, clocks, used, pinned=None, timing=None, *rest):  # type: ignore[no-untyped-def]
+        result, fixed = real_adjust(rig, uv, start, reference, clocks, used, pinned, timing, *rest)
         passed.append((timing, fixed.timing, result.state.camera_timing[~timing] - clocks.start[~timing]))
         return result, fixed
 

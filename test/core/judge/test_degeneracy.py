@@ -8,6 +8,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from wand_calib_ros.core.adjust.bundle_problem import N_CAMERA_PARAMS
 from wand_calib_ros.core.errors import DegenerateDataError
 from wand_calib_ros.core.judge.degeneracy import check_uncertainty
 from wand_calib_ros.core.model.rig import CameraSpec, RigSpec, WandSpec
@@ -17,7 +18,7 @@ from wand_calib_ros.sim.scenarios import paper_fisheye_scenario
 def _undetermined(spec: CameraSpec) -> None:
     """check_uncertainty on one camera whose focal is known to +-200 % and principal point to +-5000 px."""
     model = paper_fisheye_scenario().cameras[0].model
-    std = np.zeros((1, 20))
+    std = np.zeros((1, N_CAMERA_PARAMS))
     std[0, 0], std[0, 5], std[0, 6] = 2.0 * model.k[0], 5000.0, 5000.0
     rig = RigSpec(WandSpec.from_lengths(400.0, 200.0), (spec,))
     check_uncertainty(rig, SimpleNamespace(state=SimpleNamespace(models=(model,)), camera_std=std))  # type: ignore[arg-type]

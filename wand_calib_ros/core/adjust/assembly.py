@@ -8,8 +8,16 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import NDArray
 
+from wand_calib_ros.core.adjust.brightness_bias import MIN_CLASS_POINTS, class_points
 from wand_calib_ros.core.adjust.bundle_adjustment import BundleResult
-from wand_calib_ros.core.adjust.bundle_problem import CAMERA_PARAM_NAMES, LENS, BundleProblem, BundleState
+from wand_calib_ros.core.adjust.bundle_problem import (
+    BIAS,
+    CAMERA_PARAM_NAMES,
+    LENS,
+    N_CAMERA_PARAMS,
+    BundleProblem,
+    BundleState,
+)
 from wand_calib_ros.core.adjust.gating import VIEW_GATE_SIGMAS
 from wand_calib_ros.core.adjust.linearisation import residuals, squared_norms
 from wand_calib_ros.core.adjust.model_order import FixedParameters, free_mask
@@ -18,13 +26,14 @@ from wand_calib_ros.core.adjust.placements import triangulate_placements
 from wand_calib_ros.core.adjust.timing import (
     ClockModel,
 )
+from wand_calib_ros.core.model.brightness import N_BIAS, N_BIAS_CLASSES, SHAPE_NAMES, bias_weights
 from wand_calib_ros.core.model.camera_model import (
     CameraModel,
     angle_of_radius,
     max_image_radius_mm,
     radial_basis,
 )
-from wand_calib_ros.core.model.result import CalibrationResult, CameraCalibration, LensTrial, TimingSummary
+from wand_calib_ros.core.model.result import CalibrationResult, CameraCalibration, ClassBias, LensTrial, TimingSummary
 from wand_calib_ros.core.model.rig import CameraSpec, RigSpec
 
 FloatArray = NDArray[np.float64]
@@ -202,8 +211,8 @@ def _cameras(
     rejected_views: NDArray[np.int64],
     warnings: list[str],
 ) -> list[CameraCalibration]:
-    """Each camera's calibration in the rig's order, with the ``reported`` (C, 20) standard deviations; what each
-    camera's coverage, weak parameters and rejected views should say is added to ``warnings``."""
+    """Each camera's calibration in the rig's order, with the ``reported`` (C, N_CAMERA_PARAMS) standard
+    deviations; what each camera's coverage, weak parameters and rejected views should say is added to ``warnings``."""
     state = result.state
     max_theta = max_off_axis(result, problem)
     n_cameras = problem.n_cameras
@@ -212,11 +221,16 @@ def _cameras(
     with np.errstate(invalid="ignore", divide="ignore"):
         rms_px = np.sqrt(squares / (2 * counts))  # over u and v; NaN for a camera without points
     view_counts = np.bincount(problem.camera[block_starts(problem.placement, problem.camera)], minlength=n_cameras)
+    counts_by_class, mean_stops = class_points(problem)
     by_camera = np.argsort(problem.camera, kind="stable")  # each camera's observations, a run each
     bounds = np.searchsorted(problem.camera[by_camera], np.arange(n_cameras + 1))
     cameras = []
     for c, spec in enumerate(rig.cameras):
-        std = {name: float(result.camera_std[c, i]) for i, name in enumerate(CAMERA_PARAM_NAMES) if reported[c, i]}
+        std = {  # (the centre bias's with it: :func:`_class_biases`)
+            name: float(result.camera_std[c, i])
+            for i, name in enumerate(CAMERA_PARAM_NAMES[: BIAS.start])
+            if reported[c, i]
+        }
         pinned = fixed.pinned is not None and bool(fixed.pinned.cameras()[c])
         mine = problem.uv[by_camera[bounds[c] : bounds[c + 1]]]
         warnings.extend(coverage_warnings(spec, state.models[c], max_theta[c], result, c, mine, pinned))
@@ -244,9 +258,37 @@ def _cameras(
                 float(state.camera_timing[c, 0]),
                 float(state.camera_timing[c, 1]),
                 "estimated" if spec.intrinsics is None else "given" if spec.intrinsics_fixed else "given_start",
+                _class_biases(result, fixed, c, counts_by_class[c], mean_stops[c]),
             )
         )
     return cameras
+
+
+def _class_biases(
+    result: BundleResult, fixed: FixedParameters, camera: int, counts: NDArray[np.int64], means: FloatArray
+) -> tuple[ClassBias, ...]:
+    """Where the centres of each brightness class sit in ``camera`` by the bias the adjustment estimated, with
+    their standard deviations (none where it has none); ``counts`` and ``means`` (N_BIAS_CLASSES + 1,) its points of
+    each class and their mean brightness."""
+    if fixed.bias is None or not fixed.bias[camera].any():
+        return ()
+    shape, start = int(result.state.bias_shapes[camera]), int(result.state.bias_starts[camera])
+    values = result.state.camera_bias[camera]
+    index = camera * N_CAMERA_PARAMS + BIAS.start + np.arange(N_BIAS)
+    covariance = result.camera_covariance[np.ix_(index, index)]
+    kept = fixed.bias[camera, ::3]
+    out = []
+    for k in range(1, N_BIAS_CLASSES + 1):
+        one = np.ones(1, dtype=np.int8)
+        weights = bias_weights(np.array([means[k]]), shape * one, start * one)[0]  # (terms,)
+        if counts[k] < MIN_CLASS_POINTS or not np.any(weights * kept):
+            continue
+        mix = np.kron(weights, np.eye(3))  # (3, N_BIAS): the class's offsets from the terms
+        u, v, r = (float(x) for x in mix @ values)
+        std = np.sqrt(np.clip(np.diag(mix @ covariance @ mix.T), 0.0, None))
+        spread = (float(std[0]), float(std[1]), float(std[2]))
+        out.append(ClassBias(k, (u, v), r, spread, int(counts[k]), SHAPE_NAMES[shape]))
+    return tuple(out)
 
 
 def timing_summary(rig: RigSpec, clocks: ClockModel, fixed: FixedParameters) -> TimingSummary | None:
@@ -270,13 +312,14 @@ def free_placements(state: BundleState, problem: BundleProblem, uv: FloatArray) 
 
 
 def synchronised_pixels(state: BundleState, problem: BundleProblem, uv: FloatArray) -> FloatArray:
-    """(P, C, 3, 2) the observations moved to their placement's time (the modelled motion removed).
+    """(P, C, 3, 2) the observations moved to their placement's time (the modelled motion removed), their centres'
+    modelled bias removed.
 
-    Triangulating these gives the wand as one instant saw it; without timing they are ``uv``.
+    Triangulating these gives the wand as one instant saw it; without timing or bias they are ``uv``.
     """
-    if problem.timing is None:
+    if problem.timing is None and (problem.brightness is None or state.bias is None):
         return uv
-    shift = residuals(state, problem) - residuals(state, replace(problem, timing=None))
+    shift = residuals(state, problem) - residuals(state, replace(problem, timing=None, brightness=None))
     out = np.array(uv, dtype=np.float64)
     out[problem.placement, problem.camera, problem.point] -= shift
     return out

@@ -18,12 +18,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wand_calib_ros.core.adjust.bundle_problem import (
+    BIAS,
     LENS,
     N_CAMERA_PARAMS,
     N_GEOMETRIC,
     BundleProblem,
     BundleState,
     apply_step,
+    bias_columns,
     lens_columns,
     parameter_mask,
     timing_columns,
@@ -59,8 +61,9 @@ class CameraSystem:
     rhs: FloatArray
 
     def step(self, free: NDArray[np.bool_], moves: FloatArray | None = None) -> FloatArray:
-        """(C, 20) the Gauss-Newton step with the camera parameters ``free`` (C, 20) estimated and the
-        others moved by ``moves`` (C, 20; e.g. a term fixed at zero: minus its value; None: they stay).
+        """(C, N_CAMERA_PARAMS) the Gauss-Newton step with the camera parameters ``free`` (C, N_CAMERA_PARAMS)
+        estimated and the others moved by ``moves`` (C, N_CAMERA_PARAMS; e.g. a term fixed at zero: minus its
+        value; None: they stay).
 
         With other parameters free than the adjustment's (e.g. distortion terms it held at zero
         released), this is the linearised estimate of that other model: no new linearisation, the
@@ -68,8 +71,9 @@ class CameraSystem:
         terms only where it carries them: else no camera's model has them).
         """
         missing = np.setdiff1d(np.arange(N_CAMERA_PARAMS), self.columns)
-        if free[:, missing[missing < LENS.start]].any():  # lens terms not carried are of no camera's model
-            raise ValueError("a timing parameter the adjustment did not carry cannot be estimated")
+        if free[:, missing[(missing < LENS.start) | (missing >= BIAS.start)]].any():  # (lens terms not carried
+            # are of no camera's model)
+            raise ValueError("a timing or centre-bias parameter the adjustment did not carry cannot be estimated")
         n_cameras = free.shape[0]
         free_flat = free[:, self.columns].reshape(-1)
         fixed = (
@@ -81,9 +85,10 @@ class CameraSystem:
         return delta
 
     def covariance(self, free: NDArray[np.bool_], sigma: float, prior_std: FloatArray | None = None) -> FloatArray:
-        """(C*20, C*20) sigma^2 S^-1 over the ``free`` (C, 20) camera parameters (0 rows and columns elsewhere).
+        """(C*N_CAMERA_PARAMS, C*N_CAMERA_PARAMS) sigma^2 S^-1 over the ``free`` (C, N_CAMERA_PARAMS) camera
+        parameters (0 rows and columns elsewhere).
 
-        With ``prior_std`` (C, 20), the parameters with a positive one are estimated too, each with a
+        With ``prior_std`` (C, N_CAMERA_PARAMS), the parameters with a positive one are estimated too, each with a
         Gaussian prior of that standard deviation (in its own unit) around its value: sigma^2 (S + sigma^2
         diag(1 / prior_std^2))^-1 over the free and those.
         """
@@ -102,13 +107,15 @@ class CameraSystem:
 
 
 def camera_std(covariance: FloatArray) -> FloatArray:
-    """(C, 20) the standard deviations on the diagonal of a (C*20, C*20) camera covariance (0 for fixed ones)."""
+    """(C, N_CAMERA_PARAMS) the standard deviations on the diagonal of a (C*N_CAMERA_PARAMS,
+    C*N_CAMERA_PARAMS) camera covariance (0 for fixed ones)."""
     return np.sqrt(np.clip(np.diag(covariance), 0.0, None)).reshape(-1, N_CAMERA_PARAMS)
 
 
 #: A choice of the parameters to estimate made on the normal equations at an adjustment's start (see
 #: :func:`bundle_adjust`): called with the start, its cameras' system and its noise estimate (px), it
-#: returns the (C, 20) parameters to estimate and the (C, 20) steps of those it fixes, or None.
+#: returns the (C, N_CAMERA_PARAMS) parameters to estimate and the (C, N_CAMERA_PARAMS) steps of those it fixes,
+#: or None.
 ChooseFree = Callable[["BundleState", CameraSystem, float], "tuple[NDArray[np.bool_], FloatArray] | None"]
 
 
@@ -121,9 +128,10 @@ class BundleResult:
         residuals: (M, 2) reprojection residuals (projected minus observed), px.
         iterations: LM iterations done.
         converged: whether a convergence criterion was met.
-        camera_std: (C, 20) standard deviations of the camera parameters
+        camera_std: (C, N_CAMERA_PARAMS) standard deviations of the camera parameters
             (:data:`CAMERA_PARAM_NAMES` order; 0 for fixed ones), from the final Jacobian.
-        camera_covariance: (C*20, C*20) covariance of all camera parameters (0 rows/cols for fixed).
+        camera_covariance: (C*N_CAMERA_PARAMS, C*N_CAMERA_PARAMS) covariance of all camera parameters (0
+            rows/cols for fixed).
         sigma: estimated pixel noise sqrt(sum r^2 / (m - p)), px.
         dof: (m, p) residual scalars and free parameters.
         system: the cameras' normal equations at ``state`` (None: no camera parameter was free).
@@ -173,7 +181,7 @@ def bundle_adjust(
     Args:
         state: initial values (Step 3 result, placements from triangulation).
         problem: the observations, sorted by placement then camera.
-        free: (C, 20) which camera parameters are estimated (see :func:`default_free_mask`; only those
+        free: (C, N_CAMERA_PARAMS) which camera parameters are estimated (see :func:`default_free_mask`; only those
             of each camera's model are, :func:`parameter_mask`); the timing ones need ``problem.timing``.
         loss_scale: Huber threshold on each observation's 2D residual (px), or None for least
             squares. The robust problem is solved by iteratively reweighted least squares.
@@ -201,7 +209,9 @@ def bundle_adjust(
         The optimised state, residuals and parameter uncertainties.
     """
     exists = parameter_mask(state.models)
-    carried = np.concatenate([timing_columns(free & exists), lens_columns(state.models)])  # beyond the geometric
+    carried = np.concatenate(  # beyond the geometric ones
+        [timing_columns(free & exists), lens_columns(state.models), bias_columns(free & exists)]
+    )
     estimated = _Estimated(free & exists, np.concatenate([np.arange(N_GEOMETRIC), carried]), problem)
     cameras = bool(estimated.free_flat.any())
     layout = block_layout(
@@ -243,7 +253,7 @@ class _Estimated:
     """What an adjustment estimates.
 
     Attributes:
-        free: (C, 20) the camera parameters estimated (of each camera's model only).
+        free: (C, N_CAMERA_PARAMS) the camera parameters estimated (of each camera's model only).
         columns: (K,) the camera parameters carried per camera (fixed ones included): the geometric ones, the
             timing ones free for some camera, and the lens terms some camera's model has.
         problem: the adjustment's observations.
@@ -293,8 +303,10 @@ def _chosen_start(
     if choice is None:
         return start, estimated
     free, moves = choice[0] & exists, choice[1]
-    if not np.array_equal(timing_columns(free), work.carried[work.carried < LENS.start]):
-        raise ValueError("a choice of the parameters to estimate cannot change the timing ones carried")
+    if not np.array_equal(timing_columns(free), work.carried[work.carried < LENS.start]) or not np.array_equal(
+        bias_columns(free), work.carried[work.carried >= BIAS.start]
+    ):
+        raise ValueError("a choice of the parameters to estimate cannot change the timing or bias ones carried")
     chosen_estimate = _Estimated(free, estimated.columns, estimated.problem)
     columns = estimated.columns
     delta_c = start_system.step(free, moves)[:, columns]

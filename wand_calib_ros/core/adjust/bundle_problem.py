@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wand_calib_ros.core.model import pinhole
+from wand_calib_ros.core.model.brightness import BIAS_COMPONENTS, N_BIAS, N_BIAS_CLASSES
 from wand_calib_ros.core.model.camera_model import EQUIDISTANT, N_EXTRA, N_INTRINSIC, N_RADIAL, PLUMB_BOB, CameraModel
 from wand_calib_ros.core.model.geometry import Pose, rotation_from_rotvec, tangent_basis
 from wand_calib_ros.core.model.rig import WandSpec
@@ -38,21 +39,25 @@ IntArray = NDArray[np.int64]
 
 #: Geometric parameters per camera: k1..k5, u0, v0, rotation (3), translation (3).
 N_GEOMETRIC = N_INTRINSIC + 6
-#: Parameters per camera: the geometric ones, the time offset and the rolling-shutter readout time, then
-#: the pinhole models' tangential (t1, t2) and rational (d1, d2, d3) terms.
-N_CAMERA_PARAMS = N_GEOMETRIC + 2 + N_EXTRA
+#: Parameters per camera: the geometric ones, the time offset and the rolling-shutter readout time, the
+#: pinhole models' tangential (t1, t2) and rational (d1, d2, d3) terms, then the centre bias of each brightness
+#: class (:mod:`~wand_calib_ros.core.model.brightness`).
+N_CAMERA_PARAMS = N_GEOMETRIC + 2 + N_EXTRA + N_BIAS
 #: Indices of the timing parameters in a camera's parameter vector.
 TIME_OFFSET, READOUT = N_GEOMETRIC, N_GEOMETRIC + 1
 TIMING = slice(TIME_OFFSET, READOUT + 1)
 #: The pinhole models' further parameters in a camera's parameter vector (its ``CameraModel.lens_vector``).
-LENS = slice(READOUT + 1, N_CAMERA_PARAMS)
+LENS = slice(READOUT + 1, READOUT + 1 + N_EXTRA)
+#: The centre bias in a camera's parameter vector: per brightness class 1.. its offsets along u, v and radially.
+BIAS = slice(LENS.stop, N_CAMERA_PARAMS)
 #: Every intrinsic parameter's index in a camera's parameter vector.
 INTRINSICS = np.r_[0:N_INTRINSIC, LENS.start : LENS.stop]
 #: Names of the per-camera parameters in order (rotation as a small-angle update, rad; the timing
-#: parameters in the time unit of the observations; t1, t2 in mm, d1..d3 dimensionless).
+#: parameters in the time unit of the observations; t1, t2 in mm, d1..d3 dimensionless; the bias in px).
 CAMERA_PARAM_NAMES = (
     "k1", "k2", "k3", "k4", "k5", "u0", "v0", "rx", "ry", "rz", "tx", "ty", "tz", "time_offset", "readout",
     "t1", "t2", "d1", "d2", "d3",
+    *(f"bias{k}_{axis}" for k in range(1, N_BIAS_CLASSES + 1) for axis in BIAS_COMPONENTS),
 )  # fmt: skip
 
 
@@ -148,6 +153,8 @@ class BundleProblem:
         uv: (M, 2) observed pixels.
         timing: when each observation was seen and how its point moved (None: every camera saw a
             placement at one instant, as hardware-triggered global shutters do).
+        brightness: (M,) each observation's brightness, stops over full scale (:mod:`~wand_calib_ros.core.model.
+            brightness`; NaN: not known; None: none known, no centre bias modelled).
     """
 
     wand: WandSpec
@@ -158,13 +165,19 @@ class BundleProblem:
     point: IntArray
     uv: FloatArray
     timing: ObservationTiming | None = None
+    brightness: FloatArray | None = None
 
     @staticmethod
     def from_dense(
-        wand: WandSpec, uv: FloatArray, timing: PlacementTiming | None = None, rows: IntArray | None = None
+        wand: WandSpec,
+        uv: FloatArray,
+        timing: PlacementTiming | None = None,
+        rows: IntArray | None = None,
+        brightness: FloatArray | None = None,
     ) -> BundleProblem:
         """Problem from dense (P, C, 3, 2) pixels with NaN for unseen points, or from their placements ``rows``
-        (R,) only (no copy of those), and the timing of those placements."""
+        (R,) only (no copy of those), the timing of those placements and the points' (P, C, 3) brightness (of
+        all P placements, as ``uv``)."""
         n_placements, n_cameras = (uv.shape[0] if rows is None else rows.size), uv.shape[1]
         flat, placement, camera, point = observed_points(uv, rows)
         observed = uv.reshape(-1, 2)[flat]
@@ -177,11 +190,27 @@ class BundleProblem:
             point,
             observed,
             None if timing is None else timing.observations(placement, camera, point, observed),
+            None if brightness is None else brightness.reshape(-1)[flat],
         )
 
     @property
     def n_observations(self) -> int:
         return int(self.camera.size)
+
+
+@dataclass(frozen=True, eq=False)
+class CameraBias:
+    """The cameras' centre bias (:mod:`~wand_calib_ros.core.model.brightness`).
+
+    Attributes:
+        values: (C, N_BIAS) each camera's terms (u, v, r each), px (per stop for a linear shape's second term).
+        shapes: (C,) each camera's shape: CLASSES, LINEAR or CONSTANT.
+        starts: (C,) the brightness class a LINEAR or CONSTANT shape starts from (1: full scale).
+    """
+
+    values: FloatArray
+    shapes: NDArray[np.int8]
+    starts: NDArray[np.int8]
 
 
 @dataclass(frozen=True, eq=False)
@@ -195,6 +224,7 @@ class BundleState:
         wand_direction: (P, 3) unit vector from A to C.
         timing: (C, 2) per camera time offset (exposure = stamp - offset) and rolling-shutter readout
             time, in the time unit of the observations; None: all zero.
+        bias: the cameras' centre bias; None: none.
     """
 
     models: tuple[CameraModel, ...]
@@ -202,11 +232,28 @@ class BundleState:
     wand_a: FloatArray
     wand_direction: FloatArray
     timing: FloatArray | None = None
+    bias: CameraBias | None = None
 
     @property
     def camera_timing(self) -> FloatArray:
         """(C, 2) time offset and readout time per camera (zeros when not modelled)."""
         return np.zeros((len(self.models), 2)) if self.timing is None else self.timing
+
+    @property
+    def camera_bias(self) -> FloatArray:
+        """(C, N_BIAS) the centre bias's terms per camera (zeros when not modelled)."""
+        return np.zeros((len(self.models), N_BIAS)) if self.bias is None else self.bias.values
+
+    @property
+    def bias_shapes(self) -> NDArray[np.int8]:
+        """(C,) the shape of each camera's centre bias (:data:`~wand_calib_ros.core.model.brightness.CLASSES` when
+        not modelled)."""
+        return np.zeros(len(self.models), dtype=np.int8) if self.bias is None else self.bias.shapes
+
+    @property
+    def bias_starts(self) -> NDArray[np.int8]:
+        """(C,) the class each camera's LINEAR or CONSTANT bias starts from (1 when not modelled)."""
+        return np.ones(len(self.models), dtype=np.int8) if self.bias is None else self.bias.starts
 
     def points(self, wand: WandSpec) -> FloatArray:
         """(P, 3, 3) A, B, C of every placement in the reference frame, mm."""
@@ -222,6 +269,12 @@ def timing_columns(free: NDArray[np.bool_]) -> IntArray:
     return (np.flatnonzero(free[:, TIMING].any(axis=0)) + TIMING.start).astype(np.int64)
 
 
+def bias_columns(free: NDArray[np.bool_]) -> IntArray:
+    """The centre-bias parameters (indices into :data:`CAMERA_PARAM_NAMES`) free for at least one camera: the
+    adjustment carries only these, so a take without brightness costs what it did."""
+    return (np.flatnonzero(free[:, BIAS].any(axis=0)) + BIAS.start).astype(np.int64)
+
+
 def lens_columns(models: tuple[CameraModel, ...]) -> IntArray:
     """The pinhole models' lens terms (indices into :data:`CAMERA_PARAM_NAMES`) some camera's model has:
     the adjustment carries them (fixed or free) only then, so a fisheye-model rig costs what it did."""
@@ -231,11 +284,13 @@ def lens_columns(models: tuple[CameraModel, ...]) -> IntArray:
 def default_free_mask(
     n_cameras: int, reference: int = 0, models: tuple[CameraModel, ...] | None = None
 ) -> NDArray[np.bool_]:
-    """(C, 20) mask: every intrinsic free (of the cameras' ``models``, when given: the adjustment leaves out
-    what a model does not have anyway), every pose but the reference camera's free, no timing."""
+    """(C, N_CAMERA_PARAMS) mask: every intrinsic free (of the cameras' ``models``, when given: the adjustment
+    leaves out what a model does not have anyway), every pose but the reference camera's free, no timing, no
+    centre bias."""
     free = np.ones((n_cameras, N_CAMERA_PARAMS), dtype=bool)
     free[reference, N_INTRINSIC:N_GEOMETRIC] = False
     free[:, TIMING] = False
+    free[:, BIAS] = False
     return free if models is None else free & parameter_mask(models)
 
 
@@ -254,13 +309,16 @@ def apply_step(state: BundleState, delta_c: FloatArray, delta_p: FloatArray, car
     delta = np.zeros((len(state.models), N_CAMERA_PARAMS))
     delta[:, np.concatenate([np.arange(N_GEOMETRIC), carried])] = delta_c
     delta[~parameter_mask(state.models)] = 0.0  # what a camera's model does not have stays as it is
-    lens = bool(np.any(carried >= LENS.start))
+    lens = bool(np.any((carried >= LENS.start) & (carried < LENS.stop)))
     moved = [moved_camera(m, p, d, lens=lens) for m, p, d in zip(state.models, state.poses, delta, strict=True)]
     models, poses = [m for m, _ in moved], [p for _, p in moved]
     camera_timing = state.timing
     if np.any(carried < LENS.start):
         camera_timing = state.camera_timing + delta[:, TIMING]
+    bias = state.bias
+    if np.any(carried >= BIAS.start):
+        bias = CameraBias(state.camera_bias + delta[:, BIAS], state.bias_shapes, state.bias_starts)
     basis = tangent_basis(state.wand_direction)
     direction = state.wand_direction + np.einsum("pij,pj->pi", basis, delta_p[:, 3:])
     direction /= np.linalg.norm(direction, axis=1, keepdims=True)
-    return BundleState(tuple(models), tuple(poses), state.wand_a + delta_p[:, :3], direction, camera_timing)
+    return BundleState(tuple(models), tuple(poses), state.wand_a + delta_p[:, :3], direction, camera_timing, bias)

@@ -102,7 +102,9 @@ def rejected_views(
 
 
 def subset_state(state: BundleState, mask: NDArray[np.bool_]) -> BundleState:
-    return BundleState(state.models, state.poses, state.wand_a[mask], state.wand_direction[mask], state.timing)
+    return BundleState(
+        state.models, state.poses, state.wand_a[mask], state.wand_direction[mask], state.timing, state.bias
+    )
 
 
 def huber_scale(state: BundleState, problem: BundleProblem) -> float:
@@ -132,7 +134,12 @@ def robust_adjustment(
 
 
 def readmit(
-    rig: RigSpec, uv: FloatArray, aside: NDArray[np.int64], result: BundleResult, timing: PlacementTiming | None
+    rig: RigSpec,
+    uv: FloatArray,
+    aside: NDArray[np.int64],
+    result: BundleResult,
+    timing: PlacementTiming | None,
+    brightness: FloatArray | None = None,
 ) -> tuple[NDArray[np.bool_], NDArray[np.bool_], BundleState]:
     """The placements set aside that fit the solved cameras once their outlying views are removed.
 
@@ -143,6 +150,7 @@ def readmit(
 
     Args:
         uv: (P, C, K, 2) every placement's pixels; ``aside`` (S,) the placements to try, ``timing`` theirs.
+        brightness: (P, C, K) every placement's points' brightness classes (None: not known).
 
     Returns:
         (S,) which of ``aside`` come in, (A, C) the views of those A to leave out (rejected), and their fitted
@@ -154,7 +162,9 @@ def readmit(
     # stage64's final adjustment, its Gauss-Newton step from the chosen model order raising the cost, took two
     # more linearisations: 3.0 -> 5.9 s for 0.9 s saved here). Their views are read in place (no copy: 150 MB
     # at 64 cameras).
-    index, fitted = fit_placements(rig.wand, result.state, uv, timing, rows=aside, loss_scale=HUBER_SIGMAS * sigma)
+    index, fitted = fit_placements(
+        rig.wand, result.state, uv, timing, rows=aside, loss_scale=HUBER_SIGMAS * sigma, brightness=brightness
+    )
     rows = aside[index]
     rejected = rejected_views(uv, fitted.residuals, VIEW_GATE_SIGMAS * sigma, rows)
     ok = enough_views(uv, rows, left_out=rejected)

@@ -17,7 +17,7 @@ The wand-length start (:mod:`~wand_calib_ros.core.initialise.wand_lm`) keeps its
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -397,17 +397,15 @@ def held_placements(
     Args:
         res: (M, 2) the residuals at ``candidate``.
     """
-    held = BundleState(candidate.models, candidate.poses, state.wand_a, state.wand_direction, candidate.timing)
+    held = replace(candidate, wand_a=state.wand_a, wand_direction=state.wand_direction)
     n = problem.n_placements
     stepped = np.bincount(problem.placement, observation_costs(res, loss_scale), minlength=n)
     kept = np.bincount(problem.placement, observation_costs(residuals(held, problem), loss_scale), minlength=n)
     worse = ~(stepped <= kept)  # NaN costs count as worse
     if not worse.any() or not float(np.sum(np.where(worse, kept, stepped))) < cost:
         return None
-    return BundleState(
-        candidate.models,
-        candidate.poses,
-        np.where(worse[:, None], state.wand_a, candidate.wand_a),
-        np.where(worse[:, None], state.wand_direction, candidate.wand_direction),
-        candidate.timing,
+    return replace(
+        candidate,
+        wand_a=np.where(worse[:, None], state.wand_a, candidate.wand_a),
+        wand_direction=np.where(worse[:, None], state.wand_direction, candidate.wand_direction),
     )

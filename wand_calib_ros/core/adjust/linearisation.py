@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wand_calib_ros.core.adjust.bundle_problem import (
+    BIAS,
     LENS,
     N_GEOMETRIC,
     TIME_OFFSET,
@@ -32,6 +33,7 @@ from wand_calib_ros.core.adjust.normal_equations import (
     empty_normal_equations,
 )
 from wand_calib_ros.core.model import pinhole
+from wand_calib_ros.core.model.brightness import N_BIAS, bias_basis, bias_offsets, bias_weights, radial_directions
 from wand_calib_ros.core.model.camera_model import (
     N_EXTRA,
     N_INTRINSIC,
@@ -46,8 +48,9 @@ FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
 #: Columns of :class:`_Unknowns`' camera table: k (5), m (2), principal point (2), rotation (9, row-major),
-#: translation (3), time offset and readout (2), the pinhole models' further terms (5).
-_K, _M, _PP, _ROT, _T, _TIMING, _EXTRA = 0, 5, 7, 9, 18, 21, 23
+#: translation (3), time offset and readout (2), the pinhole models' further terms (5), the centre bias's terms (15),
+#: shape (1) and start (1).
+_K, _M, _PP, _ROT, _T, _TIMING, _EXTRA, _BIAS, _SHAPE, _START = 0, 5, 7, 9, 18, 21, 23, 28, 43, 44
 #: Columns of its placement table: A (3), the direction (3), its tangent basis e1 (3) and e2 (3).
 _A, _DIRECTION, _E1, _E2 = 0, 3, 6, 9
 
@@ -57,15 +60,17 @@ class _Unknowns:
     """The state as two tables the linearisation gathers rows from, one gather per chunk.
 
     Attributes:
-        cameras: (C, 28) per camera k, m, principal point, rotation (row-major), translation, time
-            offset and readout time, the pinhole models' further terms.
+        cameras: (C, 45) per camera k, m, principal point, rotation (row-major), translation, time
+            offset and readout time, the pinhole models' further terms, the centre bias's terms, shape and start.
         placements: (P, 12) per placement A, the unit direction A -> C and its tangent basis e1, e2.
         pinhole: (C,) which cameras have a pinhole model (None: none has).
+        biased: whether some camera's centre bias is not zero.
     """
 
     cameras: FloatArray
     placements: FloatArray
     pinhole: NDArray[np.bool_] | None = None
+    biased: bool = False
 
     @staticmethod
     def of(state: BundleState) -> _Unknowns:
@@ -79,13 +84,17 @@ class _Unknowns:
                 np.stack([p.translation for p in state.poses]),
                 state.camera_timing,
                 np.stack([m.lens_vector() for m in state.models]),
+                state.camera_bias,
+                state.bias_shapes[:, None],
+                state.bias_starts[:, None],
             ],
             axis=1,
         )
         basis = tangent_basis(state.wand_direction)  # (P, 3, 2)
         placements = np.concatenate([state.wand_a, state.wand_direction, basis[:, :, 0], basis[:, :, 1]], axis=1)
         pinhole = np.array([m.is_pinhole for m in state.models], dtype=bool)
-        return _Unknowns(cameras, placements, pinhole if pinhole.any() else None)
+        biased = state.bias is not None and bool(np.any(state.bias.values))
+        return _Unknowns(cameras, placements, pinhole if pinhole.any() else None, biased)
 
 
 def _project_rows(
@@ -169,6 +178,9 @@ def _linearise_rows(
     uv, d_camera, d_intrinsics, d_extra = _project_rows(
         unknowns, cam, c, in_camera, jacobians=jacobians, intrinsics=cameras
     )
+    centres = None
+    if problem.brightness is not None and (unknowns.biased or np.any(carried >= BIAS.start)):
+        centres = _centres(uv, d_intrinsics, cam, problem.brightness[first:stop], problem.uv[first:stop])
     res = uv - problem.uv[first:stop]
     if not jacobians:
         return res, None, None
@@ -178,7 +190,7 @@ def _linearise_rows(
     jp = np.empty((n, 2, N_PLACEMENT_PARAMS + 1))
     jp[:, :, N_PLACEMENT_PARAMS] = res
     if jc is not None:
-        _camera_columns(jc, d_intrinsics, d_camera, d_extra, carried, res)
+        _camera_columns(jc, d_intrinsics, d_camera, d_extra, carried, res, centres)
     d_point = d_camera.transpose(1, 2, 0)  # (2, 3, n): d(u, v) / d(x, y, z), camera frame
     timing = carried[carried < LENS.start]
     row = None if problem.timing is None else problem.timing.row[first:stop]
@@ -204,6 +216,22 @@ def _linearise_rows(
     return res, jc, jp
 
 
+def _centres(
+    uv: FloatArray, d_intrinsics: FloatArray | None, cam: FloatArray, stops: FloatArray, observed: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Add each point's centre bias (its camera's, at its brightness ``stops``) to its projection ``uv`` (n, 2),
+    and its derivative by the principal point (through the radial direction) to ``d_intrinsics`` (when it has
+    the intrinsics' columns), in place. Returns (n, N_BIAS_TERMS) the points' weights of the terms and (n, 2) the
+    radial directions, for the bias columns."""
+    direction, d_direction = radial_directions(observed, cam[_PP : _PP + 2].T)
+    weights = bias_weights(stops, cam[_SHAPE].astype(np.int8), cam[_START].astype(np.int8))
+    offsets, radial = bias_offsets(cam[_BIAS : _BIAS + N_BIAS].T, weights, direction)
+    uv += offsets
+    if d_intrinsics is not None and d_intrinsics.shape[2] == N_INTRINSIC:
+        d_intrinsics[:, :, N_RADIAL : N_RADIAL + 2] += radial[:, None, None] * d_direction
+    return weights, direction
+
+
 def _moved_in_time(
     world: FloatArray, cam: FloatArray, timing: ObservationTiming, first: int, stop: int
 ) -> tuple[FloatArray, FloatArray]:
@@ -224,17 +252,24 @@ def _camera_columns(
     d_extra: FloatArray | None,
     carried: IntArray,
     res: FloatArray,
+    centres: tuple[FloatArray, FloatArray] | None,
 ) -> None:
-    """Fill the camera Jacobian ``jc`` (n, 2, 13 + len(carried) + 1)'s intrinsic, translation, lens-term and
-    residual columns (the rotation and timing columns are the point's: :func:`_linearise_rows`)."""
+    """Fill the camera Jacobian ``jc`` (n, 2, 13 + len(carried) + 1)'s intrinsic, translation, lens-term,
+    centre-bias and residual columns (the rotation and timing columns are the point's: :func:`_linearise_rows`);
+    ``centres``: the points' weights of the bias terms and radial directions (:func:`_centres`)."""
     width = jc.shape[2] - 1
     jc[:, :, :N_INTRINSIC] = d_intrinsics
     jc[:, :, N_INTRINSIC + 3 : N_GEOMETRIC] = d_camera  # translation
-    lens = carried[carried >= LENS.start]
+    lens = np.flatnonzero((carried >= LENS.start) & (carried < LENS.stop))
     if lens.size:
         if d_extra is None:
             raise ValueError("lens terms are carried only for pinhole cameras")
-        jc[:, :, N_GEOMETRIC + carried.size - lens.size : width] = d_extra[:, :, lens - LENS.start]
+        jc[:, :, N_GEOMETRIC + lens[0] : N_GEOMETRIC + lens[-1] + 1] = d_extra[:, :, carried[lens] - LENS.start]
+    bias = np.flatnonzero(carried >= BIAS.start)
+    if bias.size:
+        if centres is None:
+            raise ValueError("a centre bias is carried only for observations of known brightness")
+        jc[:, :, N_GEOMETRIC + bias[0] : width] = bias_basis(*centres, carried[bias] - BIAS.start)
     jc[:, :, width] = res
 
 

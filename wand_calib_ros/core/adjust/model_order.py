@@ -14,8 +14,10 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from wand_calib_ros.core.adjust.brightness_bias import bias_candidates, decide_bias, stops_of
 from wand_calib_ros.core.adjust.bundle_adjustment import BundleResult, CameraSystem, bundle_adjust
 from wand_calib_ros.core.adjust.bundle_problem import (
+    BIAS,
     CAMERA_PARAM_NAMES,
     INTRINSICS,
     LENS,
@@ -86,7 +88,7 @@ def low_order(models: tuple[CameraModel, ...]) -> tuple[CameraModel, ...]:
 
 
 def low_order_mask(models: tuple[CameraModel, ...], free: NDArray[np.bool_], *, terms: int = 0) -> NDArray[np.bool_]:
-    """``free`` (C, 20) with the terms of :data:`LOW_ORDER_FIXED` held, but for the first ``terms`` of them
+    """``free`` (C, N_CAMERA_PARAMS) with the terms of :data:`LOW_ORDER_FIXED` held, but for the first ``terms`` of them
     (k3 of the fisheye model, k4 of plumb_bob's: ``terms=1``)."""
     out = free.copy()
     for c, model in enumerate(models):
@@ -100,8 +102,8 @@ class Pinned:
     point and distortion, :mod:`~wand_calib_ros.core.adjust.narrow_field`).
 
     Attributes:
-        mask: (C, 20) the parameters held.
-        std: (C, 20) the standard deviation of the prior they are held at (0: held exactly); the
+        mask: (C, N_CAMERA_PARAMS) the parameters held.
+        std: (C, N_CAMERA_PARAMS) the standard deviation of the prior they are held at (0: held exactly); the
             reported covariance includes it.
     """
 
@@ -123,8 +125,11 @@ class FixedParameters:
         per_camera: per camera the fixed terms.
         timing: (C, 2) whether each camera's time offset and readout time are estimated.
         held: (C,) cameras whose given intrinsics are held fixed (all of them).
-        exists: (C, 20) the parameters each camera's model has (None: the fisheye model's, every camera).
+        exists: (C, N_CAMERA_PARAMS) the parameters each camera's model has (None: the fisheye model's, every
+            camera).
         pinned: parameters held at their start whatever the order (None: none).
+        bias: (C, N_BIAS) the centre-bias terms estimated (:mod:`~wand_calib_ros.core.adjust.brightness_bias`;
+            None: none).
     """
 
     per_camera: tuple[tuple[int, ...], ...]
@@ -132,6 +137,7 @@ class FixedParameters:
     held: NDArray[np.bool_]
     exists: NDArray[np.bool_] | None = None
     pinned: Pinned | None = None
+    bias: NDArray[np.bool_] | None = None
 
     def ordered(self) -> NDArray[np.bool_]:
         """(C,) the cameras whose model order is decided (neither given and held nor pinned)."""
@@ -144,12 +150,14 @@ def held_intrinsics(rig: RigSpec) -> NDArray[np.bool_]:
 
 
 def free_mask(n_cameras: int, reference: int, fixed: FixedParameters) -> NDArray[np.bool_]:
-    """(C, 20) the parameters an adjustment with ``fixed`` estimates."""
+    """(C, N_CAMERA_PARAMS) the parameters an adjustment with ``fixed`` estimates."""
     free = default_free_mask(n_cameras, reference)
     for camera, indices in enumerate(fixed.per_camera):
         free[camera, list(indices)] = False
     free[np.ix_(fixed.held, INTRINSICS)] = False
     free[:, TIMING] = fixed.timing
+    if fixed.bias is not None:
+        free[:, BIAS] = fixed.bias
     if fixed.pinned is not None:
         free &= ~fixed.pinned.mask
     if fixed.exists is None:
@@ -178,6 +186,8 @@ def adjust_with_model_selection(
     used: NDArray[np.int64],
     pinned: Pinned | None = None,
     timing: NDArray[np.bool_] | None = None,
+    brightness: FloatArray | None = None,
+    bias: NDArray[np.bool_] | None = None,
 ) -> tuple[BundleResult, FixedParameters]:
     """Bundle-adjust with every k3..k5 (and the timing) free, then drop what the data do not support and re-adjust.
 
@@ -191,18 +201,26 @@ def adjust_with_model_selection(
     ``x - cov[:, h] / cov[h, h] * x[h]`` and shrinks the covariance accordingly, so
     one re-adjustment (from that better start) settles a term fixed only then. Time
     offsets and readout times under ``auto`` are kept only when significant
-    (:func:`wand_calib_ros.core.adjust.timing.reduce_timing`).
+    (:func:`wand_calib_ros.core.adjust.timing.reduce_timing`), and a centre bias only where significant
+    (:func:`~wand_calib_ros.core.adjust.brightness_bias.reduce_bias`).
 
     Args:
         uv: (P, C, 3, 2) the placements to adjust, ``used`` (P,) their indices in the timeline.
         pinned: parameters held at their start (no order decided for their cameras).
         timing: (C, 2) the timing parameters to estimate, ``clocks.free`` or fewer (None: ``clocks.free``): a
             decision made before, whose dropped parameters ``initial`` holds at ``clocks.start``, is not made again.
+        brightness: (T, C, 3) the brightness of the timeline's points, stops over full scale (None: not known).
+        bias: (C, N_BIAS) the bias terms to estimate, of the candidates or fewer (None: every candidate): a
+            decision made before, in the shapes ``initial`` has (:func:`~wand_calib_ros.core.adjust.
+            brightness_bias.decide_bias`).
     """
-    problem = BundleProblem.from_dense(rig.wand, uv, clocks.placements(used))
+    problem = BundleProblem.from_dense(rig.wand, uv, clocks.placements(used), None, stops_of(brightness, used))
     exists = parameter_mask(initial.models)
     free_timing = clocks.free if timing is None else clocks.free & timing
-    fixed = FixedParameters(tuple(() for _ in rig.cameras), free_timing.copy(), held_intrinsics(rig), exists, pinned)
+    free_bias = bias_candidates(problem) if bias is None else bias
+    fixed = FixedParameters(
+        tuple(() for _ in rig.cameras), free_timing.copy(), held_intrinsics(rig), exists, pinned, free_bias
+    )
     start = initial
     choose: OrderOnAllPlacements | None = OrderOnAllPlacements(rig, fixed, reference, len(uv))
     while True:
@@ -217,18 +235,27 @@ def adjust_with_model_selection(
                 covariance = intrinsic_covariance(result.camera_covariance, c)
                 per_camera[c], models[c] = reduce_radial(spec, models[c], covariance, per_camera[c])
         timing = reduce_timing(clocks, result, fixed.timing)
-        if tuple(per_camera) == fixed.per_camera and np.array_equal(timing, fixed.timing):
+        kept, centre = fixed.bias, result.state.bias
+        if fixed.bias is not None:
+            kept, centre = decide_bias(result, fixed.bias, problem, rig.camera_names)
+        if (
+            tuple(per_camera) == fixed.per_camera
+            and np.array_equal(timing, fixed.timing)
+            and (kept is None or fixed.bias is None or np.array_equal(kept, fixed.bias))
+            and (centre is None or np.array_equal(centre.shapes, result.state.bias_shapes))
+        ):
             log.info("model order on %d placements: %s", len(uv), _orders_text(rig, fixed))
             return result, fixed
         state = result.state
         values = state.camera_timing.copy()
         values[fixed.timing & ~timing] = clocks.start[fixed.timing & ~timing]
-        fixed = replace(fixed, per_camera=tuple(per_camera), timing=timing)
-        start = BundleState(zero_fixed(tuple(models), fixed), state.poses, state.wand_a, state.wand_direction, values)
+        fixed = replace(fixed, per_camera=tuple(per_camera), timing=timing, bias=kept)
+        start = replace(state, models=zero_fixed(tuple(models), fixed), timing=values, bias=centre)
 
 
 def intrinsic_covariance(covariance: FloatArray, camera: int) -> FloatArray:
-    """(12, 12) the covariance of one camera's :func:`intrinsics_of` from the (C*20, C*20) camera covariance."""
+    """(12, 12) the covariance of one camera's :func:`intrinsics_of` from the (C*N_CAMERA_PARAMS, C*N_CAMERA_PARAMS)
+    camera covariance."""
     index = camera * N_CAMERA_PARAMS + INTRINSICS
     return covariance[np.ix_(index, index)]
 

@@ -82,7 +82,7 @@ def narrow_pins(rig: RigSpec, narrow: NDArray[np.bool_]) -> Pinned:
 
 
 def views_std(system: CameraSystem, free: NDArray[np.bool_], sigma: float, pinned: Pinned) -> FloatArray:
-    """(C, 20) standard deviations of the parameters held at a prior as the views alone determine them
+    """(C, N_CAMERA_PARAMS) standard deviations of the parameters held at a prior as the views alone determine them
     (released with the other free parameters, without the prior), 0 elsewhere."""
     at_prior = pinned.std > 0
     return np.where(at_prior, camera_std(system.covariance(free | at_prior, sigma)), 0.0)

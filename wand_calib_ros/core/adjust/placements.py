@@ -92,6 +92,7 @@ def fit_placements(
     loss_scale: float | None = None,
     max_iterations: int = 10,
     tolerance: float = 1e-5,
+    brightness: FloatArray | None = None,
 ) -> tuple[NDArray[np.int64], BundleResult]:
     """Each placement's wand (A and direction) fitted to its views with the cameras held fixed.
 
@@ -107,6 +108,8 @@ def fit_placements(
         rows: (R,) the placements to fit (no copy of their views); None: all.
         loss_scale: Huber threshold (px) of the fit, or None for least squares.
         max_iterations, tolerance: of the Levenberg-Marquardt.
+        brightness: (P, C, K) the points' brightness classes (their centres corrected by the cameras' bias; None:
+            not known).
 
     Returns:
         The indices of the fitted placements (into ``rows`` where given) and the fit (its state holds only them).
@@ -120,9 +123,16 @@ def fit_placements(
         usable[usable] &= ~unprojectable(models, poses, uv[placements[usable]], points[usable])
     index = np.flatnonzero(usable)
     start = BundleState(
-        models, poses, points[index, 0], wand_directions(points[index, 0], points[index, -1]), cameras.timing
+        models,
+        poses,
+        points[index, 0],
+        wand_directions(points[index, 0], points[index, -1]),
+        cameras.timing,
+        cameras.bias,
     )
-    problem = BundleProblem.from_dense(wand, uv, None if timing is None else timing.subset(index), placements[index])
+    problem = BundleProblem.from_dense(
+        wand, uv, None if timing is None else timing.subset(index), placements[index], brightness
+    )
     if index.size == 0:
         return index, BundleResult(start, np.zeros((0, 2)), 0, True, np.zeros((len(models), N_CAMERA_PARAMS)),
                                    np.zeros((0, 0)), 0.0, (0, 0))  # fmt: skip

@@ -454,7 +454,8 @@ def significant(
 
 
 def with_timing(free: NDArray[np.bool_], timing: NDArray[np.bool_]) -> NDArray[np.bool_]:
-    """(C, 20) the camera parameters ``free`` with the timing parameters ``timing`` (C, 2) estimated (a copy)."""
+    """(C, N_CAMERA_PARAMS) the camera parameters ``free`` with the timing parameters ``timing`` (C, 2) estimated
+    (a copy)."""
     out = free.copy()
     out[:, TIMING] = timing
     return out
@@ -474,7 +475,7 @@ def clearly_synchronised(clocks: ClockModel, system: CameraSystem, sigma: float,
         clocks: the tentative model (``clocks.free`` the parameters tested, the ``auto`` ones).
         system: the cameras' normal equations at the synchronised solution, the timing parameters carried.
         sigma: the pixel noise of that linearisation (its robust one).
-        free: (C, 20) the other camera parameters estimated.
+        free: (C, N_CAMERA_PARAMS) the other camera parameters estimated.
     """
     tested = with_timing(free, clocks.free)
     for column, parameter in ((1, READOUT), (0, TIME_OFFSET)):  # the finer term first, as reduce_timing

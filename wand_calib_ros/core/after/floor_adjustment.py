@@ -98,7 +98,8 @@ def adjust_floor(
 
     Args:
         models, poses: the calibrated cameras (poses relative to the reference camera).
-        covariance: (C*20, C*20) the calibration's covariance of the camera parameters (rig order).
+        covariance: (C*N_CAMERA_PARAMS, C*N_CAMERA_PARAMS) the calibration's covariance of the camera parameters
+            (rig order).
         sigma_px: the calibration's pixel noise.
         uv: (F, C, K, 2) the floor frames' views, NaN where not seen.
         start: X_ref = R X_world + T to start from (the two-stage fit).
@@ -151,7 +152,7 @@ class _FloorProblem:
         start: the floor frame at x = 0.
         free: (n,) the free camera parameters' indices into the (C*20,) rig order.
         prior: (r, n) the whitening matrix of the calibration's prior (:func:`_prior`).
-        std: (C, 20) the calibration's standard deviations.
+        std: (C, N_CAMERA_PARAMS) the calibration's standard deviations.
         sigma_px: the calibration's pixel noise.
         frame, camera, marker: (M,) each floor view's frame, camera and marker.
         observed: (M, 2) its pixels.

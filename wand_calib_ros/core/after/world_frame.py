@@ -188,7 +188,8 @@ def floor_of(
     Args:
         models, poses: the calibrated cameras.
         uv: the floor frames' views: the wand's markers, or the tool's in any order per view (labelled here).
-        covariance: (C*20, C*20) the calibration's camera covariance (CalibrationResult.camera_covariance).
+        covariance: (C*N_CAMERA_PARAMS, C*N_CAMERA_PARAMS) the calibration's camera covariance
+            (CalibrationResult.camera_covariance).
         sigma_px: the calibration's pixel noise.
         positions_mm: the wand's marker positions from A.
         origin: for the wand: the first lay's "A" or its "centre".

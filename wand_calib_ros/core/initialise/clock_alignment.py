@@ -21,6 +21,7 @@ observations' time unit: seconds with stamps, frames with frame ids alone (expos
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -606,11 +607,25 @@ def _shifted_ids(observations: WandObservations, offsets: IntArray) -> WandObser
     uv = np.full((frames.size, *observations.uv.shape[1:]), np.nan)
     frame_index, camera = np.nonzero(seen)
     uv[row[frame_index, camera], camera] = observations.uv[frame_index, camera]
-    saturated = None
-    if observations.saturated is not None:
-        saturated = np.zeros(uv.shape[:3], dtype=bool)
-        saturated[row[frame_index, camera], camera] = observations.saturated[frame_index, camera]
-    return WandObservations(frames.astype(np.int64), observations.camera_names, uv, None, saturated)
+    saturated = _placed(observations.saturated, uv.shape[:3], row[frame_index, camera], frame_index, camera, False)
+    brightness = _placed(observations.brightness, uv.shape[:3], row[frame_index, camera], frame_index, camera, np.nan)
+    return WandObservations(frames.astype(np.int64), observations.camera_names, uv, None, saturated, brightness)
+
+
+def _placed(
+    values: NDArray[Any] | None,
+    shape: tuple[int, ...],
+    rows: IntArray,
+    frame_index: IntArray,
+    camera: IntArray,
+    fill: Any,
+) -> NDArray[Any] | None:
+    """(F', C, K) the views' per-point ``values`` (F, C, K) at their new ``rows`` (``fill`` elsewhere; None: none)."""
+    if values is None:
+        return None
+    out = np.full(shape, fill, dtype=values.dtype)
+    out[rows, camera] = values[frame_index, camera]
+    return out
 
 
 def _shifted_stamps(observations: WandObservations, offsets: FloatArray) -> WandObservations:
@@ -671,10 +686,8 @@ def _regrouped(
     rows = rank[slot[frame_index, camera]]
     uv[rows, camera] = observations.uv[frame_index, camera]
     new_stamps[rows, camera] = stamps[frame_index, camera]
-    saturated = None
-    if observations.saturated is not None:
-        saturated = np.zeros(uv.shape[:3], dtype=bool)
-        saturated[rows, camera] = observations.saturated[frame_index, camera]
+    saturated = _placed(observations.saturated, uv.shape[:3], rows, frame_index, camera, False)
+    brightness = _placed(observations.brightness, uv.shape[:3], rows, frame_index, camera, np.nan)
     keep = np.any(np.isfinite(uv), axis=(1, 2, 3))
     return replace(
         observations,
@@ -682,4 +695,5 @@ def _regrouped(
         uv=uv[keep],
         stamps=new_stamps[keep],
         saturated=None if saturated is None else saturated[keep],
+        brightness=None if brightness is None else brightness[keep],
     )

@@ -15,6 +15,7 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import NDArray
 
+from wand_calib_ros.core.adjust.brightness_bias import stops_of
 from wand_calib_ros.core.adjust.bundle_adjustment import DECIDING_SETTLED, BundleResult, bundle_adjust
 from wand_calib_ros.core.adjust.bundle_problem import INTRINSICS, LENS, N_CAMERA_PARAMS, BundleProblem, parameter_mask
 from wand_calib_ros.core.adjust.chi_square import chi_square_quantile
@@ -84,8 +85,10 @@ def choose_models(
     reference: int,
     clocks: ClockModel,
     used: NDArray[np.int64],
+    brightness: FloatArray | None = None,
 ) -> tuple[BundleResult, FixedParameters]:
-    """The fisheye-model adjustment ``result`` of the placements ``used`` (their pixels ``uv``) with the
+    """The fisheye-model adjustment ``result`` of the placements ``used`` (their pixels ``uv``; ``brightness`` the
+    timeline's points' brightness classes, None: not known) with the
     conventional cameras whose model the rig leaves open (:func:`undecided`) in plumb_bob instead, each where
     the data show its tangential terms (:data:`TANGENTIAL_THRESHOLD`). Each camera's order is then
     decided again in its model.
@@ -105,7 +108,7 @@ def choose_models(
     # what the fisheye curve's shape leaves does not pass for tangential terms), the rest as ``result``.
     free = free_mask(len(rig.cameras), reference, fixed) & parameter_mask(state.models)
     free[candidates] |= parameter_mask(state.models)[candidates] & ~_NOT_INTRINSIC
-    problem = BundleProblem.from_dense(rig.wand, uv, clocks.placements(used))
+    problem = BundleProblem.from_dense(rig.wand, uv, clocks.placements(used), None, stops_of(brightness, used))
     try:  # a test: settled as the passes that decide are, unless a camera's statistics are near a threshold
         tested = bundle_adjust(state, problem, free, settled=DECIDING_SETTLED)
         statistics = [_tangential_statistics(tested, c) for c in candidates]
@@ -130,7 +133,9 @@ def choose_models(
         chosen_models[c] = tested.state.models[c]
     start = replace(tested.state, models=tuple(chosen_models))  # the model order of the chosen decided in plumb_bob
     # (the timing parameters ``fixed`` dropped as insignificant stay dropped: plumb_bob only fits the lenses better)
-    return adjust_with_model_selection(rig, uv, start, reference, clocks, used, fixed.pinned, fixed.timing)
+    return adjust_with_model_selection(
+        rig, uv, start, reference, clocks, used, fixed.pinned, fixed.timing, brightness, fixed.bias
+    )
 
 
 def _tangential_statistics(tested: BundleResult, camera: int) -> tuple[float, float]:

@@ -98,7 +98,7 @@ def saturated_pull(
         timing: the placements' timing in the full adjustment (None: synchronised).
         full: the full adjustment: its state, residuals (in ``BundleProblem.from_dense`` order), camera parameters
             and their standard deviations.
-        free: (C, 20) the camera parameters it estimated.
+        free: (C, N_CAMERA_PARAMS) the camera parameters it estimated.
     """
     problem = BundleProblem.from_dense(rig.wand, uv, timing)
     if problem.n_observations != full.residuals.shape[0]:

@@ -348,7 +348,7 @@ def check_given_intrinsics(
     residuals that would remove (see GIVEN_CHI2, GIVEN_SHARE).
 
     Args:
-        result: the final adjustment, of the (C, 20) parameters ``free``.
+        result: the final adjustment, of the (C, N_CAMERA_PARAMS) parameters ``free``.
         points: (C,) image points of each camera in it.
 
     Returns:

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from wand_calib_ros.core.model.brightness import class_text
 from wand_calib_ros.core.model.camera_model import CameraModel
 from wand_calib_ros.core.model.geometry import Pose
 from wand_calib_ros.core.model.rig import WandSpec
@@ -38,6 +39,43 @@ class WorldFrame:
         return camera.compose(self.world_from_reference.inverse())
 
 
+@dataclass(frozen=True)
+class ClassBias:
+    """Where the centres of one brightness class sit in a camera relative to those of spots below full scale, as
+    the adjustment estimated (and corrected) them (:mod:`~wand_calib_ros.core.model.brightness`).
+
+    Attributes:
+        klass: the brightness class (1: 1-2x full scale, ... :data:`~wand_calib_ros.core.model.brightness.BIAS_EDGES`).
+        offset_px: (u, v) its constant offset, px (OpenCV image axes: u right, v down).
+        radial_px: its offset away from the principal point, px (negative: towards it).
+        std_px: (u, v, radial) their standard deviations, px.
+        points: the camera's points of that class in the adjustment.
+        shape: the shape of the camera's bias these come from ("classes", "linear" or "constant",
+            :mod:`~wand_calib_ros.core.model.brightness`).
+    """
+
+    klass: int
+    offset_px: tuple[float, float]
+    radial_px: float
+    std_px: tuple[float, float, float]
+    points: int
+    shape: str = "classes"
+
+    def line(self, camera: str) -> str:
+        """The statement: ``cam1: centres of LEDs 4-8x full scale sit 0.50 px right, 0.02 px down and 0.01 px
+        further out than those below full scale (+-0.03 px; 612 points): corrected``."""
+        u, v = self.offset_px
+        parts = [
+            f"{abs(u):.2f} px {'right' if u >= 0 else 'left'}",
+            f"{abs(v):.2f} px {'down' if v >= 0 else 'up'}",
+            f"{abs(self.radial_px):.2f} px {'further out' if self.radial_px >= 0 else 'further in'}",
+        ]
+        return (
+            f"{camera}: centres of LEDs {class_text(self.klass)} sit {', '.join(parts[:2])} and {parts[2]} than those "
+            f"below full scale (+-{max(self.std_px):.2f} px; {self.points} points; a {self.shape} bias): corrected"
+        )
+
+
 @dataclass(frozen=True, eq=False)
 class CameraCalibration:
     """One calibrated camera.
@@ -62,6 +100,8 @@ class CameraCalibration:
         readout: rolling-shutter readout time of the whole image in the time unit (0: global shutter).
         intrinsics: "estimated", "given" (the rig description's, held fixed) or "given_start" (the
             rig description's, refined).
+        centre_bias: the brightness classes whose centres the adjustment found biased, and corrected (empty:
+            none, or brightness not known).
     """
 
     name: str
@@ -79,6 +119,7 @@ class CameraCalibration:
     time_offset: float = 0.0
     readout: float = 0.0
     intrinsics: str = "estimated"
+    centre_bias: tuple[ClassBias, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -211,10 +252,11 @@ class CalibrationResult:
         world: the world frame of a floor fit (None: no floor given; poses stay relative to the
             reference camera).
         quality: the verdict in plain words (:mod:`wand_calib_ros.core.judge.quality`; None: not judged).
-        camera_covariance: (C*20, C*20) covariance of the camera parameters of the final adjustment, cameras
-            in the rig's order, 20 per camera in the bundle adjustment's order (CAMERA_PARAM_NAMES: k1..k5
-            mm, u0, v0 px, a left rotation vector rad, the translation mm, timing, t1, t2, d1..d3); zero rows
-            for fixed parameters (None: not kept, e.g. a result read from a file).
+        camera_covariance: (C*N, C*N) covariance of the camera parameters of the final adjustment, cameras
+            in the rig's order, N (N_CAMERA_PARAMS) per camera in the bundle adjustment's order
+            (CAMERA_PARAM_NAMES: k1..k5 mm, u0, v0 px, a left rotation vector rad, the translation mm, timing,
+            t1, t2, d1..d3, the centre bias px); zero rows for fixed parameters (None: not kept, e.g. a result
+            read from a file).
         systematic: systematic errors the residuals do not show, in plain words (the centres of saturated LEDs
             pulling a camera's focal length, :mod:`~wand_calib_ros.core.judge.centre_bias`): they keep the grade
             from "excellent".

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -201,6 +202,9 @@ class WandObservations:
             view in that frame), or None when the observations carry no stamps.
         saturated: (F, C, K) which points were measured on saturated spots (the detector's flag: their centres
             may be biased, :mod:`~wand_calib_ros.core.judge.centre_bias`), or None: not known.
+        brightness: (F, C, K) each point's brightness, stops over full scale (log2 of its spot's peak over the
+            image's full scale, :mod:`~wand_calib_ros.core.model.brightness`; NaN where not known), or None: none
+            known.
     """
 
     frames: NDArray[np.int64]
@@ -208,6 +212,7 @@ class WandObservations:
     uv: FloatArray
     stamps: FloatArray | None = None
     saturated: NDArray[np.bool_] | None = None
+    brightness: FloatArray | None = None
 
     def __post_init__(self) -> None:
         frames = np.asarray(self.frames, dtype=np.int64)
@@ -232,6 +237,12 @@ class WandObservations:
                 raise ValueError(f"saturated must have shape (F, C, K) = {uv.shape[:3]}, got {saturated.shape}")
             saturated.setflags(write=False)
             object.__setattr__(self, "saturated", saturated)
+        if self.brightness is not None:
+            brightness = np.array(self.brightness, dtype=np.float64)
+            if brightness.shape != uv.shape[:3]:
+                raise ValueError(f"brightness must have shape (F, C, K) = {uv.shape[:3]}, got {brightness.shape}")
+            brightness.setflags(write=False)
+            object.__setattr__(self, "brightness", brightness)
 
     @property
     def complete(self) -> NDArray[np.bool_]:
@@ -248,7 +259,8 @@ class WandObservations:
         """A copy restricted to the frames where ``mask`` (F,) is True (or to an index of frames)."""
         stamps = None if self.stamps is None else self.stamps[mask]
         saturated = None if self.saturated is None else self.saturated[mask]
-        return WandObservations(self.frames[mask], self.camera_names, self.uv[mask], stamps, saturated)
+        brightness = None if self.brightness is None else self.brightness[mask]
+        return WandObservations(self.frames[mask], self.camera_names, self.uv[mask], stamps, saturated, brightness)
 
     def select_cameras(self, names: tuple[str, ...]) -> WandObservations:
         """A copy with only the named cameras, in that order (these observations themselves if they are those)."""
@@ -257,36 +269,54 @@ class WandObservations:
         index = [self.camera_index(n) for n in names]
         stamps = None if self.stamps is None else self.stamps[:, index]
         saturated = None if self.saturated is None else self.saturated[:, index]
-        return WandObservations(self.frames, names, self.uv[:, index], stamps, saturated)
+        brightness = None if self.brightness is None else self.brightness[:, index]
+        return WandObservations(self.frames, names, self.uv[:, index], stamps, saturated, brightness)
 
     def with_uv(self, uv: FloatArray) -> WandObservations:
         """The same frames, cameras and stamps with other pixels (F, C, K, 2): each point keeps its saturation flag
-        where it is where one of its view's points was (labels exchanged), else none."""
+        and brightness where it is where one of its view's points was (labels exchanged), else none."""
         return WandObservations(
-            self.frames, self.camera_names, uv, self.stamps, moved_flags(self.uv, uv, self.saturated)
+            self.frames,
+            self.camera_names,
+            uv,
+            self.stamps,
+            moved_flags(self.uv, uv, self.saturated),
+            moved_values(self.uv, uv, self.brightness),
         )
 
 
 def moved_flags(old: FloatArray, new: FloatArray, flags: NDArray[np.bool_] | None) -> NDArray[np.bool_] | None:
     """(F, C, K) the flags of ``old`` (F, C, K, 2) points carried to the ``new`` points at the same place in their
     view (within 1e-6 px; False where none was), or None: no flags."""
-    if flags is None:
-        return None
+    return None if flags is None else _moved(old, new, flags, False)
+
+
+def moved_values(old: FloatArray, new: FloatArray, values: FloatArray | None) -> FloatArray | None:
+    """(F, C, K) the values of ``old`` (F, C, K, 2) points carried to the ``new`` points at the same place in their
+    view (within 1e-6 px; NaN where none was), or None: no values."""
+    return None if values is None else _moved(old, new, values, np.nan)
+
+
+def _moved(old: FloatArray, new: FloatArray, values: NDArray[Any], fill: Any) -> NDArray[Any]:
+    """:func:`moved_flags` and :func:`moved_values`: ``fill`` where no old point was."""
     if old.shape != new.shape:
-        return np.zeros(new.shape[:3], dtype=bool)
+        return np.full(new.shape[:3], fill, dtype=values.dtype)
     with np.errstate(invalid="ignore"):
         kept = np.all(np.abs(new - old) < 1e-6, axis=-1)  # (F, C, K) the point did not move
-    out = flags & kept
+    out = np.where(kept, values, fill)
     moved = np.flatnonzero((np.isfinite(new[..., 0]) & ~kept).reshape(-1, new.shape[2]).any(axis=1))
     if moved.size:  # views whose points moved (labels exchanged, a view added): matched by place
         views_old = old.reshape(-1, *old.shape[2:])[moved]
         views_new = new.reshape(-1, *new.shape[2:])[moved]
         gaps = np.linalg.norm(views_new[:, :, None, :] - views_old[:, None, :, :], axis=-1)  # (V, K, K)
-        same = np.nan_to_num(gaps, nan=np.inf) < 1e-6
-        carried = (same & flags.reshape(-1, flags.shape[2])[moved][:, None, :]).any(axis=-1)
-        out = out.reshape(-1, flags.shape[2])
+        same = np.nan_to_num(gaps, nan=np.inf) < 1e-6  # (V, K new, K old): at most one old point per new one
+        source = np.argmax(same, axis=-1)  # (V, K)
+        found = same.any(axis=-1)
+        old_values = values.reshape(-1, values.shape[2])[moved]
+        carried = np.where(found, np.take_along_axis(old_values, source, axis=1), fill)
+        out = out.reshape(-1, values.shape[2])
         out[moved] = carried
-        out = out.reshape(flags.shape)
+        out = out.reshape(values.shape)
     return np.asarray(out)
 
 

@@ -1,0 +1,129 @@
+"""A centre bias that grows with brightness, modelled in the adjustment: biased centres calibrate as well as
+unbiased ones, the bias is reported where it is, nothing where there is none, and the standard deviations
+cover the errors with the bias present.
+
+Each take is simulated once and calibrated twice, with and without the bias drawn (the same noise, the same
+placements): the ratio of their errors is the bias's cost alone. Brightness follows the renderer's light model
+(1/d^2 and the wand's angle to the line of sight), 0.25 px noise, six seeds."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from rigs import rms, z_scores
+
+from wand_calib_ros.core.adjust.brightness_bias import MIN_REFERENCE_POINTS
+from wand_calib_ros.core.model.brightness import brightness_classes
+from wand_calib_ros.core.pipeline import calibrate
+from wand_calib_ros.sim.centre_bias import DrawnBias, LedLight, with_bias
+from wand_calib_ros.sim.detection_score import ERROR_CLASSES, calibration_errors
+from wand_calib_ros.sim.scenarios import SCENARIOS, simulate
+
+SEEDS = range(6)
+NOISE_PX = 0.25
+#: A minute's wave at 30 fps keeps about this many placements: enough that each class's bias is known to a few
+#: hundredths of a pixel (0.25 px / sqrt(100) points and their coupling to the camera's other parameters).
+PLACEMENTS = 1000
+#: The rigs, and how bright their LEDs are (every class from below full scale to 16x populated).
+RIGS = {"paper3": LedLight(), "conventional": LedLight(stops_at_1m=5.0)}
+#: The biases drawn.
+KINDS = {
+    "a step from 4x full scale": DrawnBias(offset_px=(0.5, 0.0), from_stops=2.0),
+    "radial from full scale": DrawnBias(radial_px=0.5),
+    "growing per stop": DrawnBias(offset_px=(0.15, 0.1), radial_px=0.1, per_stop=True),
+    "a step in one camera": DrawnBias(offset_px=(0.0, -0.5), from_stops=2.0, cameras=(1,)),
+}
+
+
+#: What is still short of it (issue 53, open), as measured.
+SHORT = {
+    ("paper3", "a step from 4x full scale"): "focal lengths 1.35x the unbiased take's (the radial step's cost)",
+    ("conventional", "growing per stop"): "a bias growing with brightness, which falls with distance, looks "
+    "like a camera moved along its axis: focal lengths 1.7x, positions 1.7x, a class 0.35 px off",
+}
+
+
+@pytest.mark.parametrize(
+    ("rig", "kind"),
+    [
+        pytest.param(rig, kind, marks=[pytest.mark.xfail(reason=SHORT[rig, kind], strict=True)])
+        if (rig, kind) in SHORT
+        else (rig, kind)
+        for rig in RIGS
+        for kind in KINDS
+    ],
+)
+def test_biased_centres_calibrate_as_unbiased_ones_and_the_bias_is_reported(rig: str, kind: str) -> None:
+    scenario, bias, light = SCENARIOS[rig](), KINDS[kind], RIGS[rig]
+    errors: dict[str, dict[str, list[float]]] = {"clean": {}, "biased": {}}
+    pooled: dict[str, list[float]] = {}
+    for seed in SEEDS:
+        data = simulate(scenario, NOISE_PX, np.random.default_rng(seed), n=PLACEMENTS)
+        for label, drawn in (("clean", None), ("biased", bias)):
+            observations = with_bias(scenario, data, drawn, light).observations
+            result = calibrate(scenario.rig, observations)
+            for key, values in calibration_errors(scenario, result).items():
+                errors[label].setdefault(key, []).extend(values)
+            if drawn is None:
+                assert not any(c.centre_bias for c in result.cameras), (seed, "a bias where none is")
+                continue
+            for key, values in z_scores(result, scenario).items():
+                pooled.setdefault(key, []).extend(values)
+            stops = observations.brightness
+            assert stops is not None
+            for c, camera in enumerate(scenario.cameras):
+                reported = {b.klass: b for b in result.camera(camera.spec.name).centre_bias}
+                classes = brightness_classes(stops[:, c])
+                for klass in range(1, 6):
+                    mine = stops[:, c][classes == klass]
+                    if mine.size < 30:
+                        continue
+                    truth = bias.class_truth(c, mine)
+                    found = reported.get(klass)
+                    if found is None:  # unreported: the class's bias is too small to matter
+                        assert np.max(np.abs(truth)) <= 0.1, (seed, camera.spec.name, klass, truth)
+                        continue
+                    measured = np.array([*found.offset_px, found.radial_px])
+                    assert np.max(np.abs(measured - truth)) <= 0.1, (seed, camera.spec.name, klass, measured, truth)
+    for key in ERROR_CLASSES:
+        ratio = rms(errors["biased"][key]) / rms(errors["clean"][key])
+        assert ratio <= 1.3, (key, ratio)
+    for key, values in pooled.items():  # the standard deviations cover the errors with the bias present
+        assert rms(values) <= 1.6 and np.max(np.abs(values)) <= 4.0, (key, rms(values), np.max(np.abs(values)))
+
+
+@pytest.mark.parametrize("rig", RIGS)
+def test_without_a_bias_its_brightness_changes_nothing(rig: str) -> None:
+    """Brightness known, no bias drawn: nothing reported, and the calibration within 1.05x of the same take's
+    without the brightness column (today's)."""
+    scenario, light = SCENARIOS[rig](), RIGS[rig]
+    errors: dict[str, dict[str, list[float]]] = {"known": {}, "unknown": {}}
+    for seed in SEEDS:
+        data = simulate(scenario, NOISE_PX, np.random.default_rng(100 + seed), n=PLACEMENTS)
+        known = with_bias(scenario, data, None, light).observations
+        for label, observations in (("known", known), ("unknown", data.observations)):
+            result = calibrate(scenario.rig, observations)
+            assert not any(c.centre_bias for c in result.cameras)
+            for key, values in calibration_errors(scenario, result).items():
+                errors[label].setdefault(key, []).extend(values)
+    for key in ERROR_CLASSES:
+        ratio = rms(errors["known"][key]) / rms(errors["unknown"][key])
+        assert ratio <= 1.05, (key, ratio)
+
+
+def test_a_camera_with_too_few_points_below_full_scale_is_named_and_the_result_is_not_excellent() -> None:
+    """LEDs 16,000x over full scale at 1 m: no camera has the points below full scale to measure a bias against
+    (MIN_REFERENCE_POINTS), so a 0.5 px radial one cannot be corrected, and the result says so."""
+    scenario = SCENARIOS["paper3"]()
+    for seed in range(2):
+        data = simulate(scenario, NOISE_PX, np.random.default_rng(seed), n=PLACEMENTS)
+        observations = with_bias(scenario, data, DrawnBias(radial_px=0.5), LedLight(stops_at_1m=14.0)).observations
+        result = calibrate(scenario.rig, observations)
+        assert result.quality is not None and result.quality.grade != "excellent"
+        stops = observations.brightness
+        assert stops is not None
+        for c, camera in enumerate(scenario.cameras):
+            below = int(np.sum(stops[:, c] < 0.0))
+            named = [line for line in result.systematic if line.startswith(f"{camera.spec.name}: ")]
+            assert below >= MIN_REFERENCE_POINTS or (named and "cannot be measured" in named[0]), (seed, below)
+            assert not result.camera(camera.spec.name).centre_bias or below >= MIN_REFERENCE_POINTS
