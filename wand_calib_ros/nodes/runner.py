@@ -93,17 +93,18 @@ class Spinner:
                 raise
 
     def close(self) -> None:
-        """Run the nodes' ``close()`` hooks, stop the executors, destroy the nodes, join the threads."""
+        """Run the nodes' ``close()`` hooks, stop the executors, join the threads, destroy the nodes (after the
+        threads: a callback still running would publish through a destroyed publisher)."""
         for node in self.nodes:
             close = getattr(node, "close", None)
             if close is not None:
                 close()
         for executor, _ in self._running:
             executor.shutdown()
-        for node in self.nodes:
-            node.destroy_node()
         for _, thread in self._running:
             thread.join(timeout=10)
+        for node in self.nodes:
+            node.destroy_node()
 
 
 #: Fast DDS profile for large images on one machine (see the module docstring).
