@@ -101,8 +101,8 @@ def _near_calibrations(seed: int) -> tuple[Scenario, CalibrationResult, Calibrat
 
 def test_saturated_centres_drawn_off_on_purpose_are_measured_and_corrected() -> None:
     # 2-10 % of each camera's spots stay below full scale. The detector's brightness carries the bias to the
-    # adjustment: each camera reports it, the calibration's principal points, poses and curves are the unbiased
-    # take's, and the standard deviations cover their errors.
+    # adjustment: each camera reports it, the calibration is within 1.3x of the unbiased take's in every error
+    # class (measured 1.06-1.21x, curves 0.86x), and the standard deviations cover the errors.
     biased: dict[str, list[float]] = {}
     unbiased: dict[str, list[float]] = {}
     pooled: dict[str, list[float]] = {}
@@ -116,28 +116,22 @@ def test_saturated_centres_drawn_off_on_purpose_are_measured_and_corrected() -> 
                 label.setdefault(key, []).extend(values)
         for key, values in z_scores(with_bias, scenario).items():
             pooled.setdefault(key, []).extend(values)
-    for key in ("pp", "E_r", "E_t", "curve"):
+    for key in biased:
         assert rms(biased[key]) <= 1.3 * rms(unbiased[key]), (key, rms(biased[key]), rms(unbiased[key]))
-    for key in ("principal point", "rotation", "translation"):
+    for key in pooled:
         assert rms(pooled[key]) <= 1.6 and np.max(np.abs(pooled[key])) <= 4.0, (key, pooled[key])
 
 
 @pytest.mark.xfail(
-    reason="issue 53, open: in the renders the centres of spots below full scale are 1.5-3x noisier than those of "
-    "saturated ones while the adjustment weighs them alike, so the bias's standard deviation is too small: cam2 "
-    "takes a growth that is not there (classes 0.13 px off), the take without bias reports one in 2 of 4 seeds "
-    "(up to 0.22 px), and the focal lengths are 1.7x the unbiased take's",
+    reason="issue 53, open: in the small room cam2 finds a bias that grows with brightness where the drawn centres "
+    "have none (up to 0.17 px in the take without bias, seed 1; 0.13 px off in the biased take), a pattern of its "
+    "residuals the detector's centres do not show",
     strict=True,
 )
-def test_biased_centres_calibrate_as_unbiased_ones_and_an_unbiased_take_reports_nothing() -> None:
-    biased: list[float] = []
-    unbiased: list[float] = []
+def test_an_unbiased_take_reports_nothing_and_each_class_is_reported_within_a_tenth_of_a_pixel() -> None:
     for seed in SEEDS:
         scenario, with_bias, without = _near_calibrations(seed)
         for camera in scenario.cameras:
             assert not without.camera(camera.spec.name).centre_bias, (seed, camera.spec.name)
             for bias in with_bias.camera(camera.spec.name).centre_bias:
                 assert abs(bias.radial_px - 0.5) <= 0.1 and max(map(abs, bias.offset_px)) <= 0.1, (seed, bias)
-        biased.extend(calibration_errors(scenario, with_bias)["focal"])
-        unbiased.extend(calibration_errors(scenario, without)["focal"])
-    assert rms(biased) <= 1.3 * rms(unbiased), (rms(biased), rms(unbiased))

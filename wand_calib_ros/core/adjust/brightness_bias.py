@@ -32,6 +32,7 @@ from numpy.typing import NDArray
 from wand_calib_ros.core.adjust.bundle_adjustment import BundleResult
 from wand_calib_ros.core.adjust.bundle_problem import BIAS, N_CAMERA_PARAMS, BundleProblem, CameraBias
 from wand_calib_ros.core.adjust.chi_square import chi_square_quantile
+from wand_calib_ros.core.adjust.linearisation import noise_scale, squared_norms
 from wand_calib_ros.core.model.brightness import (
     BIAS_COMPONENTS,
     BIAS_EDGES,
@@ -52,6 +53,9 @@ log = logging.getLogger(__name__)
 MIN_CLASS_POINTS = 10
 #: ... nor does any class of a camera with fewer points than this below full scale to measure it against.
 MIN_REFERENCE_POINTS = 10
+#: A brightness class's centres are weighed by their own noise where a camera has this many of them (else by the
+#: camera's): enough to know it to 7 % (1 / sqrt(2 n)).
+MIN_NOISE_POINTS = 30
 #: A camera's bias is kept when it differs from zero at this level (chi-square): with a dozen classes tested per
 #: rig, a take without bias keeps one by chance about once in a thousand.
 SIGNIFICANCE_LEVEL = 0.9999
@@ -89,6 +93,28 @@ def bias_candidates(problem: BundleProblem) -> NDArray[np.bool_] | None:
     if not enough.any():
         return None
     return np.repeat(enough, _WIDTH, axis=1)
+
+
+def class_noise(result: BundleResult, problem: BundleProblem) -> FloatArray:
+    """(C, N_BIAS_CLASSES + 1) each camera's centres' noise by brightness class (class 0 first) relative to all of
+    its centres', from an adjustment's residuals (in pixels); 1 for a class of fewer than MIN_NOISE_POINTS points.
+
+    A dim spot's centre is noisier than a bright one's (less light over the same read noise), and the points below
+    full scale are what a bias is measured against: weighed alike, the bias's standard deviation would be too
+    small, and chance would pass for a bias.
+    """
+    n, cameras = N_BIAS_CLASSES + 1, problem.n_cameras
+    if problem.brightness is None:
+        return np.ones((cameras, n))
+    scale = noise_scale(result.state, problem)
+    res = result.residuals if scale is None else result.residuals * scale[:, None]
+    index = problem.camera * n + brightness_classes(problem.brightness)
+    counts = np.bincount(index, minlength=cameras * n).reshape(cameras, n)
+    squares = np.bincount(index, squared_norms(res), minlength=cameras * n).reshape(cameras, n)
+    mean_square = squares.sum(axis=1) / np.maximum(counts.sum(axis=1), 1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratio = np.sqrt(squares / counts / mean_square[:, None])
+    return np.where(counts >= MIN_NOISE_POINTS, np.clip(np.nan_to_num(ratio, nan=1.0), 0.25, 4.0), 1.0)
 
 
 def unmeasured_bias(problem: BundleProblem, names: tuple[str, ...]) -> list[str]:
@@ -129,7 +155,7 @@ def decide_bias(
         kept[c] = False
         for j in fit.terms:
             kept[c, _WIDTH * j : _WIDTH * (j + 1)] = True
-    return kept, CameraBias(values, shapes, starts)
+    return kept, CameraBias(values, shapes, starts, state.bias_noise)
 
 
 @dataclass(frozen=True, eq=False)

@@ -206,11 +206,14 @@ class CameraBias:
         values: (C, N_BIAS) each camera's terms (u, v, r each), px (per stop for a linear shape's second term).
         shapes: (C,) each camera's shape: CLASSES, LINEAR or CONSTANT.
         starts: (C,) the brightness class a LINEAR or CONSTANT shape starts from (1: full scale).
+        noise: (C, N_BIAS_CLASSES + 1) the centres' noise in each brightness class (class 0 first) relative to the
+            camera's as a whole: each observation's residual is divided by its class's (None: all alike).
     """
 
     values: FloatArray
     shapes: NDArray[np.int8]
     starts: NDArray[np.int8]
+    noise: FloatArray | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -254,6 +257,11 @@ class BundleState:
     def bias_starts(self) -> NDArray[np.int8]:
         """(C,) the class each camera's LINEAR or CONSTANT bias starts from (1 when not modelled)."""
         return np.ones(len(self.models), dtype=np.int8) if self.bias is None else self.bias.starts
+
+    @property
+    def bias_noise(self) -> FloatArray | None:
+        """(C, N_BIAS_CLASSES + 1) the centres' relative noise by brightness class (None: all alike)."""
+        return None if self.bias is None else self.bias.noise
 
     def points(self, wand: WandSpec) -> FloatArray:
         """(P, 3, 3) A, B, C of every placement in the reference frame, mm."""
@@ -317,7 +325,7 @@ def apply_step(state: BundleState, delta_c: FloatArray, delta_p: FloatArray, car
         camera_timing = state.camera_timing + delta[:, TIMING]
     bias = state.bias
     if np.any(carried >= BIAS.start):
-        bias = CameraBias(state.camera_bias + delta[:, BIAS], state.bias_shapes, state.bias_starts)
+        bias = CameraBias(state.camera_bias + delta[:, BIAS], state.bias_shapes, state.bias_starts, state.bias_noise)
     basis = tangent_basis(state.wand_direction)
     direction = state.wand_direction + np.einsum("pij,pj->pi", basis, delta_p[:, 3:])
     direction /= np.linalg.norm(direction, axis=1, keepdims=True)

@@ -33,7 +33,14 @@ from wand_calib_ros.core.adjust.normal_equations import (
     empty_normal_equations,
 )
 from wand_calib_ros.core.model import pinhole
-from wand_calib_ros.core.model.brightness import N_BIAS, bias_basis, bias_offsets, bias_weights, radial_directions
+from wand_calib_ros.core.model.brightness import (
+    N_BIAS,
+    bias_basis,
+    bias_offsets,
+    bias_weights,
+    brightness_classes,
+    radial_directions,
+)
 from wand_calib_ros.core.model.camera_model import (
     N_EXTRA,
     N_INTRINSIC,
@@ -65,12 +72,14 @@ class _Unknowns:
         placements: (P, 12) per placement A, the unit direction A -> C and its tangent basis e1, e2.
         pinhole: (C,) which cameras have a pinhole model (None: none has).
         biased: whether some camera's centre bias is not zero.
+        noise: (C, N_BIAS_CLASSES + 1) the centres' relative noise by brightness class (None: all alike).
     """
 
     cameras: FloatArray
     placements: FloatArray
     pinhole: NDArray[np.bool_] | None = None
     biased: bool = False
+    noise: FloatArray | None = None
 
     @staticmethod
     def of(state: BundleState) -> _Unknowns:
@@ -94,7 +103,7 @@ class _Unknowns:
         placements = np.concatenate([state.wand_a, state.wand_direction, basis[:, :, 0], basis[:, :, 1]], axis=1)
         pinhole = np.array([m.is_pinhole for m in state.models], dtype=bool)
         biased = state.bias is not None and bool(np.any(state.bias.values))
-        return _Unknowns(cameras, placements, pinhole if pinhole.any() else None, biased)
+        return _Unknowns(cameras, placements, pinhole if pinhole.any() else None, biased, state.bias_noise)
 
 
 def _project_rows(
@@ -182,8 +191,9 @@ def _linearise_rows(
     if problem.brightness is not None and (unknowns.biased or np.any(carried >= BIAS.start)):
         centres = _centres(uv, d_intrinsics, cam, problem.brightness[first:stop], problem.uv[first:stop])
     res = uv - problem.uv[first:stop]
+    scale = _noise_scale(unknowns.noise, problem.brightness, c, first, stop)
     if not jacobians:
-        return res, None, None
+        return (res if scale is None else res / scale[:, None]), None, None
     assert d_camera is not None and d_intrinsics is not None
     width = N_GEOMETRIC + carried.size
     jc = np.empty((n, 2, width + 1)) if cameras else None
@@ -213,7 +223,29 @@ def _linearise_rows(
             along = w0 * along_time[0] + w1 * along_time[1] + w2 * along_time[2]  # d uv_i / d tau
             for column, parameter in enumerate(timing, start=N_GEOMETRIC):
                 jc[:, i, column] = -along if parameter == TIME_OFFSET else row * along
-    return res, jc, jp
+    if scale is None:
+        return res, jc, jp
+    inverse = (1.0 / scale)[:, None, None]
+    jp *= inverse
+    if jc is not None:
+        jc *= inverse
+    return res * inverse[:, :, 0], jc, jp
+
+
+def _noise_scale(
+    noise: FloatArray | None, brightness: FloatArray | None, camera: IntArray, first: int, stop: int
+) -> FloatArray | None:
+    """(n,) the relative noise of the observations ``first:stop`` (of cameras ``camera``) by their brightness class,
+    their residuals' and Jacobians' divisor (None: all alike)."""
+    if noise is None or brightness is None:
+        return None
+    return np.asarray(noise[camera, brightness_classes(brightness[first:stop])], dtype=np.float64)
+
+
+def noise_scale(state: BundleState, problem: BundleProblem) -> FloatArray | None:
+    """(M,) what each observation's residual is divided by in the adjustment: its brightness class's relative
+    noise (None: nothing); ``residuals(state, problem) * noise_scale`` is in pixels."""
+    return _noise_scale(state.bias_noise, problem.brightness, problem.camera, 0, problem.n_observations)
 
 
 def _centres(
@@ -274,7 +306,8 @@ def _camera_columns(
 
 
 def residuals(state: BundleState, problem: BundleProblem) -> FloatArray:
-    """(M, 2) reprojection residuals (projected minus observed) in px. Pure."""
+    """(M, 2) reprojection residuals (projected minus observed) in px, each divided by its relative noise where
+    the state has one by brightness (:func:`noise_scale`). Pure."""
     unknowns = _Unknowns.of(state)
     out = np.empty((problem.n_observations, 2))
     firsts = range(0, problem.n_observations, CHUNK_OBSERVATIONS)

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from wand_calib_ros.core.adjust.brightness_bias import bias_candidates, decide_bias, stops_of
+from wand_calib_ros.core.adjust.brightness_bias import bias_candidates, class_noise, decide_bias, stops_of
 from wand_calib_ros.core.adjust.bundle_adjustment import BundleResult, CameraSystem, bundle_adjust
 from wand_calib_ros.core.adjust.bundle_problem import (
     BIAS,
@@ -235,11 +235,14 @@ def adjust_with_model_selection(
                 covariance = intrinsic_covariance(result.camera_covariance, c)
                 per_camera[c], models[c] = reduce_radial(spec, models[c], covariance, per_camera[c])
         timing = reduce_timing(clocks, result, fixed.timing)
-        kept, centre = fixed.bias, result.state.bias
+        kept, centre, weighed = fixed.bias, result.state.bias, False
         if fixed.bias is not None:
             kept, centre = decide_bias(result, fixed.bias, problem, rig.camera_names)
+            if centre.noise is None:  # (the first adjustment's residuals tell each class's noise: weighed from now)
+                centre, weighed = replace(centre, noise=class_noise(result, problem)), True
         if (
-            tuple(per_camera) == fixed.per_camera
+            not weighed
+            and tuple(per_camera) == fixed.per_camera
             and np.array_equal(timing, fixed.timing)
             and (kept is None or fixed.bias is None or np.array_equal(kept, fixed.bias))
             and (centre is None or np.array_equal(centre.shapes, result.state.bias_shapes))
