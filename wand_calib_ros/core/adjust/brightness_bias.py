@@ -54,7 +54,7 @@ MIN_CLASS_POINTS = 10
 #: ... nor does any class of a camera with fewer points than this below full scale to measure it against.
 MIN_REFERENCE_POINTS = 10
 #: A brightness class's centres are weighed by their own noise where a camera has this many of them (else by the
-#: camera's): enough to know it to 7 % (1 / sqrt(2 n)).
+#: camera's): enough to know it to about 13 % (1 / sqrt(2 n)); it is held within 0.25-4x the camera's.
 MIN_NOISE_POINTS = 30
 #: A camera's bias is kept when it differs from zero at this level (chi-square): with a dozen classes tested per
 #: rig, a take without bias keeps one by chance about once in a thousand.
