@@ -197,6 +197,29 @@ def timed_take(name: str, seed: int, noise: float, options: TakeOptions) -> tupl
     return replace(scenario, volume=waved), observations, clocks
 
 
+#: The errors of a calibration against the truth that :func:`truth_errors` gives.
+TRUTH_MEASURES = ("focal", "principal point", "curve", "E_r", "E_t", "D_RMS")
+
+
+def truth_errors(result: CalibrationResult, scenario: Scenario) -> dict[str, list[float]]:
+    """Errors of a calibration against the scenario's truth, in its reference frame, per :data:`TRUTH_MEASURES`:
+    focal, principal point, curve (px, every camera), E_r (deg), E_t (cameras but the first), D_RMS (mm, 200
+    held-out noise-free placements in the scenario's volume)."""
+    models, poses = in_truth_frame(result, scenario)
+    out: dict[str, list[float]] = {k: [] for k in TRUTH_MEASURES}
+    for c, camera in enumerate(scenario.cameras):
+        e = camera_errors(models[c], poses[c], camera.model, camera.pose)
+        out["focal"].append(e.focal_px)
+        out["principal point"].append(e.principal_point_px)
+        out["curve"].append(e.curve_px)
+        if c > 0:
+            out["E_r"].append(e.rotation_deg)
+            out["E_t"].append(e.translation)
+    held = simulate(scenario, 0.0, np.random.default_rng(99), n=200)
+    out["D_RMS"].append(heldout_wand_rms(tuple(models), tuple(poses), held.observations.uv, scenario.wand))
+    return out
+
+
 @cache
 def timed_calibration(
     name: str, seed: int, noise: float, options: TakeOptions, timing: tuple[str, str] = ("auto", "auto")
@@ -213,18 +236,7 @@ def timed_calibration(
     result = calibrate(
         scenario.rig, observations, CalibrationOptions(time_offsets=timing[0], rolling_shutter=timing[1])
     )
-    models, poses = in_truth_frame(result, scenario)
-    out: dict[str, list[float]] = {k: [] for k in ("focal", "principal point", "curve", "E_r", "E_t", "D_RMS")}
-    for c, camera in enumerate(scenario.cameras):
-        e = camera_errors(models[c], poses[c], camera.model, camera.pose)
-        out["focal"].append(e.focal_px)
-        out["principal point"].append(e.principal_point_px)
-        out["curve"].append(e.curve_px)
-        if c > 0:
-            out["E_r"].append(e.rotation_deg)
-            out["E_t"].append(e.translation)
-    held = simulate(scenario, 0.0, np.random.default_rng(99), n=200)
-    out["D_RMS"].append(heldout_wand_rms(tuple(models), tuple(poses), held.observations.uv, scenario.wand))
+    out = truth_errors(result, scenario)
     latency = {n: clock.latency_s for n, clock in zip(scenario.rig.camera_names, clocks, strict=True)}
     readout = {n: clock.readout_s for n, clock in zip(scenario.rig.camera_names, clocks, strict=True)}
     for key in ("offset", "offset z", "readout", "readout z", "intrinsics z"):

@@ -11,10 +11,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from rigs import in_truth_frame, rms
+from rigs import TRUTH_MEASURES, rms, truth_errors
 
 from wand_calib_ros.cli import main
-from wand_calib_ros.core.judge.metrics import camera_errors, heldout_wand_rms
 from wand_calib_ros.core.pipeline import calibrate
 from wand_calib_ros.io.bags import write_image_bag
 from wand_calib_ros.io.observations_csv import read_rig_observations
@@ -22,14 +21,13 @@ from wand_calib_ros.io.rig_yaml import save_rig
 from wand_calib_ros.io.videos import CameraSource, read_source_frames
 from wand_calib_ros.sim.clocks import TakeOptions, film, take_trajectory
 from wand_calib_ros.sim.render import Recording, RenderOptions, render_take
-from wand_calib_ros.sim.scenarios import SCENARIOS, Scenario, simulate
+from wand_calib_ros.sim.scenarios import SCENARIOS, Scenario
 from wand_calib_ros.sim.videos import write_camera_videos
 
 FPS = 30.0
 #: Each camera was started this long after the first (s): up to 5 s apart.
 STARTS = {"cam0": 0.0, "cam1": 2.3, "cam2": 4.9}
 SEEDS = range(3)
-MEASURES = ("focal", "principal point", "curve", "E_r", "E_t", "D_RMS")
 #: The videos lose the first seconds of two cameras and go through MPEG-4: their errors stay within this of the
 #: bag's, RMS over the seeds and cameras.
 AS_THE_BAG = 1.3
@@ -68,18 +66,7 @@ def _videos(folder: Path) -> list[str]:
 def _errors(scenario: Scenario, observations_csv: Path, truth: dict[str, float] | None) -> dict[str, list[float]]:
     observations = read_rig_observations(observations_csv, scenario.rig)
     result = calibrate(scenario.rig, observations)
-    models, poses = in_truth_frame(result, scenario)
-    out: dict[str, list[float]] = {measure: [] for measure in (*MEASURES, "offset")}
-    for c, camera in enumerate(scenario.cameras):
-        e = camera_errors(models[c], poses[c], camera.model, camera.pose)
-        out["focal"].append(e.focal_px)
-        out["principal point"].append(e.principal_point_px)
-        out["curve"].append(e.curve_px)
-        if c > 0:
-            out["E_r"].append(e.rotation_deg)
-            out["E_t"].append(e.translation)
-    held = simulate(scenario, 0.0, np.random.default_rng(99), n=200)
-    out["D_RMS"].append(heldout_wand_rms(tuple(models), tuple(poses), held.observations.uv, scenario.wand))
+    out = {**truth_errors(result, scenario), "offset": []}
     if truth is not None:
         reference = truth[result.reference_camera]
         out["offset"] = [camera.time_offset - (truth[camera.name] - reference) for camera in result.cameras]
@@ -98,7 +85,7 @@ def test_videos_started_seconds_apart_calibrate_as_the_same_take_from_its_bag(tm
                              ("videos", _errors(scenario, folder / "videos.csv", truth))):  # fmt: skip
             for key, values in errors.items():
                 pooled[name].setdefault(key, []).extend(values)
-    ratios = {m: rms(pooled["videos"][m]) / rms(pooled["bag"][m]) for m in MEASURES}
+    ratios = {m: rms(pooled["videos"][m]) / rms(pooled["bag"][m]) for m in TRUTH_MEASURES}
     assert all(ratio <= AS_THE_BAG for ratio in ratios.values()), ratios
     assert np.max(np.abs(pooled["videos"]["offset"])) <= OFFSET_S, pooled["videos"]["offset"]
 

@@ -73,9 +73,11 @@ def test_calibrator_alone_commits_to_the_drivers(ros: Ros, tmp_path: Path) -> No
     assert abs(committed["cam1"].k[0] - truth.focal_px[0]) < 1.0
 
 
-def test_calibrate_answers_before_its_report_and_again_while_it_is_drawn(ros: Ros, tmp_path: Path) -> None:
+def _calibrator_on_a_take(ros: Ros, tmp_path: Path, seed: int) -> tuple[CalibratorNode, Path]:
+    """A calibrator on its defaults (write_report as a user has it: on) whose output folder holds a take of the
+    paper's rig (seed ``seed``): the node, spinning, and that folder."""
     scenario = paper_fisheye_scenario()
-    data = simulate(scenario, 0.5, np.random.default_rng(5))
+    data = simulate(scenario, 0.5, np.random.default_rng(seed))
     save_rig(scenario.rig, tmp_path / "cameras.yaml")
     out = tmp_path / "out"
     out.mkdir()
@@ -86,9 +88,14 @@ def test_calibrate_answers_before_its_report_and_again_while_it_is_drawn(ros: Ro
             Parameter("cameras_file", value=str(tmp_path / "cameras.yaml")),
             Parameter("output_dir", value=str(out)),
             Parameter("min_theta_fraction", value=0.5),
-        ],  # write_report as a user has it: on
+        ],
     )
     ros.add(node)
+    return node, out
+
+
+def test_calibrate_answers_before_its_report_and_again_while_it_is_drawn(ros: Ros, tmp_path: Path) -> None:
+    node, out = _calibrator_on_a_take(ros, tmp_path, 5)
     assert node.reports is not None
     release, sources = threading.Event(), []
 
@@ -113,21 +120,7 @@ def test_calibrate_answers_before_its_report_and_again_while_it_is_drawn(ros: Ro
 
 
 def test_a_stop_waits_a_few_seconds_for_the_report_being_drawn(ros: Ros, tmp_path: Path) -> None:
-    scenario = paper_fisheye_scenario()
-    data = simulate(scenario, 0.5, np.random.default_rng(6))
-    save_rig(scenario.rig, tmp_path / "cameras.yaml")
-    out = tmp_path / "out"
-    out.mkdir()
-    write_observations(data.observations, out / "observations.csv")
-    node = CalibratorNode(
-        context=ros.context,
-        parameter_overrides=[
-            Parameter("cameras_file", value=str(tmp_path / "cameras.yaml")),
-            Parameter("output_dir", value=str(out)),
-            Parameter("min_theta_fraction", value=0.5),
-        ],
-    )
-    ros.add(node)
+    node, out = _calibrator_on_a_take(ros, tmp_path, 6)
     started = threading.Event()
 
     def slow(request: ReportRequest) -> None:  # a report that takes a second longer than usual

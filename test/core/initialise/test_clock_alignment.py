@@ -10,15 +10,15 @@ from functools import cache
 
 import numpy as np
 import pytest
-from rigs import in_truth_frame, rms
+from rigs import TRUTH_MEASURES, in_truth_frame, rms, truth_errors
 
 from wand_calib_ros.core.errors import TimingError
 from wand_calib_ros.core.initialise.clock_alignment import align_clocks, shifted
-from wand_calib_ros.core.judge.metrics import camera_errors, heldout_wand_rms
+from wand_calib_ros.core.judge.metrics import camera_errors
 from wand_calib_ros.core.model.rig import WandObservations
 from wand_calib_ros.core.pipeline import calibrate
 from wand_calib_ros.sim.clocks import TakeOptions, film, observe, take_trajectory
-from wand_calib_ros.sim.scenarios import SCENARIOS, Scenario, simulate
+from wand_calib_ros.sim.scenarios import SCENARIOS, Scenario
 
 SEEDS = range(6)
 NOISE = 0.25
@@ -28,7 +28,6 @@ MOVES = {
     "2.3 s": ((1, 2.3), (3, 2.3)),
     "-7 s": ((2, -7.0), (3, -7.0)),
 }
-MEASURES = ("focal", "principal point", "curve", "E_r", "E_t", "D_RMS")
 #: The lined-up take may differ from the one whose clocks agreed only in which of two images half a frame from a
 #: frame's time joins it (free-running phases): its errors stay within this of the other's, RMS over the seeds.
 SAME_TAKE = 1.15
@@ -60,18 +59,7 @@ def _errors(seed: int, moves: tuple[tuple[int, float], ...], frames: bool = Fals
     if frames:
         observations = replace(observations, stamps=None)
     result = calibrate(scenario.rig, observations)
-    models, poses = in_truth_frame(result, scenario)
-    out: dict[str, list[float]] = {measure: [] for measure in (*MEASURES, "offset")}
-    for c, camera in enumerate(scenario.cameras):
-        e = camera_errors(models[c], poses[c], camera.model, camera.pose)
-        out["focal"].append(e.focal_px)
-        out["principal point"].append(e.principal_point_px)
-        out["curve"].append(e.curve_px)
-        if c > 0:
-            out["E_r"].append(e.rotation_deg)
-            out["E_t"].append(e.translation)
-    held = simulate(scenario, 0.0, np.random.default_rng(99), n=200)
-    out["D_RMS"].append(heldout_wand_rms(tuple(models), tuple(poses), held.observations.uv, scenario.wand))
+    out = {**truth_errors(result, scenario), "offset": []}
     if not frames:
         reference = truth[result.reference_camera]
         out["offset"] = [camera.time_offset - (truth[camera.name] - reference) for camera in result.cameras]
@@ -90,7 +78,7 @@ def _pooled(moves: tuple[tuple[int, float], ...], frames: bool = False) -> dict[
 def test_clocks_seconds_apart_calibrate_as_the_take_whose_clocks_agreed(case: str) -> None:
     agreed = _pooled(())
     moved = _pooled(MOVES[case])
-    ratios = {measure: rms(moved[measure]) / rms(agreed[measure]) for measure in MEASURES}
+    ratios = {measure: rms(moved[measure]) / rms(agreed[measure]) for measure in TRUTH_MEASURES}
     assert all(ratio <= SAME_TAKE for ratio in ratios.values()), ratios
     assert np.max(np.abs(moved["offset"])) <= OFFSET_S  # the whole offset: seconds and the sub-frame part
 
