@@ -22,7 +22,7 @@ import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TextIO
+from typing import Any, TextIO
 
 import numpy as np
 from numpy.typing import NDArray
@@ -228,13 +228,9 @@ def _parse_plain(
             seen = stamps[:, c][np.isfinite(stamps[:, c])]
             if np.any(np.diff(seen) <= 0):  # stamps must increase with the frame id
                 return None
-    saturated = brightness = None
-    if flag is not None:
-        saturated = np.zeros(uv.shape[:3], dtype=bool)
-        saturated[frame_row, camera, point] = flag == 1
-    if stops is not None:
-        brightness = np.full(uv.shape[:3], np.nan)
-        brightness[frame_row, camera, point] = stops
+    where = (frame_row, camera, point)
+    saturated = _per_point(uv.shape[:3], where, None if flag is None else flag == 1, False)
+    brightness = _per_point(uv.shape[:3], where, stops, np.nan)
     return WandObservations(frame_ids.astype(np.int64), names, uv, stamps, saturated, brightness)
 
 
@@ -451,17 +447,28 @@ def _parsed(
             stamps[frame_row, camera_index] = stamp
         stamps = stamps[order]
         _check_stamp_order(path, frame_ids[order], names, stamps, view_stamps, order)
-    saturated = None
-    if flags is not None:
-        saturated = np.zeros(uv.shape[:3], dtype=bool)
-        saturated[f, c, p] = flags
-        saturated = saturated[order]
-    brightness = None
-    if stops is not None:
-        brightness = np.full(uv.shape[:3], np.nan)
-        brightness[f, c, p] = stops
-        brightness = brightness[order]
-    return WandObservations(frame_ids[order], names, uv[order], stamps, saturated, brightness)
+    saturated = _per_point(uv.shape[:3], (f, c, p), flags, False)
+    brightness = _per_point(uv.shape[:3], (f, c, p), stops, np.nan)
+    return WandObservations(
+        frame_ids[order],
+        names,
+        uv[order],
+        stamps,
+        None if saturated is None else saturated[order],
+        None if brightness is None else brightness[order],
+    )
+
+
+def _per_point(
+    shape: tuple[int, ...], where: tuple[NDArray[Any], ...], values: Any, empty: bool | float
+) -> NDArray[Any] | None:
+    """(F, C, K) a per-point column: ``values`` at the points ``where`` (frame rows, cameras, points), ``empty``
+    elsewhere (its type the array's: bool flags or float stops); None where the file has no such column."""
+    if values is None:
+        return None
+    out = np.full(shape, empty, dtype=bool if isinstance(empty, bool) else np.float64)
+    out[where] = values
+    return out
 
 
 def _stamp(path: Path, row_number: int, camera: str, frame: int, text: str) -> float:

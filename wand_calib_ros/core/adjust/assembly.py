@@ -19,7 +19,7 @@ from wand_calib_ros.core.adjust.bundle_problem import (
     BundleState,
 )
 from wand_calib_ros.core.adjust.gating import VIEW_GATE_SIGMAS
-from wand_calib_ros.core.adjust.linearisation import noise_scale, residuals, squared_norms
+from wand_calib_ros.core.adjust.linearisation import in_pixels, residuals, squared_norms
 from wand_calib_ros.core.adjust.model_order import FixedParameters, free_mask
 from wand_calib_ros.core.adjust.normal_equations import block_starts
 from wand_calib_ros.core.adjust.placements import triangulate_placements
@@ -217,9 +217,9 @@ def _cameras(
     max_theta = max_off_axis(result, problem)
     n_cameras = problem.n_cameras
     counts = np.bincount(problem.camera, minlength=n_cameras)
-    scale = noise_scale(state, problem)  # (the adjustment's residuals back in pixels)
-    in_pixels = result.residuals if scale is None else result.residuals * scale[:, None]
-    squares = np.bincount(problem.camera, squared_norms(in_pixels), minlength=n_cameras)
+    squares = np.bincount(
+        problem.camera, squared_norms(in_pixels(result.residuals, state, problem)), minlength=n_cameras
+    )
     with np.errstate(invalid="ignore", divide="ignore"):
         rms_px = np.sqrt(squares / (2 * counts))  # over u and v; NaN for a camera without points
     view_counts = np.bincount(problem.camera[block_starts(problem.placement, problem.camera)], minlength=n_cameras)
@@ -321,8 +321,7 @@ def synchronised_pixels(state: BundleState, problem: BundleProblem, uv: FloatArr
     """
     if problem.timing is None and (problem.brightness is None or state.bias is None):
         return uv
-    scale = noise_scale(state, problem)
-    moved = residuals(state, problem) if scale is None else residuals(state, problem) * scale[:, None]
+    moved = in_pixels(residuals(state, problem), state, problem)
     shift = moved - residuals(state, replace(problem, timing=None, brightness=None))
     out = np.array(uv, dtype=np.float64)
     out[problem.placement, problem.camera, problem.point] -= shift

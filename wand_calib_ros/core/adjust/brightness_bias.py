@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 from wand_calib_ros.core.adjust.bundle_adjustment import BundleResult
 from wand_calib_ros.core.adjust.bundle_problem import BIAS, N_CAMERA_PARAMS, BundleProblem, CameraBias
 from wand_calib_ros.core.adjust.chi_square import chi_square_quantile
-from wand_calib_ros.core.adjust.linearisation import noise_scale, squared_norms
+from wand_calib_ros.core.adjust.linearisation import in_pixels, squared_norms
 from wand_calib_ros.core.model.brightness import (
     BIAS_COMPONENTS,
     BIAS_EDGES,
@@ -106,10 +106,9 @@ def class_noise(result: BundleResult, problem: BundleProblem) -> FloatArray:
     n, cameras = N_BIAS_CLASSES + 1, problem.n_cameras
     if problem.brightness is None:
         return np.ones((cameras, n))
-    scale = noise_scale(result.state, problem)
-    res = result.residuals if scale is None else result.residuals * scale[:, None]
+    counts, _ = class_points(problem)
     index = problem.camera * n + brightness_classes(problem.brightness)
-    counts = np.bincount(index, minlength=cameras * n).reshape(cameras, n)
+    res = in_pixels(result.residuals, result.state, problem)
     squares = np.bincount(index, squared_norms(res), minlength=cameras * n).reshape(cameras, n)
     mean_square = squares.sum(axis=1) / np.maximum(counts.sum(axis=1), 1)
     with np.errstate(invalid="ignore", divide="ignore"):

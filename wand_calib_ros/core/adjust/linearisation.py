@@ -242,10 +242,11 @@ def _noise_scale(
     return np.asarray(noise[camera, brightness_classes(brightness[first:stop])], dtype=np.float64)
 
 
-def noise_scale(state: BundleState, problem: BundleProblem) -> FloatArray | None:
-    """(M,) what each observation's residual is divided by in the adjustment: its brightness class's relative
-    noise (None: nothing); ``residuals(state, problem) * noise_scale`` is in pixels."""
-    return _noise_scale(state.bias_noise, problem.brightness, problem.camera, 0, problem.n_observations)
+def in_pixels(res: FloatArray, state: BundleState, problem: BundleProblem) -> FloatArray:
+    """(M, 2) the residuals ``res`` of the adjustment of ``problem`` at ``state`` back in pixels: each was divided
+    by its brightness class's relative noise where the state has one (:func:`residuals`)."""
+    scale = _noise_scale(state.bias_noise, problem.brightness, problem.camera, 0, problem.n_observations)
+    return res if scale is None else res * scale[:, None]
 
 
 def _centres(
@@ -307,7 +308,7 @@ def _camera_columns(
 
 def residuals(state: BundleState, problem: BundleProblem) -> FloatArray:
     """(M, 2) reprojection residuals (projected minus observed) in px, each divided by its relative noise where
-    the state has one by brightness (:func:`noise_scale`). Pure."""
+    the state has one by brightness (:func:`in_pixels` undoes that). Pure."""
     unknowns = _Unknowns.of(state)
     out = np.empty((problem.n_observations, 2))
     firsts = range(0, problem.n_observations, CHUNK_OBSERVATIONS)

@@ -225,24 +225,19 @@ class WandObservations:
         uv.setflags(write=False)
         object.__setattr__(self, "frames", frames)
         object.__setattr__(self, "uv", uv)
-        if self.stamps is not None:
-            stamps = np.array(self.stamps, dtype=np.float64)
-            if stamps.shape != uv.shape[:2]:
-                raise ValueError(f"stamps must have shape (F, C) = {uv.shape[:2]}, got {stamps.shape}")
-            stamps.setflags(write=False)
-            object.__setattr__(self, "stamps", stamps)
-        if self.saturated is not None:
-            saturated = np.array(self.saturated, dtype=bool)
-            if saturated.shape != uv.shape[:3]:
-                raise ValueError(f"saturated must have shape (F, C, K) = {uv.shape[:3]}, got {saturated.shape}")
-            saturated.setflags(write=False)
-            object.__setattr__(self, "saturated", saturated)
-        if self.brightness is not None:
-            brightness = np.array(self.brightness, dtype=np.float64)
-            if brightness.shape != uv.shape[:3]:
-                raise ValueError(f"brightness must have shape (F, C, K) = {uv.shape[:3]}, got {brightness.shape}")
-            brightness.setflags(write=False)
-            object.__setattr__(self, "brightness", brightness)
+        for name, dtype, shape, axes in (
+            ("stamps", np.float64, uv.shape[:2], "(F, C)"),
+            ("saturated", np.bool_, uv.shape[:3], "(F, C, K)"),
+            ("brightness", np.float64, uv.shape[:3], "(F, C, K)"),
+        ):
+            given = getattr(self, name)
+            if given is None:
+                continue
+            array = np.array(given, dtype=dtype)
+            if array.shape != shape:
+                raise ValueError(f"{name} must have shape {axes} = {shape}, got {array.shape}")
+            array.setflags(write=False)
+            object.__setattr__(self, name, array)
 
     @property
     def complete(self) -> NDArray[np.bool_]:
