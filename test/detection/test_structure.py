@@ -8,8 +8,16 @@ import numpy as np
 import pytest
 
 from wand_calib_ros.core.model.rig import CameraSpec
+from wand_calib_ros.detection.background import box_sums, estimate_background
 from wand_calib_ros.detection.recording import CameraStream
-from wand_calib_ros.detection.structure import StaticStructure, median_of, repeated, sorted_pixels
+from wand_calib_ros.detection.structure import (
+    SNAPSHOT_NS,
+    SNAPSHOTS,
+    StaticStructure,
+    median_of,
+    repeated,
+    sorted_pixels,
+)
 from wand_calib_ros.detection.wand import WandOptions
 from wand_calib_ros.sim.room import CameraRoom, Lamp, Reflection, Sensor, Stripe
 from wand_calib_ros.sim.room_images import render_camera
@@ -118,3 +126,24 @@ def test_the_median_and_the_second_largest_of_five_are_numpys() -> None:
         median, upper = median_and_upper(snapshots)
         ordered = np.sort(np.stack(snapshots), axis=0)
         assert np.array_equal(median, ordered[(n - 1) // 2]) and np.array_equal(upper, ordered[-2])
+
+
+def test_a_still_rooms_snapshots_keep_the_threshold_and_a_lamp_switched_on_makes_it_again() -> None:
+    rng = np.random.default_rng(4)
+    structure = StaticStructure()
+    background = estimate_background(box_sums(np.full((120, 160), 40, np.uint8))[0])
+
+    def snapshot(k: int, lamp: bool = False) -> bool:
+        """Whether the snapshot made the structure's threshold again."""
+        image = np.clip(rng.normal(40.0, 2.0, (120, 160)), 0, 255).astype(np.uint8)
+        if lamp:
+            image[50:60, 70:80] = 200
+        structure.add(k * SNAPSHOT_NS, image, box_sums(image)[0])
+        again = not structure.unchanged
+        structure.apply(background)
+        return again
+
+    assert all(snapshot(k) for k in range(SNAPSHOTS))  # the window fills: made again with each
+    made = [snapshot(k) for k in range(SNAPSHOTS, 3 * SNAPSHOTS)]  # a still room: made again once a window
+    assert made == [False] * (SNAPSHOTS - 1) + [True] + [False] * (SNAPSHOTS - 1) + [True]
+    assert snapshot(3 * SNAPSHOTS, lamp=True)  # a lamp switched on: its light stands above the threshold

@@ -27,6 +27,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from wand_calib_ros.core.initialise.clock_alignment import ClockAlignment
 from wand_calib_ros.core.initialise.intrinsics_init import nominal_bearings
 from wand_calib_ros.core.model.bearings import BearingTable
 from wand_calib_ros.core.model.camera_model import CameraModel
@@ -78,6 +79,8 @@ class Detections:
         tracks: (F, C) the camera's track of each view (-1: no view): views of one track were labelled together.
         reports: per camera what it saw (:mod:`~wand_calib_ros.detection.health`).
         masks: per camera the pixels its detector ignored at the end (given and learned), or None: none.
+        clocks: the cameras' clock offsets the wand's motion gave for the grouping (the calibration of the same
+            views need not search them again), or None: not decided.
     """
 
     observations: WandObservations
@@ -86,6 +89,7 @@ class Detections:
     tracks: NDArray[np.int64]
     reports: dict[str, HealthReport]
     masks: dict[str, Mask | None]
+    clocks: ClockAlignment | None = None
 
 
 @dataclass
@@ -299,6 +303,10 @@ class CameraStream:
             sums, unit = box_sums(gray)
             if self.structure.due(stamp_ns):
                 self.structure.add(stamp_ns, gray, sums, wand)
+            if current is not None and learned and self.structure.unchanged and current.threshold.dtype == depth:
+                self._since_background = 1  # (a still room's snapshot: the structure and its threshold stand)
+                self._background = replace(current, static=self.structure.pixels)
+                return replace(self._background, sums=sums)
             background = estimate_background(sums, self.blob_options.background, unit=unit)
             self._background = self.structure.apply(background)
             self._since_background = 1

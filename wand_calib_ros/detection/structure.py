@@ -11,6 +11,10 @@ room does not:
 - every SNAPSHOT_NS (the first few EARLY_NS apart) the image's box sums are kept, the newest SNAPSHOTS of them
   (three seconds); the structure is their per-pixel median: a moving LED is at a pixel in one or two
   of them, so it is not part of it (an LED at rest for longer is: it is still, not the wand);
+- the structure is made again when a snapshot changes it: where the snapshot stands above the threshold or below
+  the structure by as much (a lamp switched on or off, a chair moved) on more than CHANGED_PIXELS pixels, or when
+  the noise changed by NOISE_CHANGE; and at least every SNAPSHOTS snapshots, so that it is never older than its
+  window. A still room's snapshots change nothing: the structure is made once in a window, not with every one;
 - the threshold that follows it is the structure plus the noise's contrast at its level. The noise is measured
   over time, from two snapshots' differences (tiles' lower halves, as the background measures it in space): a
   floor's grain or a window's bars are structure, not noise;
@@ -70,6 +74,13 @@ EARLY_FLICKER = 0.15
 #: A static pixel this close to full scale (a fraction) is saturated: nothing of a spot can be seen there.
 SATURATED_STATIC = 0.98
 
+#: A snapshot changes the structure when more than this many of its box sums stand above the search threshold or
+#: below the structure by as much (noise alone: about one pixel in a million beyond five sigmas) ...
+CHANGED_PIXELS = 16
+#: ... or when the noise's variance at a typical level changed by more than this factor (a gain or exposure
+#: changed; one estimate's scatter is a few percent).
+NOISE_CHANGE = 1.5
+
 #: Comparators (i, j) that sort 2-5 values (optimal networks): after them value i <= value j for every pair.
 _NETWORKS = {
     2: ((0, 1),),
@@ -93,25 +104,40 @@ def sorted_pixels(snapshots: list[NDArray[Any]]) -> list[NDArray[Any]]:
 
 def median_and_upper(snapshots: list[NDArray[Any]]) -> tuple[NDArray[Any], NDArray[Any]]:
     """The per-pixel median and second largest of 3-5 images (the lower median and the second largest of four): of
-    five by thirteen minima and maxima instead of a sort's eighteen."""
+    five by thirteen minima and maxima instead of a sort's eighteen, into four arrays (a new array's pages cost
+    as much as a minimum's arithmetic)."""
     if len(snapshots) != 5:
         ordered = sorted_pixels(snapshots)
         return ordered[(len(ordered) - 1) // 2], ordered[-2]
     a, b, c, d, e = snapshots
-    a, b, c, d = cv2.min(a, b), cv2.max(a, b), cv2.min(c, d), cv2.max(c, d)
-    low, high, top = cv2.max(a, c), cv2.min(b, d), cv2.max(b, d)  # the middle two and the largest of four
-    middle_low, middle_high = cv2.min(low, high), cv2.max(low, high)
-    return cv2.max(middle_low, cv2.min(middle_high, e)), cv2.max(middle_high, cv2.min(top, e))
+    low, high, small, large = (np.empty_like(a) for _ in range(4))
+    np.minimum(a, b, out=low), np.maximum(a, b, out=high), np.minimum(c, d, out=small), np.maximum(c, d, out=large)
+    np.maximum(low, small, out=low)  # the middle two of four: low, small; the largest: high
+    np.minimum(high, large, out=small)
+    np.maximum(high, large, out=high)
+    np.minimum(low, small, out=large)  # the middle two ordered: large <= low
+    np.maximum(low, small, out=low)
+    np.minimum(high, e, out=high)  # the second largest of five
+    np.maximum(low, high, out=high)
+    np.minimum(low, e, out=low)  # the median of five
+    np.maximum(large, low, out=low)
+    return low, high
 
 
 def median_of(snapshots: list[NDArray[Any]]) -> NDArray[Any]:
     """The per-pixel median of 1-5 images (the lower median of an even count); of five by seven minima and maxima
-    (the median of 5 is the median of the fifth and the middle two of the other four's pairs)."""
+    (the median of 5 is the median of the fifth and the middle two of the other four's pairs), into two arrays."""
     if len(snapshots) != 5:
         return sorted_pixels(snapshots)[(len(snapshots) - 1) // 2]
     a, b, c, d, e = snapshots
-    low, high = cv2.max(cv2.min(a, b), cv2.min(c, d)), cv2.min(cv2.max(a, b), cv2.max(c, d))
-    return cv2.max(cv2.min(low, high), cv2.min(cv2.max(low, high), e))
+    low, high = np.minimum(a, b), np.minimum(c, d)
+    np.maximum(low, high, out=low)  # the larger of the pairs' minima
+    np.maximum(a, b, out=high)
+    np.minimum(high, np.maximum(c, d), out=high)  # the smaller of their maxima
+    median = np.minimum(low, high)
+    np.maximum(low, high, out=low)
+    np.minimum(low, e, out=low)
+    return np.maximum(median, low, out=median)
 
 
 class StaticStructure:
@@ -130,7 +156,11 @@ class StaticStructure:
         self._last: tuple[NDArray[Any], NDArray[Any]] | None = None  # the newest snapshot's image and sums as they came
         self._pixel_noise: tuple[float, float] = (0.0, 0.0)  # (a, b) of a pixel's
         self._made: tuple[NDArray[Any], NDArray[Any], NDArray[Any], NDArray[Any]] | None = None  # (see _make)
+        self._made_noise: tuple[float, float] | None = None  # the noise it was made with
+        self._kept = 0  # snapshots since it was made
+        self._made_from = 0  # of how many snapshots
         self._threshold: NDArray[Any] | None = None  # made from it (see apply)
+        self._floor: NDArray[Any] | None = None  # the structure less as much as the threshold stands above it
 
     def due(self, stamp_ns: int) -> bool:
         """Whether an image at ``stamp_ns`` should give a snapshot (:meth:`add`)."""
@@ -178,7 +208,37 @@ class StaticStructure:
         self._sums.append(sums)
         self._taken += 1
         self._last_ns = stamp_ns
-        self._made = self._threshold = None
+        self._kept += 1
+        if self._changed_by(sums):
+            self._made = self._made_noise = self._threshold = self._floor = None
+            self._kept = 0
+        elif self._made is not None:  # the pixels spots are measured on: the newest snapshots' median still
+            self._made = (median_of(list(self._images)), *self._made[1:])
+
+    @property
+    def pixels(self) -> NDArray[Any] | None:
+        """(H, W) the structure's pixels (the newest snapshots' median), or None: none learned yet."""
+        return None if self._made is None else self._made[0]
+
+    @property
+    def unchanged(self) -> bool:
+        """Whether the newest snapshot left the structure and its threshold as they were."""
+        return self._threshold is not None
+
+    def _changed_by(self, sums: NDArray[Any]) -> bool:
+        """Whether a new snapshot's box sums (the wand kept out) make the structure again (see the module
+        docstring)."""
+        if self._threshold is None or self._floor is None or self._made_noise is None or self._noise is None:
+            return True
+        if self._made_from < SNAPSHOTS or self._kept >= SNAPSHOTS or sums.shape != self._threshold.shape:
+            return True  # (made from fewer snapshots, early: made again with each until the window is full)
+        level = 100.0 * max(1.0, self._noise[1], self._made_noise[1])
+        now, then = (max(a + b * level, 1e-12) for a, b in (self._noise, self._made_noise))
+        if not 1.0 / NOISE_CHANGE <= now / then <= NOISE_CHANGE:
+            return True
+        over = cv2.countNonZero(cv2.compare(sums, self._threshold, cv2.CMP_GT))
+        under = cv2.countNonZero(cv2.compare(sums, self._floor, cv2.CMP_LT))
+        return bool(over + under > CHANGED_PIXELS)
 
     def reset(self) -> None:
         """Forget what was learned (the view changed)."""
@@ -187,6 +247,7 @@ class StaticStructure:
         self._pairs.clear()
         self._last = None
         self._taken, self._last_ns, self._noise, self._made, self._threshold = 0, None, None, None, None
+        self._made_noise, self._floor, self._kept, self._made_from = None, None, 0, 0
 
     @property
     def noise(self) -> tuple[float, float] | None:
@@ -211,6 +272,7 @@ class StaticStructure:
             return background
         if self._threshold is None:
             self._threshold = _threshold(structure, above, flicker, background, len(self._sums) < SNAPSHOTS)
+            self._floor = _floor(structure, above, flicker)
         return replace(background, search=None, structure=self._threshold, static=pixels, static_sums=structure,
                        static_noise=self._pixel_noise)  # fmt: skip
 
@@ -244,7 +306,7 @@ class StaticStructure:
                 sums = np.arange(int(structure.max()) + 1, dtype=np.float32)
                 noise = np.sqrt(np.float32(a) + np.float32(b) * sums)
                 table = np.minimum(np.ceil(np.maximum(sigmas * noise, least)), 65535.0).astype(np.uint16)
-                contrast = np.take(table, structure)
+                contrast = np.take(table, structure, out=np.empty_like(structure), mode="clip")
                 above = cv2.add(structure, contrast)
                 flicker = _flicker(structure, upper, (a, b), contrast, float(sigmas))
             else:
@@ -252,6 +314,7 @@ class StaticStructure:
                 above = level + np.maximum(sigmas * np.sqrt(np.float32(a) + np.float32(b) * level), least)
                 flicker = _flicker(structure, upper, (a, b))
             self._made = (median_of(list(self._images)), structure, above, flicker)
+            self._made_noise, self._made_from = self._noise, len(self._sums)
         return self._made
 
 
@@ -270,17 +333,26 @@ def _threshold(
     background; ``early`` (too few snapshots to tell flicker): any static light may flicker by EARLY_FLICKER of it,
     and the threshold is never below the spatial one."""
     height, width = above.shape
-    level = cv2.resize(background.level.astype(np.float32), (width, height), interpolation=cv2.INTER_LINEAR)
-    if structure.dtype == np.uint16:
-        excess = cv2.subtract(structure, np.minimum(level, 65535.0).astype(np.uint16))  # (saturates at 0)
-        cap = _scaled(excess, FLICKER_MAX)
+    if structure.dtype == np.uint16:  # (the level's grid in the sums' dtype: a quarter of a float image's cost)
+        grid = np.minimum(np.round(background.level), 65535.0).astype(np.uint16)
+        excess = cv2.subtract(structure, cv2.resize(grid, (width, height), interpolation=cv2.INTER_LINEAR))
+        cap = _scaled(excess, FLICKER_MAX)  # (saturates at 0)
     else:
+        level = cv2.resize(background.level.astype(np.float32), (width, height), interpolation=cv2.INTER_LINEAR)
         cap = np.maximum(structure - level, 0.0) * np.float32(FLICKER_MAX)
     if early:
         light = _scaled(structure, EARLY_FLICKER)
         threshold: NDArray[Any] = cv2.max(cv2.add(above, cv2.max(cap, light)), background.threshold)
         return threshold
     return cv2.add(above, cv2.min(flicker, cap))
+
+
+def _floor(structure: NDArray[Any], above: NDArray[Any], flicker: NDArray[Any]) -> NDArray[Any]:
+    """(H, W) the structure's sums less the noise's contrast (``above`` less the structure) and the flicker's margin:
+    a snapshot below it there has lost light the structure holds."""
+    if structure.dtype == np.uint16:
+        return cv2.subtract(structure, cv2.add(cv2.subtract(above, structure), flicker))  # (saturates at 0)
+    return np.asarray(structure - (above - structure) - flicker)
 
 
 def _flicker(
