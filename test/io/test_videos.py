@@ -18,7 +18,7 @@ from wand_calib_ros.core.pipeline import calibrate
 from wand_calib_ros.io.bags import write_image_bag
 from wand_calib_ros.io.observations_csv import read_rig_observations
 from wand_calib_ros.io.rig_yaml import save_rig
-from wand_calib_ros.io.videos import CameraSource, read_source_frames
+from wand_calib_ros.io.videos import CameraSource, camera_frames
 from wand_calib_ros.sim.clocks import TakeOptions, film, take_trajectory
 from wand_calib_ros.sim.render import Recording, RenderOptions, render_take
 from wand_calib_ros.sim.scenarios import SCENARIOS, Scenario
@@ -110,17 +110,14 @@ def small_take(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return folder
 
 
-def test_frames_come_in_time_order_with_each_files_own_times(small_take: Path) -> None:
-    sources = {name: CameraSource(name, small_take / "videos" / f"{name}.mp4") for name in ("cam0", "cam1")}
-    frames = list(read_source_frames(sources))
-    stamps = [frame.stamp_ns for frame in frames]
-    assert stamps == sorted(stamps) and all(frame.encoding == "mono8" and frame.image.ndim == 2 for frame in frames)
+def test_each_cameras_frames_come_with_its_files_own_times(small_take: Path) -> None:
     for name, expected in (("cam0", 90), ("cam1", 60)):  # cam1 started 1 s later
-        mine = [frame.stamp_ns for frame in frames if frame.camera == name]
+        frames = list(camera_frames(name, CameraSource(name, small_take / "videos" / f"{name}.mp4")))
+        assert all(f.camera == name and f.encoding == "mono8" and f.image.ndim == 2 for f in frames)
+        mine = [frame.stamp_ns for frame in frames]
         assert len(mine) == expected and mine[0] == 0
         assert np.allclose(np.diff(mine), 1e9 / FPS, atol=1e3)  # the file's frame times (ns)
-    folders = {name: CameraSource(name, small_take / "frames" / name, 30.0) for name in ("cam0", "cam1")}
-    numbered = [frame for frame in read_source_frames(folders) if frame.camera == "cam1"]
+    numbered = list(camera_frames("cam1", CameraSource("cam1", small_take / "frames" / "cam1", 30.0)))
     assert len(numbered) == 90 and numbered[3].stamp_ns == 100_000_000  # index / fps
 
 
@@ -155,3 +152,29 @@ def test_every_bad_input_is_one_line_and_exit_2(
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and said.format(v=videos) in err[0], err
     assert not (tmp_path / "o.csv").exists()
+
+
+@pytest.mark.parametrize(("fourcc", "suffix"), [("MJPG", ".avi"), ("mp4v", ".mp4"), ("FFV1", ".mkv")])
+def test_a_videos_luma_plane_reads_as_the_grey_levels_of_its_bgr_decoding(
+    tmp_path: Path, fourcc: str, suffix: str
+) -> None:
+    # full range (MJPEG's), video range (MPEG-4's 16-235) and lossless grey (FFV1's): the same images either way
+    rng = np.random.default_rng(0)
+    ramp = np.linspace(0.0, 255.0, 160)[None, :]
+    drawn = [np.clip(rng.normal(0.0, 4.0, (120, 160)) + ramp, 0, 255).astype(np.uint8) for _ in range(5)]
+    path = tmp_path / f"cam0{suffix}"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*fourcc), FPS, (160, 120), isColor=False)
+    for image in drawn:
+        writer.write(image)
+    writer.release()
+    capture = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
+    decoded = []
+    while (read := capture.read())[0]:
+        decoded.append(cv2.cvtColor(read[1], cv2.COLOR_BGR2GRAY))
+    capture.release()
+    frames = list(camera_frames("cam0", CameraSource("cam0", path)))
+    stamps = np.array([f.stamp_ns for f in frames])
+    assert np.abs(stamps - np.arange(5) / FPS * 1e9).max() <= 1e6  # (Matroska keeps milliseconds)
+    for frame, grey in zip(frames, decoded, strict=True):
+        assert frame.image.shape == grey.shape and frame.image.dtype == np.uint8
+        assert np.abs(frame.image.astype(int) - grey).max() <= 1  # (rounding of the range's stretch)

@@ -10,8 +10,11 @@ from __future__ import annotations
 
 import heapq
 import logging
+import multiprocessing
 from collections.abc import Callable, Iterable, Iterator, Mapping
-from dataclasses import replace
+from concurrent.futures import ProcessPoolExecutor, wait
+from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -19,12 +22,14 @@ from wand_calib_ros.collection.sync import frames_to_observations, group_by_stam
 from wand_calib_ros.collection.timeline import TimeLines
 from wand_calib_ros.core.adjust.timing import frame_period
 from wand_calib_ros.core.errors import TimingError
-from wand_calib_ros.core.initialise.clock_alignment import Track, find_clock_offsets
-from wand_calib_ros.core.model.rig import RigSpec
+from wand_calib_ros.core.initialise.clock_alignment import ClockAlignment, Track, find_clock_offsets
+from wand_calib_ros.core.model.rig import CameraSpec, RigSpec
 from wand_calib_ros.detection.blobs import BlobOptions, Blobs
+from wand_calib_ros.detection.health import HealthReport
 from wand_calib_ros.detection.masks import Mask
-from wand_calib_ros.detection.recording import CameraStream, Detections, Labelled, Unsettled
+from wand_calib_ros.detection.recording import CameraStats, CameraStream, Detections, Labelled, Unsettled
 from wand_calib_ros.detection.wand import WandDetection, WandOptions
+from wand_calib_ros.errors import WandCalibError
 from wand_calib_ros.io.bags import ImageFrame
 
 #: A recording's images are put in stamp order within this much of it (s): a bag stores them as they arrived, a
@@ -76,33 +81,182 @@ def detect_recording(
             (progress reports, debug overlays).
         masks: per camera the pixels to ignore (the rig file's ``mask``), if any.
     """
-    wand_options = WandOptions.for_rig(rig)
     given = masks or {}
-    streams = {
-        c.name: CameraStream(c, wand_options, blob_options, max_hold_ns=None, mask=given.get(c.name))
-        for c in rig.cameras
-    }
+    searches = {c.name: CameraSearch(c, WandOptions.for_rig(rig), blob_options, given.get(c.name)) for c in rig.cameras}
     outcomes: list[tuple[str, Labelled]] = []
-    timelines = TimeLines(rig.camera_names)
     for frame in in_stamp_order(frames, int(REORDER_S * 1e9)):
-        stream = streams[frame.camera]
-        placed = timelines.place(frame.camera, frame.stamp_ns, None)  # (a file's stamps are all there is)
+        outcomes += [(frame.camera, out) for out in searches[frame.camera].see(frame, inspect)]
+    searched = [search.finish() for search in searches.values()]
+    outcomes += [(camera.camera, out) for camera in searched for out in camera.flushed]
+    return grouped_detections(rig, searched, outcomes, tolerance_ns)
+
+
+def detect_cameras_apart(
+    sources: Mapping[str, Callable[[], Iterable[ImageFrame]]],
+    rig: RigSpec,
+    *,
+    workers: int,
+    tolerance_ns: int = 0,
+    blob_options: BlobOptions = BlobOptions(),
+    inspect: Callable[[ImageFrame, Blobs | None, WandDetection | None, str | None], None] | None = None,
+    progress: Callable[[int], None] | None = None,
+    masks: Mapping[str, Mask] | None = None,
+) -> Detections:
+    """Wand observations of a recording kept one camera to a file (a video per camera): each camera's images
+    searched on their own, up to ``workers`` cameras at a time in processes of their own, then grouped as
+    :func:`detect_recording` groups them (the same detections: a camera's search never looks at another's images).
+
+    Args:
+        sources: per camera of the rig, what reads its images in stamp order (called in the worker).
+        workers: how many cameras are searched at a time (1: here, one after the other).
+        inspect: called for every image where it is searched (debug overlays).
+        progress: called here with how many images were searched so far, a few times a second.
+        tolerance_ns, blob_options, masks: as :func:`detect_recording`'s.
+
+    Raises:
+        WandCalibError: what reading a camera's images raised, its message as it was.
+    """
+    global _APART
+    given = masks or {}
+    _APART = _Apart(sources, rig, blob_options, dict(given), inspect, multiprocessing.get_context("fork").Value("q", 0))
+    try:
+        if workers <= 1 or len(rig.cameras) <= 1:
+            searched = [_search_camera(name) for name in rig.camera_names]
+        else:
+            searched = _searched_in_workers(rig.camera_names, workers, progress)
+    finally:
+        counted, _APART = _APART.counted, None
+    if progress is not None:
+        progress(int(counted.value))
+    outcomes = [(camera.camera, out) for camera in searched for out in camera.outcomes]
+    outcomes.sort(key=lambda item: item[1].stamp_ns)  # (stable: a camera's own order, cameras in rig order)
+    return grouped_detections(rig, searched, outcomes, tolerance_ns)
+
+
+@dataclass(frozen=True)
+class _Apart:
+    """What a worker searching one camera of :func:`detect_cameras_apart` needs (inherited as it forks)."""
+
+    sources: Mapping[str, Callable[[], Iterable[ImageFrame]]]
+    rig: RigSpec
+    blob_options: BlobOptions
+    masks: dict[str, Mask]
+    inspect: Callable[[ImageFrame, Blobs | None, WandDetection | None, str | None], None] | None
+    counted: Any  # a shared count of the images searched
+
+
+_APART: _Apart | None = None
+#: How often (s) the progress of cameras searched in workers is told.
+PROGRESS_S = 0.25
+
+
+def _searched_in_workers(
+    names: tuple[str, ...], workers: int, progress: Callable[[int], None] | None
+) -> list[Searched]:
+    """Each camera searched in a worker process (forked: it inherits _APART), in rig order."""
+    assert _APART is not None
+    with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork")) as pool:
+        futures = [pool.submit(_search_camera, name) for name in names]
+        pending = set(futures)
+        while pending:
+            _, pending = wait(pending, timeout=PROGRESS_S)
+            if progress is not None:
+                progress(int(_APART.counted.value))
+        return [future.result() for future in futures]
+
+
+def _search_camera(name: str) -> Searched:
+    """One camera's images searched (in a worker, or here); a reading error comes back as a WandCalibError with
+    its message (a worker's exceptions travel by pickle)."""
+    assert _APART is not None
+    work = _APART
+    search = CameraSearch(work.rig.camera(name), WandOptions.for_rig(work.rig), work.blob_options, work.masks.get(name))
+    outcomes: list[Labelled] = []
+    try:
+        for frame in in_stamp_order(work.sources[name](), int(REORDER_S * 1e9)):
+            outcomes += search.see(frame, work.inspect)
+            with work.counted.get_lock():
+                work.counted.value += 1
+    except WandCalibError as error:
+        raise WandCalibError(str(error)) from None
+    searched = search.finish()
+    return replace(searched, outcomes=(*outcomes, *searched.flushed), flushed=())
+
+
+@dataclass(frozen=True)
+class Searched:
+    """One camera's images, searched.
+
+    Attributes:
+        camera: its name.
+        outcomes: its labelled views and images without one, in stamp order (where :func:`detect_cameras_apart`
+            searched it; empty where :func:`detect_recording` keeps them with the others').
+        flushed: what its labeller still held at the end.
+        stats: its counts.
+        report: what it saw.
+        mask: the pixels its detector ignored at the end (given and learned), or None: none.
+    """
+
+    camera: str
+    outcomes: tuple[Labelled, ...]
+    flushed: tuple[Labelled, ...]
+    stats: CameraStats
+    report: HealthReport
+    mask: Mask | None
+
+
+class CameraSearch:
+    """One camera's images of a recording through its time line and detector, in stamp order."""
+
+    def __init__(self, spec: CameraSpec, wand: WandOptions, blobs: BlobOptions, mask: Mask | None) -> None:
+        self.stream = CameraStream(spec, wand, blobs, max_hold_ns=None, mask=mask)
+        self.timeline = TimeLines((spec.name,))
+
+    def see(
+        self,
+        frame: ImageFrame,
+        inspect: Callable[[ImageFrame, Blobs | None, WandDetection | None, str | None], None] | None,
+    ) -> list[Labelled]:
+        """One image searched (unless its time line does not place it next); what the labeller releases."""
+        placed = self.timeline.place(frame.camera, frame.stamp_ns, None)  # (a file's stamps are all there is)
         if placed.order != "next":
-            skipped = stream.passed_over(placed.order == "repeat")
+            skipped = self.stream.passed_over(placed.order == "repeat")
             if inspect is not None:
                 inspect(frame, None, None, skipped)
-            continue
-        blobs, detection, reason = stream.detect(frame.image, frame.encoding, frame.stamp_ns)
+            return []
+        blobs, detection, reason = self.stream.detect(frame.image, frame.encoding, frame.stamp_ns)
         if inspect is not None:
             inspect(frame, blobs, detection, reason)
-        outcomes += [(frame.camera, out) for out in stream.label(frame.stamp_ns, detection, reason)]
-    outcomes += [(name, out) for name, stream in streams.items() for out in stream.flush()]
-    return _grouped(rig, streams, outcomes, tolerance_ns, _clock_shifts(rig, outcomes))
+        return self.stream.label(frame.stamp_ns, detection, reason)
+
+    def finish(self) -> Searched:
+        """The search's end: what the labeller held, the counts, the report and the mask."""
+        stream = self.stream
+        flushed = tuple(stream.flush())
+        return Searched(stream.spec.name, (), flushed, stream.stats, stream.report(), stream.mask)
 
 
-def _clock_shifts(rig: RigSpec, outcomes: list[tuple[str, Labelled]]) -> dict[str, int]:
+def grouped_detections(
+    rig: RigSpec, searched: list[Searched], outcomes: list[tuple[str, Labelled]], tolerance_ns: int
+) -> Detections:
+    """The searched cameras' labelled views (``outcomes``: (camera, view)) grouped into frames, the cameras'
+    clocks lined up by the wand's motion first where they disagree."""
+    clocks = _clocks(rig, outcomes)
+    return replace(_grouped(rig, searched, outcomes, tolerance_ns, _shifts_ns(rig, clocks)), clocks=clocks)
+
+
+def _shifts_ns(rig: RigSpec, clocks: ClockAlignment | None) -> dict[str, int]:
     """Per camera whose clock the wand's motion lines up with the others' (by more than a frame or two), its
     offset in ns (empty where the clocks agree or cannot be decided: ``calibrate`` says why)."""
+    if clocks is None:
+        return {}
+    moved = zip(rig.camera_names, clocks.offsets, clocks.moved, strict=True)
+    return {name: round(float(offset) * 1e9) for name, offset, is_moved in moved if is_moved}
+
+
+def _clocks(rig: RigSpec, outcomes: list[tuple[str, Labelled]]) -> ClockAlignment | None:
+    """The cameras' clock offsets from the wand's motion in their labelled views (None: they cannot be decided,
+    ``calibrate`` says why)."""
     tracks = []
     for name in rig.camera_names:
         views = [(out.stamp_ns / 1e9, out.points) for camera, out in outcomes if camera == name]
@@ -115,16 +269,15 @@ def _clock_shifts(rig: RigSpec, outcomes: list[tuple[str, Labelled]]) -> dict[st
         found = find_clock_offsets(rig, tuple(tracks), frames=False)
     except TimingError as error:
         log.info("the cameras' clocks are not lined up: %s", error)
-        return {}
+        return None
     for line in found.lines:
         log.info(line)
-    moved = zip(rig.camera_names, found.offsets, found.moved, strict=True)
-    return {name: round(float(offset) * 1e9) for name, offset, is_moved in moved if is_moved}
+    return found
 
 
 def _grouped(
     rig: RigSpec,
-    streams: Mapping[str, CameraStream],
+    searched: list[Searched],
     outcomes: list[tuple[str, Labelled]],
     tolerance_ns: int,
     shift_ns: Mapping[str, int],
@@ -155,9 +308,9 @@ def _grouped(
             tracks[row, index[camera]] = out.track
             if out.brightness is not None and out.brightness.size == rig.wand.n_points:
                 brightness[row, index[camera]] = out.brightness
-    stats = {name: stream.stats for name, stream in streams.items()}
-    reports = {name: stream.report() for name, stream in streams.items()}
-    ignored: dict[str, Mask | None] = {name: stream.mask for name, stream in streams.items()}
+    stats = {camera.camera: camera.stats for camera in searched}
+    reports = {camera.camera: camera.report for camera in searched}
+    ignored: dict[str, Mask | None] = {camera.camera: camera.mask for camera in searched}
     stops = brightness[observations.frames]
     observations = replace(observations, saturated=np.nan_to_num(stops, nan=-1.0) >= 0.0, brightness=stops)
     return Detections(observations, stats, ambiguous, tracks[observations.frames], reports, ignored)

@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import sys
 import time
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -132,7 +134,7 @@ def video_sources(args: argparse.Namespace, rig: RigSpec) -> dict[str, CameraSou
 def run(args: argparse.Namespace) -> int:
     import cv2
 
-    from wand_calib_ros.collection.recording import detect_recording
+    from wand_calib_ros.collection.recording import detect_cameras_apart, detect_recording
     from wand_calib_ros.detection.background import BackgroundOptions
     from wand_calib_ros.detection.blobs import BlobOptions
     from wand_calib_ros.detection.consistency import settle_labels
@@ -141,7 +143,7 @@ def run(args: argparse.Namespace) -> int:
     from wand_calib_ros.io.bags import count_images, read_image_frames
     from wand_calib_ros.io.observations_csv import write_observations
     from wand_calib_ros.io.rig_yaml import load_camera_masks, load_rig
-    from wand_calib_ros.io.videos import VIDEO_MIN_CONTRAST, count_frames, read_source_frames
+    from wand_calib_ros.io.videos import VIDEO_MIN_CONTRAST, camera_frames, count_frames
 
     if args.sync_tolerance_ms < 0 or args.debug_every < 1:
         raise WandCalibError("--sync-tolerance-ms must be 0 or more and --debug-every at least 1")
@@ -152,7 +154,7 @@ def run(args: argparse.Namespace) -> int:
     if args.video:
         sources = video_sources(args, rig)
         topics = {name: str(source.path) for name, source in sources.items()}
-        frames: Iterable[ImageFrame] = read_source_frames(sources)
+        frames: Iterable[ImageFrame] = ()  # (each camera's are read where it is searched)
         expected, source = count_frames(sources), "the videos"
     elif args.bag is None:
         raise WandCalibError("give a bag or --video CAM=PATH for every camera")
@@ -163,15 +165,21 @@ def run(args: argparse.Namespace) -> int:
     seen: dict[str, int] = {}
     show_progress = not args.quiet and expected > 0
 
-    def inspect(frame: ImageFrame, blobs: Blobs | None, detection: WandDetection | None, reason: str | None) -> None:
-        count = seen[frame.camera] = seen.get(frame.camera, 0) + 1
-        total = sum(seen.values())
-        if show_progress and (total % 100 == 0 or total == expected):
+    shown = [0]
+
+    def progress(total: int) -> None:
+        if show_progress and (total >= shown[0] + 100 or (total == expected and shown[0] < total)):
+            shown[0] = total
             done = min(total / expected, 1.0)
             rate = total / max(time.perf_counter() - started, 1e-9)
             bar = "#" * round(30 * done) + "-" * (30 - round(30 * done))
             end = "\n" if total >= expected else ""
             print(f"\rdetect [{bar}] {total}/{expected} images, {rate:.0f}/s", end=end, file=sys.stderr, flush=True)
+
+    def inspect(frame: ImageFrame, blobs: Blobs | None, detection: WandDetection | None, reason: str | None) -> None:
+        count = seen[frame.camera] = seen.get(frame.camera, 0) + 1
+        if not args.video:  # (videos: their cameras are searched apart, progress counted there)
+            progress(sum(seen.values()))
         if args.debug_dir is not None and (count - 1) % max(args.debug_every, 1) == 0:
             from wand_calib_ros.detection.overlay import draw_overlay
 
@@ -180,16 +188,17 @@ def run(args: argparse.Namespace) -> int:
                 args.debug_dir / f"{frame.camera}_{frame.stamp_ns}.png", cv2.imencode(".png", picture)[1].tobytes()
             )
 
-    detections = detect_recording(
-        frames,
-        rig,
-        tolerance_ns=int(args.sync_tolerance_ms * 1e6),
-        blob_options=BlobOptions(background=BackgroundOptions(min_contrast=VIDEO_MIN_CONTRAST))
-        if args.video
-        else BlobOptions(),
-        inspect=inspect,
-        masks=masks,
-    )
+    tolerance_ns = int(args.sync_tolerance_ms * 1e6)
+    if args.video:  # one file per camera: the cameras searched side by side, a process each on the free cores
+        options = BlobOptions(background=BackgroundOptions(min_contrast=VIDEO_MIN_CONTRAST))
+        readers = {name: partial(camera_frames, name, source) for name, source in sources.items()}
+        workers = min(len(os.sched_getaffinity(0)), len(readers))
+        detections = detect_cameras_apart(
+            readers, rig, workers=workers, tolerance_ns=tolerance_ns, blob_options=options, inspect=inspect,
+            progress=progress, masks=masks,
+        )  # fmt: skip
+    else:
+        detections = detect_recording(frames, rig, tolerance_ns=tolerance_ns, inspect=inspect, masks=masks)
     observations, _ = settle_labels(rig, detections)
     write_observations(observations, args.output)
     summary = "what each camera saw is not kept beside a terminal or a pipe"

@@ -63,6 +63,8 @@ class CalibrationOptions:
         floor_origin: the world's origin: the first lay's "A" or its "centre".
         start: a previous calibration of the same rig whose cameras replace the pairwise
             initialisation (a warm start: the running estimate's next round; None: Steps 1-3).
+        clocks: the cameras' clock offsets already found from the wand's motion in these observations' views
+            (``detect`` finds them to group its frames), used as found; None: searched here.
     """
 
     reference_camera: str | None = None
@@ -73,6 +75,7 @@ class CalibrationOptions:
     floor_frames: tuple[int, ...] = ()
     floor_origin: str = "A"
     start: CalibrationResult | None = None
+    clocks: ClockAlignment | None = None
 
 
 def calibrate(
@@ -98,7 +101,7 @@ def calibrate(
     """
     obs, floor = _selected(rig, observations, options.floor_frames)
     check_rig(rig)
-    obs, clocks = align_clocks(rig, obs)
+    obs, clocks = align_clocks(rig, obs, options.clocks)
     for line in clocks.lines:
         log.info(line)
     check_views(rig, obs)

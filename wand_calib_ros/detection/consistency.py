@@ -232,13 +232,13 @@ def settle_labels(rig: RigSpec, detections: Detections) -> tuple[WandObservation
     """The detections' labels checked against the other cameras: a calibration of the detections, then the
     tracks it contradicts exchanged and the ambiguous views it orders added (a rig of two or more cameras and
     a three-marker wand; else the observations as they are). ``detections.stats`` is updated."""
-    from wand_calib_ros.core.pipeline import calibrate
+    from wand_calib_ros.core.pipeline import CalibrationOptions, calibrate
 
     observations, settled = detections.observations, Settled()
     if len(rig.cameras) < 2 or rig.wand.n_points != 3:
         return observations, settled
     try:
-        result = calibrate(rig, observations)
+        result = calibrate(rig, observations, CalibrationOptions(clocks=detections.clocks))
     except WandCalibError as error:
         log.info("no calibration of the detections to check their labels across cameras: %s", error)
         return observations, settled

@@ -5,18 +5,18 @@ by hand: no common stamps, only each file's own times. A video's frame times are
 where the container has them (OpenCV's ``CAP_PROP_POS_MSEC`` after each read), else its frame index over its
 frame rate; a folder's images are taken in the order of the number in their names, at the frame rate given.
 Every file's times start at its first frame: the calibration lines the cameras' clocks up from the wand
-(:mod:`~wand_calib_ros.core.initialise.clock_alignment`). Images are read as mono8 (the detector's input), the
-cameras' frames interleaved in time order as a bag's are. Any container and codec OpenCV's FFmpeg reads work
-(mp4, mov, avi, mkv; MPEG-4, H.264, MJPEG).
+(:mod:`~wand_calib_ros.core.initialise.clock_alignment`). Images are read as mono8 (the detector's input), a
+camera at a time (``detect`` searches each camera's in a process of its own:
+:func:`~wand_calib_ros.collection.recording.detect_cameras_apart`). Any container and codec OpenCV's FFmpeg reads
+work (mp4, mov, avi, mkv; MPEG-4, H.264, MJPEG).
 """
 
 from __future__ import annotations
 
-import heapq
-import queue
 import re
 import threading
 from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -70,14 +70,76 @@ def _numbered(folder: Path) -> list[Path]:
     return images
 
 
-def _capture(path: Path) -> Any:
-    """An opened OpenCV capture of ``path`` (FormatError: it cannot be decoded)."""
+def _capture(path: Path, convert: bool = True) -> Any:
+    """An opened OpenCV capture of ``path`` (FormatError: it cannot be decoded); ``convert``: its frames in BGR,
+    else as the decoder gave them (a luma plane first: that plane, :func:`_luma_table`)."""
     import cv2
 
-    capture = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG, [cv2.CAP_PROP_N_THREADS, 1])
+    capture = cv2.VideoCapture(
+        str(path), cv2.CAP_FFMPEG, [cv2.CAP_PROP_N_THREADS, 1, cv2.CAP_PROP_CONVERT_RGB, int(convert)]
+    )
     if not capture.isOpened():
         raise FormatError(path, "cannot be decoded as a video (a file OpenCV's FFmpeg reads: mp4, mov, avi, mkv)")
     return capture
+
+
+_quiet_lock = threading.Lock()
+_quiet_users = [0, 0]  # (readers decoding luma planes, OpenCV's log level before the first)
+
+
+@contextmanager
+def _opencv_quiet() -> Iterator[None]:
+    """OpenCV's warnings held back while any luma plane is read (it warns of every plane it hands over
+    unconverted); its log level as it was once the last reader is done."""
+    import cv2
+
+    with _quiet_lock:
+        if _quiet_users[0] == 0:
+            _quiet_users[1] = cv2.utils.logging.getLogLevel()
+            cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
+        _quiet_users[0] += 1
+    try:
+        yield
+    finally:
+        with _quiet_lock:
+            _quiet_users[0] -= 1
+            if _quiet_users[0] == 0:
+                cv2.utils.logging.setLogLevel(_quiet_users[1])
+
+
+#: Pixel formats (FourCC) whose first plane is the luma: OpenCV hands that plane over when asked not to convert
+#: the frames to BGR, the grey image at half the cost of decoding to BGR and back to grey.
+LUMA_FIRST = frozenset({"I420", "IYUV", "YV12", "NV12", "NV21", "Y800", "GREY", "Y41B", "Y42B", "444P"})
+
+
+def _luma_table(path: Path) -> NDArray[np.uint8] | None:
+    """(256,) the grey level OpenCV's BGR decoding gives each luma value of the file's frames (the identity for a
+    full-range file, such as MJPEG's; 16-235 stretched to 0-255 for a video range one, such as MPEG-4's), decided
+    on the first frame decoded both ways; None: the frames have no luma plane first, or the first frame does not
+    tell (then they are decoded to BGR and converted, as before)."""
+    import cv2
+
+    with _opencv_quiet():
+        raw, converted = _capture(path, convert=False), _capture(path)
+        try:
+            tag = int(raw.get(cv2.CAP_PROP_CODEC_PIXEL_FORMAT)).to_bytes(4, "little").decode("ascii", "replace")
+            ok_luma, luma = raw.read()
+            ok_bgr, bgr = converted.read()
+        finally:
+            raw.release()
+            converted.release()
+    if tag not in LUMA_FIRST or not (ok_luma and ok_bgr) or luma is None or bgr is None or luma.ndim != 2:
+        return None
+    grey = bgr if bgr.ndim == 2 else cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)
+    if luma.shape != grey.shape:
+        return None
+    levels = np.arange(256, dtype=np.float64)
+    tables = (levels, (levels - 16.0) * 255.0 / 219.0)
+    fits = [int(np.max(np.abs(np.clip(np.round(t), 0, 255)[luma] - grey))) for t in tables]
+    matching = [table for table, misfit in zip(tables, fits, strict=True) if misfit <= 1]
+    if len(matching) != 1:  # (neither, or a frame that cannot tell them apart)
+        return None
+    return np.clip(np.round(matching[0]), 0, 255).astype(np.uint8)
 
 
 def count_frames(sources: Mapping[str, CameraSource]) -> int:
@@ -130,7 +192,17 @@ def _frames(source: CameraSource) -> Iterator[tuple[float, NDArray[np.uint8]]]:
                 raise FormatError(path, f"cannot be read as an image (a frame of camera '{source.camera}')")
             yield index / source.fps, np.asarray(image, dtype=np.uint8)
         return
-    capture = _capture(source.path)
+    table = _luma_table(source.path)
+    with _opencv_quiet():
+        yield from _decoded(source, table)
+
+
+def _decoded(source: CameraSource, table: NDArray[np.uint8] | None) -> Iterator[tuple[float, NDArray[np.uint8]]]:
+    """(time in seconds from the first frame, mono8 image) of each frame of a video, read as its luma plane mapped
+    by ``table`` (:func:`_luma_table`), or None: decoded to BGR and converted."""
+    import cv2
+
+    capture = _capture(source.path, convert=table is None)
     fps = float(capture.get(cv2.CAP_PROP_FPS))
     rate_known = FPS_RANGE[0] <= fps <= FPS_RANGE[1]
     first: float | None = None
@@ -146,68 +218,17 @@ def _frames(source: CameraSource) -> Iterator[tuple[float, NDArray[np.uint8]]]:
                     raise FormatError(source.path, "has neither frame times nor a frame rate")
                 stamp = index / fps
             first = stamp if first is None else first
-            gray = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+            if table is not None:
+                gray = cv2.LUT(image, table)
+            else:
+                gray = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
             yield stamp - first, np.ascontiguousarray(gray)
             index += 1
     finally:
         capture.release()
 
 
-def read_source_frames(sources: Mapping[str, CameraSource]) -> Iterator[ImageFrame]:
-    """Every source's frames as mono8 images, the cameras' interleaved in time order (a camera's on a tie
-    in rig order), stamped in ns from each file's first frame. They are decoded in a thread of their own,
-    PREFETCH frames ahead: decoding (0.4-0.8 ms a 640x480 frame) then runs beside the detector."""
-    streams = [((_stamped(name, source)), order) for order, (name, source) in enumerate(sources.items())]
-    merged = heapq.merge(*(_keyed(stream, order) for stream, order in streams))
-    for _, _, frame in _prefetched(merged):
-        yield frame
-
-
-#: Frames decoded ahead of the one being detected.
-PREFETCH = 32
-_DONE = object()
-
-
-def _prefetched(items: Iterator[Any]) -> Iterator[Any]:
-    """``items`` produced by a thread of their own, at most PREFETCH ahead; its error raised here."""
-    ahead: queue.Queue[Any] = queue.Queue(maxsize=PREFETCH)
-    stop = threading.Event()
-
-    def produce() -> None:
-        try:
-            for item in items:
-                while not stop.is_set():
-                    try:
-                        ahead.put(item, timeout=0.1)
-                        break
-                    except queue.Full:
-                        continue
-                if stop.is_set():
-                    return
-            ahead.put(_DONE)
-        except BaseException as error:  # (raised in the consumer, where it can be handled)
-            ahead.put(error)
-
-    worker = threading.Thread(target=produce, name="video decoding", daemon=True)
-    worker.start()
-    try:
-        while True:
-            item = ahead.get()
-            if item is _DONE:
-                return
-            if isinstance(item, BaseException):
-                raise item
-            yield item
-    finally:
-        stop.set()
-        worker.join(timeout=5.0)
-
-
-def _stamped(name: str, source: CameraSource) -> Iterator[ImageFrame]:
+def camera_frames(name: str, source: CameraSource) -> Iterator[ImageFrame]:
+    """One camera's frames as mono8 images, stamped in ns from its file's first frame."""
     for seconds, image in _frames(source):
         yield ImageFrame(name, round(seconds * 1e9), image, "mono8")
-
-
-def _keyed(frames: Iterator[ImageFrame], order: int) -> Iterator[tuple[int, int, ImageFrame]]:
-    for frame in frames:
-        yield frame.stamp_ns, order, frame

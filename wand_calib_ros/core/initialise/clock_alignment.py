@@ -387,15 +387,19 @@ def _describe(offset: float, unit: str) -> str:
     return f"{amount} {'ahead of' if offset > 0 else 'behind'}"
 
 
-def align_clocks(rig: RigSpec, observations: WandObservations) -> tuple[WandObservations, ClockAlignment]:
+def align_clocks(
+    rig: RigSpec, observations: WandObservations, found: ClockAlignment | None = None
+) -> tuple[WandObservations, ClockAlignment]:
     """The observations with every camera's clock lined up on the others' from the wand's motion, and the
-    offsets found (:func:`find_clock_offsets`). Observations whose clocks agree within SHIFT_FRAMES frames are
-    returned as they are.
+    offsets found (:func:`find_clock_offsets`; ``found``: as already found from the same views). Observations
+    whose clocks agree within SHIFT_FRAMES frames are returned as they are.
 
     Raises:
         TimingError: as :func:`find_clock_offsets`.
     """
-    found = find_clock_offsets(rig, camera_tracks(observations), observations.stamps is None)
+    frames = observations.stamps is None
+    if found is None or found.unit != ("frames" if frames else "s"):
+        found = find_clock_offsets(rig, camera_tracks(observations), frames)
     if not found.moved.any():
         return observations, found
     return shifted(observations, np.where(found.moved, found.offsets, 0.0)), found
