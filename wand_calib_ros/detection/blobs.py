@@ -287,39 +287,39 @@ def _measure(
             split.append((region, tuple(cv2.boundingRect(outline))))  # type: ignore[arg-type]
         parts = split if len(split) >= 2 else parts
     own = cv2.dilate(above[y0:y1, x0:x1], _SQUARE5) > 0  # its pixels (not a lamp beside it) ...
-    if background.static is None:
-        under: NDArray[Any] | float = 0.0
-        visible = own
-    else:  # (... nor a lamp's or a window's saturated pixels under it: nothing of it can be seen there)
-        under = background.static[y0:y1, x0:x1]
-        visible = np.asarray(under < SATURATED_STATIC * full)
-    seen = own & visible
-    if not seen.any():
+    under: NDArray[Any] | float = 0.0 if background.static is None else background.static[y0:y1, x0:x1]
+    visible: NDArray[np.bool_] | None = None  # (None: all of the window, no saturated light under it)
+    if isinstance(under, np.ndarray) and float(under.max()) >= SATURATED_STATIC * full:
+        visible = np.asarray(under < SATURATED_STATIC * full)  # (... nor a lamp's or a window's saturated pixels
+        # under it: nothing of it can be seen there)
+    seen = own if visible is None else own & visible
+    if visible is not None and not seen.any():  # (its own pixels are in ``own``: seen unless hidden)
         return []
     sides = side_medians(window)
     base = 0.25 * sum(sides)
     least, ceiling = 0.0, 0.0
-    if float(raw[seen].max()) >= full:  # saturated: measured by its outline, cut if that touches a saturated light
+    brightest_raw = float(raw[seen].max())
+    if brightest_raw >= full:  # saturated: measured by its outline, cut if that touches a saturated light
         # (its clipped pixels show the least of its light that any of them can), or if so little of its light shows
         # above a bright region that the noise there would shape it
         brightest = float(np.max(under[seen])) if isinstance(under, np.ndarray) else under
         least = OUTLINE_SIGMAS * _noise_at(background, brightest, noise)
         ceiling = _ceiling(raw, under, seen, full) - base
         outline = ((window - base >= max(SATURATED_FLOOR * ceiling, least)) & seen).astype(np.uint8)
-        touches = background.static is not None and not bool(visible[cv2.dilate(outline, _SQUARE3) > 0].all())
+        touches = visible is not None and not bool(visible[cv2.dilate(outline, _SQUARE3) > 0].all())
         hidden |= ceiling < 2.0 * least or touches
     else:  # unsaturated: cut if its pixels touch a saturated light, or its window does not hold it (its sides on
         # the flat field)
-        hidden |= not bool(visible[own].all())
+        hidden |= visible is not None and not bool(visible[own].all())
         if background.static is not None and not hidden:
             hidden = max(sides) > max(floor, SIDE_FRACTION * peak)
     own = seen
     measured: list[tuple[float, ...]] = []
     for part, (cx, cy, cw, ch) in parts:
         mine = own if part is None else own & part
-        if not mine.any():  # (a core of something else in the window)
+        if part is not None and not mine.any():  # (a core of something else in the window)
             continue
-        saturated = float(raw[mine].max()) >= full
+        saturated = (brightest_raw if part is None else float(raw[mine].max())) >= full
         if saturated:
             top = ceiling if part is None else _ceiling(raw, under, mine, full) - base
             spot: SpotCentre | None = saturated_centre(window, base, top, mine, least)
