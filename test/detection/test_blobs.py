@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from wand_calib_ros.detection.background import box_sums, estimate_background, masked
-from wand_calib_ros.detection.blobs import find_blobs, to_gray
+from wand_calib_ros.detection.blobs import _clear_outline, find_blobs, to_gray
+from wand_calib_ros.detection.centres import saturated_centre
 from wand_calib_ros.detection.errors import ImageError
 from wand_calib_ros.detection.masks import mask_from_shapes
 from wand_calib_ros.sim.render import RenderOptions, render_image
@@ -94,3 +95,23 @@ def test_a_mask_held_in_the_background_finds_what_the_mask_itself_finds(encoding
     assert applied.masked is not None and applied.masked.sum() == 1  # the spot beside the small circle
     alone = find_blobs(gray, background=masked(background, mask))  # the threshold alone keeps the masked spot out
     assert alone.centres.shape[0] == 3 and not np.any(np.linalg.norm(alone.centres - spots[2], axis=1) < 5)
+
+
+def test_a_saturated_spots_outline_rises_to_stay_clear_of_a_saturated_light_beside_it() -> None:
+    # a spot 8x over its headroom (sigma 2 px) and, 6.7 px from its centre, a saturated light's edge: the outline at
+    # an eighth of the headroom (5.8 px) and a pixel around it reach it, at a quarter (5.3 px) not; its centre,
+    # measured there, is the true one
+    ceiling, size, centre = 200.0, 41, np.array([20.3, 20.6])
+    rows, cols = np.mgrid[0:size, 0:size]
+    light = np.minimum(8.0 * ceiling * np.exp(-((cols - centre[0]) ** 2 + (rows - centre[1]) ** 2) / 8.0), ceiling)
+    seen = light > 1.0
+    visible = np.ones((size, size), dtype=bool)
+    visible[:, int(centre[0]) + 7 :] = False  # the light's saturated pixels
+    seen &= visible
+    least, cut = _clear_outline(light, ceiling, 4.0, seen, visible)
+    assert not cut and least == pytest.approx(0.25 * ceiling)
+    spot = saturated_centre(light, 0.0, ceiling, seen, least)
+    assert np.hypot(spot.u - centre[0], spot.v - centre[1]) < 0.02
+    assert _clear_outline(light, ceiling, 4.0, seen, None) == (4.0, False)  # (nothing saturated near: as it was)
+    visible[:, int(centre[0]) + 3 :] = False  # the light over its core: cut whatever the outline
+    assert _clear_outline(light, ceiling, 4.0, seen & visible, visible)[1]

@@ -4,6 +4,7 @@ edge are cut), a driver's repeated image teaches nothing."""
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
@@ -11,6 +12,7 @@ from wand_calib_ros.core.model.rig import CameraSpec
 from wand_calib_ros.detection.background import box_sums, estimate_background
 from wand_calib_ros.detection.recording import CameraStream
 from wand_calib_ros.detection.structure import (
+    MIN_LIGHT_PX,
     SNAPSHOT_NS,
     SNAPSHOTS,
     StaticStructure,
@@ -19,7 +21,7 @@ from wand_calib_ros.detection.structure import (
     sorted_pixels,
 )
 from wand_calib_ros.detection.wand import WandOptions
-from wand_calib_ros.sim.room import CameraRoom, Lamp, Reflection, Sensor, Stripe
+from wand_calib_ros.sim.room import CameraRoom, Lamp, Reflection, Sensor, Stripe, Window
 from wand_calib_ros.sim.room_images import render_camera
 
 SIZE = (320, 240)
@@ -147,3 +149,23 @@ def test_a_still_rooms_snapshots_keep_the_threshold_and_a_lamp_switched_on_makes
     made = [snapshot(k) for k in range(SNAPSHOTS, 3 * SNAPSHOTS)]  # a still room: made again once a window
     assert made == [False] * (SNAPSHOTS - 1) + [True] + [False] * (SNAPSHOTS - 1) + [True]
     assert snapshot(3 * SNAPSHOTS, lamp=True)  # a lamp switched on: its light stands above the threshold
+
+
+@pytest.mark.parametrize("level", [1.1, 1.2, 1.25])
+def test_a_window_just_at_full_scale_is_a_few_lights_not_a_crowd_of_specks(level: float) -> None:
+    # panes whose light reaches full scale just: noise leaves their pixels' medians on either side of it, and their
+    # saturated pixels fall apart into 15-92 pieces, most of them of one to three pixels
+    exposure = 6.0
+    room = CameraRoom(
+        sensor=Sensor(exposure_ms=exposure),
+        lamps=(Lamp((60.0, 190.0), 3.0, 900.0),),
+        windows=(Window((150.0, 20.0, 300.0, 100.0), level * 253.0 / exposure),),
+    )
+    _, stream = _stream_over(room, np.full((60, 2), np.nan), 40.0, 0)
+    saturated = stream.structure.saturated(255.0)
+    assert saturated is not None
+    pieces, _, stats, _ = cv2.connectedComponentsWithStats(saturated.astype(np.uint8), connectivity=8)
+    assert pieces - 1 >= 15 and np.sum(stats[1:, cv2.CC_STAT_AREA] < 4) >= 10  # (the crowd is there)
+    lights = stream.structure.lights(255.0)
+    assert 2 <= len(lights) <= 1 + 4  # the lamp and the window's four panes
+    assert min(radius for _, _, radius in lights) >= np.sqrt(MIN_LIGHT_PX / np.pi)

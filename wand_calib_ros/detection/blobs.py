@@ -305,8 +305,7 @@ def _measure(
         brightest = float(np.max(under[seen])) if isinstance(under, np.ndarray) else under
         least = OUTLINE_SIGMAS * _noise_at(background, brightest, noise)
         ceiling = _ceiling(raw, under, seen, full) - base
-        outline = ((window - base >= max(SATURATED_FLOOR * ceiling, least)) & seen).astype(np.uint8)
-        touches = visible is not None and not bool(visible[cv2.dilate(outline, _SQUARE3) > 0].all())
+        least, touches = _clear_outline(window - base, ceiling, least, seen, visible)
         hidden |= ceiling < 2.0 * least or touches
     else:  # unsaturated: cut if its pixels touch a saturated light, or its window does not hold it (its sides on
         # the flat field)
@@ -367,6 +366,28 @@ def _ceiling(raw: NDArray[Any], under: NDArray[Any] | float, region: NDArray[np.
     that light)."""
     clipped = region & (raw >= full)
     return float(full - (np.max(under[clipped]) if isinstance(under, np.ndarray) else under))
+
+
+#: A saturated spot's outline is drawn at the lowest of these fractions of its headroom whose outline (and a pixel
+#: around it) stays clear of saturated static light: a bright LED whose faint halo reaches a window's edge is
+#: measured on its brighter part, which is whole (a lower outline there would be cut, and its centre pulled away).
+OUTLINE_FRACTIONS = (SATURATED_FLOOR, 0.25, 0.5)
+
+
+def _clear_outline(
+    light: NDArray[Any], ceiling: float, least: float, seen: NDArray[np.bool_], visible: NDArray[np.bool_] | None
+) -> tuple[float, bool]:
+    """(the least height of a saturated spot's outline above its background, whether even the highest of
+    OUTLINE_FRACTIONS touches saturated static light: it is cut); ``light``: (h, w) its window above its background,
+    ``ceiling``: its headroom, ``least``: the noise's floor, ``visible``: where no saturated static light is (None:
+    everywhere)."""
+    if visible is None:
+        return least, False
+    for fraction in OUTLINE_FRACTIONS:
+        outline = ((light >= max(fraction * ceiling, least)) & seen).astype(np.uint8)
+        if bool(visible[cv2.dilate(outline, _SQUARE3) > 0].all()):
+            return (least if fraction == SATURATED_FLOOR else max(fraction * ceiling, least)), False
+    return least, True
 
 
 #: A saturated spot's outline stands at least this many noise sigmas (where the noise under it is highest) above

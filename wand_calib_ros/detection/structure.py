@@ -73,6 +73,10 @@ EARLY_FLICKER = 0.15
 
 #: A static pixel this close to full scale (a fraction) is saturated: nothing of a spot can be seen there.
 SATURATED_STATIC = 0.98
+#: Saturated static pixels this many apart belong to one static light ...
+LIGHT_GAP_PX = 4
+#: ... and a light has at least this many of them (a lone saturated pixel is a speck of a bright region's edge).
+MIN_LIGHT_PX = 4
 
 #: A snapshot changes the structure when more than this many of its box sums stand above the search threshold or
 #: below the structure by as much (noise alone: about one pixel in a million beyond five sigmas) ...
@@ -283,14 +287,18 @@ class StaticStructure:
         return None if made is None else np.asarray(made[0] >= SATURATED_STATIC * full)
 
     def lights(self, full: float) -> tuple[tuple[float, float, float], ...]:
-        """(u, v, radius px) of each saturated region of the structure: the static lights it learned."""
+        """(u, v, radius px) of each saturated region of the structure: the static lights it learned. Saturated
+        pixels a few apart are one light (a window's edge or a pane just at full scale flickers into specks), and a
+        region of fewer than MIN_LIGHT_PX pixels is none."""
         where = self.saturated(full)
         if where is None or not where.any():
             return ()
-        count, _, stats, centres = cv2.connectedComponentsWithStats(where.astype(np.uint8), connectivity=8)
+        joined = cv2.morphologyEx(where.astype(np.uint8), cv2.MORPH_CLOSE, np.ones((LIGHT_GAP_PX + 1,) * 2, np.uint8))
+        count, _, stats, centres = cv2.connectedComponentsWithStats(joined, connectivity=8)
         return tuple(
             (float(centres[i, 0]), float(centres[i, 1]), float(np.sqrt(stats[i, cv2.CC_STAT_AREA] / np.pi)))
             for i in range(1, count)
+            if stats[i, cv2.CC_STAT_AREA] >= MIN_LIGHT_PX
         )
 
     def _make(self, unit: float) -> tuple[NDArray[Any], NDArray[Any], NDArray[Any], NDArray[Any]] | None:
