@@ -10,7 +10,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wand_calib_ros.collection.recording import detect_recording
+from wand_calib_ros.core.adjust.brightness_bias import MIN_CLASS_POINTS
 from wand_calib_ros.core.judge.metrics import camera_errors, rereference
+from wand_calib_ros.core.model.brightness import brightness_classes as model_classes
 from wand_calib_ros.core.model.result import CalibrationResult
 from wand_calib_ros.core.model.rig import RigSpec, WandObservations
 from wand_calib_ros.detection.consistency import settle_labels
@@ -89,27 +91,47 @@ class DetectionScore:
 
 def right_views(observations: WandObservations, truth: tuple[CameraTruth, ...]) -> NDArray[np.bool_]:
     """(F, C) the returned views that are right (every point within RIGHT_PX of its LED in either order)."""
-    return _compare(observations, truth)[0]
+    return _compare(observations, truth).right
 
 
 def right_and_labelled(observations: WandObservations, truth: tuple[CameraTruth, ...]) -> NDArray[np.bool_]:
     """(F, C) the returned views that are right with A and C in the right order: the floor a calibration from the
     detections is measured against."""
-    right, swapped, _, _ = _compare(observations, truth)
-    return np.asarray(right & ~swapped)
+    compared = _compare(observations, truth)
+    return np.asarray(compared.right & ~compared.swapped)
 
 
-def _compare(
-    observations: WandObservations, truth: tuple[CameraTruth, ...]
-) -> tuple[NDArray[np.bool_], NDArray[np.bool_], FloatArray, list[NDArray[np.int64]]]:
-    """Per returned view: right, swapped, the 2D errors of its points in the better order, and per camera
-    the image index of each frame (-1: none)."""
+@dataclass(frozen=True)
+class _Compared:
+    """The returned views against the truth (:func:`_compare`).
+
+    Attributes:
+        right: (F, C) right views.
+        swapped: (F, C) right views with A and C exchanged.
+        offsets: (F, C, K, 2) each point's offset from its LED's truth, in the better order (px).
+        images: per camera the image index of each frame (-1: none).
+    """
+
+    right: NDArray[np.bool_]
+    swapped: NDArray[np.bool_]
+    offsets: FloatArray
+    images: list[NDArray[np.int64]]
+
+    @property
+    def errors(self) -> FloatArray:
+        """(F, C, K) each point's distance from its LED's truth (px)."""
+        return np.asarray(np.linalg.norm(self.offsets, axis=-1))
+
+
+def _compare(observations: WandObservations, truth: tuple[CameraTruth, ...]) -> _Compared:
+    """Per returned view: right, swapped, the offsets of its points in the better order, and per camera the image
+    index of each frame (-1: none)."""
     if observations.stamps is None:
         raise ValueError("scoring needs the views' stamps")
     shape = observations.uv.shape[:2]
     right = np.zeros(shape, dtype=bool)
     swapped = np.zeros(shape, dtype=bool)
-    errors = np.full((*shape, observations.uv.shape[2]), np.nan)
+    offsets = np.full(observations.uv.shape, np.nan)
     images = []
     for camera in truth:
         column = observations.camera_names.index(camera.name)
@@ -131,8 +153,43 @@ def _compare(
             reverse_ok = np.all(reverse <= RIGHT_PX, axis=1)
         right[:, column] = returned & (straight_ok | reverse_ok)
         swapped[:, column] = returned & ~straight_ok & reverse_ok
-        errors[:, column] = np.where(swapped[:, column, None], reverse, straight)
-    return right, swapped, errors, images
+        offsets[:, column] = np.where(swapped[:, column, None, None], seen - true[:, ::-1], seen - true)
+    return _Compared(right, swapped, offsets, images)
+
+
+def centre_bias_by_class(
+    observations: WandObservations, truth: tuple[CameraTruth, ...], camera: str, principal_point: FloatArray
+) -> dict[int, tuple[float, float, float]]:
+    """Where a camera's detected centres sit against the truth, per brightness class of its right views' points
+    (:func:`~wand_calib_ros.core.model.brightness.brightness_classes`, 1 and up) relative to class 0's, in the
+    adjustment's terms (:class:`~wand_calib_ros.core.model.result.ClassBias`): (offset u, offset v, radial away
+    from ``principal_point``), px, by least squares; classes of fewer than MIN_CLASS_POINTS points left out (and
+    all of them without class 0's)."""
+    if observations.brightness is None:
+        return {}
+    compared = _compare(observations, truth)
+    column = observations.camera_names.index(camera)
+    right = compared.right[:, column]
+    offsets = compared.offsets[right, column].reshape(-1, 2)
+    points = observations.uv[right, column].reshape(-1, 2)
+    stops = observations.brightness[right, column].reshape(-1)
+    known = np.isfinite(stops) & np.isfinite(offsets).all(axis=1)
+    offsets, points, classes = offsets[known], points[known], model_classes(stops[known])
+    if np.count_nonzero(classes == 0) < MIN_CLASS_POINTS:
+        return {}
+    reference = offsets[classes == 0].mean(axis=0)
+    away = points - principal_point
+    away /= np.linalg.norm(away, axis=1, keepdims=True)
+    out = {}
+    for klass in range(1, int(classes.max(initial=0)) + 1):
+        chosen = classes == klass
+        if np.count_nonzero(chosen) < MIN_CLASS_POINTS:
+            continue
+        design = np.zeros((2 * int(chosen.sum()), 3))
+        design[0::2, 0], design[1::2, 1], design[:, 2] = 1.0, 1.0, away[chosen].reshape(-1)
+        solved, *_ = np.linalg.lstsq(design, (offsets[chosen] - reference).reshape(-1), rcond=None)
+        out[klass] = (float(solved[0]), float(solved[1]), float(solved[2]))
+    return out
 
 
 def score(
@@ -148,7 +205,8 @@ def score(
         select: per camera the (N,) images to count (:func:`brightness_classes`), or None: all, and returned
             views that match no image's stamp count as false.
     """
-    right, swapped, errors, images = _compare(observations, truth)
+    compared = _compare(observations, truth)
+    right, swapped, errors, images = compared.right, compared.swapped, compared.errors, compared.images
     visible = found = returned = false = turned = 0
     squares = 0.0
     centres = 0
