@@ -11,10 +11,11 @@ room does not:
 - every SNAPSHOT_NS (the first few EARLY_NS apart) the image's box sums are kept, the newest SNAPSHOTS of them
   (three seconds); the structure is their per-pixel median: a moving LED is at a pixel in one or two
   of them, so it is not part of it (an LED at rest for longer is: it is still, not the wand);
-- the structure is made again when a snapshot changes it: where the snapshot stands above the threshold or below
-  the structure by as much (a lamp switched on or off, a chair moved) on more than CHANGED_PIXELS pixels, or when
-  the noise changed by NOISE_CHANGE; and at least every SNAPSHOTS snapshots, so that it is never older than its
-  window. A still room's snapshots change nothing: the structure is made once in a window, not with every one;
+- the structure's threshold is made again when a snapshot changes it: where the snapshot stands above the
+  threshold or below the structure by as much (a lamp switched on or off, a chair moved) on more than
+  CHANGED_PIXELS pixels, or when the noise changed by NOISE_CHANGE; and at least every SNAPSHOTS snapshots, so
+  that it is never older than its window. A still room's snapshots change no threshold: it is made once in a
+  window, and only the structure's pixels (the median spots are measured on) follow every snapshot;
 - the threshold that follows it is the structure plus the noise's contrast at its level. The noise is measured
   over time, from two snapshots' differences (tiles' lower halves, as the background measures it in space): a
   floor's grain or a window's bars are structure, not noise;
@@ -226,7 +227,7 @@ class StaticStructure:
 
     @property
     def unchanged(self) -> bool:
-        """Whether the newest snapshot left the structure and its threshold as they were."""
+        """Whether the newest snapshot left the structure's threshold as it was (its pixels follow every snapshot)."""
         return self._threshold is not None
 
     def _changed_by(self, sums: NDArray[Any]) -> bool:
