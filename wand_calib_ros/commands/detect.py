@@ -199,6 +199,8 @@ def run(args: argparse.Namespace) -> int:
         )  # fmt: skip
     else:
         detections = detect_recording(frames, rig, tolerance_ns=tolerance_ns, inspect=inspect, masks=masks)
+    if show_progress and 0 < shown[0] < expected:  # (fewer images than the file said: end the bar's line)
+        print(file=sys.stderr)
     observations, _ = settle_labels(rig, detections)
     write_observations(observations, args.output)
     summary = "what each camera saw is not kept beside a terminal or a pipe"
