@@ -86,9 +86,9 @@ def detect_recording(
     outcomes: list[tuple[str, Labelled]] = []
     for frame in in_stamp_order(frames, int(REORDER_S * 1e9)):
         outcomes += [(frame.camera, out) for out in searches[frame.camera].see(frame, inspect)]
-    searched = [search.finish() for search in searches.values()]
-    outcomes += [(camera.camera, out) for camera in searched for out in camera.flushed]
-    return grouped_detections(rig, searched, outcomes, tolerance_ns)
+    ends = [search.finish() for search in searches.values()]
+    outcomes += [(camera.camera, out) for held, camera in ends for out in held]
+    return grouped_detections(rig, [camera for _, camera in ends], outcomes, tolerance_ns)
 
 
 def detect_cameras_apart(
@@ -128,9 +128,9 @@ def detect_cameras_apart(
         counted, _APART = _APART.counted, None
     if progress is not None:
         progress(int(counted.value))
-    outcomes = [(camera.camera, out) for camera in searched for out in camera.outcomes]
+    outcomes = [(camera.camera, out) for views, camera in searched for out in views]
     outcomes.sort(key=lambda item: item[1].stamp_ns)  # (stable: a camera's own order, cameras in rig order)
-    return grouped_detections(rig, searched, outcomes, tolerance_ns)
+    return grouped_detections(rig, [camera for _, camera in searched], outcomes, tolerance_ns)
 
 
 @dataclass(frozen=True)
@@ -152,7 +152,7 @@ PROGRESS_S = 0.25
 
 def _searched_in_workers(
     names: tuple[str, ...], workers: int, progress: Callable[[int], None] | None
-) -> list[Searched]:
+) -> list[tuple[list[Labelled], Searched]]:
     """Each camera searched in a worker process (forked: it inherits _APART), in rig order."""
     assert _APART is not None
     with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork")) as pool:
@@ -165,9 +165,10 @@ def _searched_in_workers(
         return [future.result() for future in futures]
 
 
-def _search_camera(name: str) -> Searched:
-    """One camera's images searched (in a worker, or here); a reading error comes back as a WandCalibError with
-    its message (a worker's exceptions travel by pickle)."""
+def _search_camera(name: str) -> tuple[list[Labelled], Searched]:
+    """One camera's images searched (in a worker, or here): its labelled views and images without one, in stamp
+    order, and its search's end; a reading error comes back as a WandCalibError with its message (a worker's
+    exceptions travel by pickle)."""
     assert _APART is not None
     work = _APART
     search = CameraSearch(work.rig.camera(name), WandOptions.for_rig(work.rig), work.blob_options, work.masks.get(name))
@@ -179,27 +180,22 @@ def _search_camera(name: str) -> Searched:
                 work.counted.value += 1
     except WandCalibError as error:
         raise WandCalibError(str(error)) from None
-    searched = search.finish()
-    return replace(searched, outcomes=(*outcomes, *searched.flushed), flushed=())
+    held, searched = search.finish()
+    return [*outcomes, *held], searched
 
 
 @dataclass(frozen=True)
 class Searched:
-    """One camera's images, searched.
+    """One camera's images, searched: what is known of it once its labelled views are given out.
 
     Attributes:
         camera: its name.
-        outcomes: its labelled views and images without one, in stamp order (where :func:`detect_cameras_apart`
-            searched it; empty where :func:`detect_recording` keeps them with the others').
-        flushed: what its labeller still held at the end.
         stats: its counts.
         report: what it saw.
         mask: the pixels its detector ignored at the end (given and learned), or None: none.
     """
 
     camera: str
-    outcomes: tuple[Labelled, ...]
-    flushed: tuple[Labelled, ...]
     stats: CameraStats
     report: HealthReport
     mask: Mask | None
@@ -229,11 +225,11 @@ class CameraSearch:
             inspect(frame, blobs, detection, reason)
         return self.stream.label(frame.stamp_ns, detection, reason)
 
-    def finish(self) -> Searched:
-        """The search's end: what the labeller held, the counts, the report and the mask."""
+    def finish(self) -> tuple[list[Labelled], Searched]:
+        """The search's end: what the labeller still held, and the counts, the report and the mask."""
         stream = self.stream
-        flushed = tuple(stream.flush())
-        return Searched(stream.spec.name, (), flushed, stream.stats, stream.report(), stream.mask)
+        held = stream.flush()
+        return held, Searched(stream.spec.name, stream.stats, stream.report(), stream.mask)
 
 
 def grouped_detections(

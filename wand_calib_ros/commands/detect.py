@@ -16,8 +16,6 @@ from wand_calib_ros.errors import WandCalibError
 from wand_calib_ros.io.outputs import check_writable, is_special, write_text
 
 if TYPE_CHECKING:
-    from collections.abc import Iterable
-
     from wand_calib_ros.core.model.rig import RigSpec
     from wand_calib_ros.detection.blobs import Blobs
     from wand_calib_ros.detection.wand import WandDetection
@@ -154,13 +152,12 @@ def run(args: argparse.Namespace) -> int:
     if args.video:
         sources = video_sources(args, rig)
         topics = {name: str(source.path) for name, source in sources.items()}
-        frames: Iterable[ImageFrame] = ()  # (each camera's are read where it is searched)
         expected, source = count_frames(sources), "the videos"
     elif args.bag is None:
         raise WandCalibError("give a bag or --video CAM=PATH for every camera")
     else:
         topics = camera_topics(args, rig)
-        frames, expected, source = read_image_frames(args.bag, topics), count_images(args.bag, topics), str(args.bag)
+        expected, source = count_images(args.bag, topics), str(args.bag)
     started = time.perf_counter()
     seen: dict[str, int] = {}
     show_progress = not args.quiet and expected > 0
@@ -198,6 +195,7 @@ def run(args: argparse.Namespace) -> int:
             progress=progress, masks=masks,
         )  # fmt: skip
     else:
+        frames = read_image_frames(args.bag, topics)
         detections = detect_recording(frames, rig, tolerance_ns=tolerance_ns, inspect=inspect, masks=masks)
     if show_progress and 0 < shown[0] < expected:  # (fewer images than the file said: end the bar's line)
         print(file=sys.stderr)
