@@ -182,9 +182,12 @@ def fringes(centres: FloatArray, areas: NDArray[np.int64], peaks: FloatArray) ->
     demosaicing, a flare), or in its halo (within its radius beyond touching) and also at most FRINGE_PEAK of its
     peak (the noise on a blooming LED's halo breaks into faint flecks around it)."""
     smaller = areas[:, None] <= FRINGE_AREA * areas[None, :]
+    if not smaller.any():  # (the common case: LEDs of like size, nothing to compare)
+        return np.zeros(areas.shape, dtype=bool)
     radii = np.sqrt(areas / np.pi)
-    halo = touching(centres, areas, TOUCH_PX + radii[None, :]) & (peaks[:, None] <= FRINGE_PEAK * peaks[None, :])
-    return np.asarray((smaller & (touching(centres, areas) | halo)).any(axis=1))
+    reach = distances(centres, centres) - (radii[:, None] + radii[None, :] + TOUCH_PX)  # (< 0: touching)
+    halo = (reach < radii[None, :]) & (peaks[:, None] <= FRINGE_PEAK * peaks[None, :])
+    return np.asarray((smaller & ((reach < 0.0) | halo)).any(axis=1))
 
 
 NO_BLOBS = Blobs(np.zeros((0, 2)), np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros(0, dtype=bool))
@@ -217,9 +220,7 @@ def to_gray(image: NDArray[Any], encoding: str) -> NDArray[Any]:
     return array if array.dtype in (np.uint8, np.uint16) else array.astype(np.float32)
 
 
-def _local(
-    background: Background, row: int, col: int, options: BlobOptions, unit: float
-) -> tuple[float, float, float, float]:
+def _local(background: Background, row: int, col: int) -> tuple[float, float, float, float]:
     """(level, noise, static, contrast) where a spot is measured (grey levels of a pixel): the level its window
     stands on once the static structure (``static`` there, 0 without) is taken away, the noise of a pixel there, and
     how far above its background the search threshold is."""
@@ -262,8 +263,8 @@ def _measure(
     x1, y1 = min(x + bw + w, width), min(y + bh + w, height)
     raw = gray[y0:y1, x0:x1].astype(np.float32)  # (exact for 8- and 16-bit pixels)
     row, col = min(y + bh // 2, height - 1), min(x + bw // 2, width - 1)
-    unit = 1.0 if gray.dtype == np.uint8 else 257.0
-    level, noise, static, contrast = _local(background, row, col, options, unit)
+    unit = 1.0 if gray.itemsize == 1 else 257.0  # (8- or 16-bit pixels; itemsize: a dtype comparison costs more)
+    level, noise, static, contrast = _local(background, row, col)
     window = raw if background.static is None else raw - background.static[y0:y1, x0:x1]
     floor = max(CENTRE_FLOOR_SIGMAS * noise, 0.5 * options.background.min_contrast * unit)
     peak = float(window.max()) - level

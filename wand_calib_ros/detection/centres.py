@@ -26,6 +26,7 @@ them can show, and the outline stays symmetric.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -59,6 +60,14 @@ class SpotCentre:
     peak: float
     background: float
     length_px: float
+
+
+@functools.cache
+def _centred(count: int) -> NDArray[np.float32]:
+    """(count,) pixel offsets from a window's middle (float32; kept per size: read only)."""
+    offsets = np.arange(count, dtype=np.float32) - np.float32((count - 1) / 2.0)
+    offsets.flags.writeable = False
+    return offsets
 
 
 def side_medians(window: Pixels) -> tuple[float, float, float, float]:
@@ -96,12 +105,14 @@ def spot_centre(
     """
     height, width = window.shape
     level, slope_u, slope_v = side_plane(window, sides)
-    cols = np.arange(width, dtype=np.float32) - (width - 1) / 2.0
-    rows = np.arange(height, dtype=np.float32) - (height - 1) / 2.0
-    above = window.astype(np.float32, copy=False) - (level + slope_u * cols[None, :] + slope_v * rows[:, None])
-    weights = np.maximum(above - floor, 0.0)
+    # the light above the plane and the floor (float32), from the plane's row and column terms
+    weights = window.astype(np.float32, copy=False) - np.add.outer(
+        _centred(height) * np.float32(slope_v) + np.float32(level + floor), _centred(width) * np.float32(slope_u)
+    )
+    peak = float(weights.max()) + floor
+    np.maximum(weights, 0.0, out=weights)
     if region is not None:
-        weights = weights * region
+        weights *= region
     moments = cv2.moments(weights)  # one call for the sums the centre and the spread need
     total = moments["m00"]
     if total <= 0.0:
@@ -113,7 +124,7 @@ def spot_centre(
     return SpotCentre(
         du + (width - 1) / 2.0,
         dv + (height - 1) / 2.0,
-        float(above.max()),
+        peak,
         level + slope_u * du + slope_v * dv,
         length,
     )

@@ -107,42 +107,59 @@ def sorted_pixels(snapshots: list[NDArray[Any]]) -> list[NDArray[Any]]:
     return values
 
 
+#: The medians run over this many rows at a time: a band's arrays stay in the cache from one step to the next (at
+#: 1280x1024, 1.7 times as fast as whole images).
+BAND_ROWS = 32
+
+
 def median_and_upper(snapshots: list[NDArray[Any]]) -> tuple[NDArray[Any], NDArray[Any]]:
     """The per-pixel median and second largest of 3-5 images (the lower median and the second largest of four): of
-    five by thirteen minima and maxima instead of a sort's eighteen, into four arrays (a new array's pages cost
-    as much as a minimum's arithmetic)."""
+    five by thirteen minima and maxima instead of a sort's eighteen, band by band (BAND_ROWS)."""
     if len(snapshots) != 5:
         ordered = sorted_pixels(snapshots)
         return ordered[(len(ordered) - 1) // 2], ordered[-2]
-    a, b, c, d, e = snapshots
-    low, high, small, large = (np.empty_like(a) for _ in range(4))
-    np.minimum(a, b, out=low), np.maximum(a, b, out=high), np.minimum(c, d, out=small), np.maximum(c, d, out=large)
-    np.maximum(low, small, out=low)  # the middle two of four: low, small; the largest: high
-    np.minimum(high, large, out=small)
-    np.maximum(high, large, out=high)
-    np.minimum(low, small, out=large)  # the middle two ordered: large <= low
-    np.maximum(low, small, out=low)
-    np.minimum(high, e, out=high)  # the second largest of five
-    np.maximum(low, high, out=high)
-    np.minimum(low, e, out=low)  # the median of five
-    np.maximum(large, low, out=low)
-    return low, high
+    first = snapshots[0]
+    median, upper = np.empty_like(first), np.empty_like(first)
+    small, large = np.empty_like(first[:BAND_ROWS]), np.empty_like(first[:BAND_ROWS])
+    for top in range(0, first.shape[0], BAND_ROWS):
+        rows = slice(top, top + BAND_ROWS)
+        a, b, c, d, e = (snapshot[rows] for snapshot in snapshots)
+        low, high, less, more = median[rows], upper[rows], small[: len(a)], large[: len(a)]
+        np.minimum(a, b, out=low), np.maximum(a, b, out=high), np.minimum(c, d, out=less), np.maximum(c, d, out=more)
+        np.maximum(low, less, out=low)  # the middle two of four: low, less; the largest: high
+        np.minimum(high, more, out=less)
+        np.maximum(high, more, out=high)
+        np.minimum(low, less, out=more)  # the middle two ordered: more <= low
+        np.maximum(low, less, out=low)
+        np.minimum(high, e, out=high)  # the second largest of five
+        np.maximum(low, high, out=high)
+        np.minimum(low, e, out=low)  # the median of five
+        np.maximum(more, low, out=low)
+    return median, upper
 
 
 def median_of(snapshots: list[NDArray[Any]]) -> NDArray[Any]:
     """The per-pixel median of 1-5 images (the lower median of an even count); of five by seven minima and maxima
-    (the median of 5 is the median of the fifth and the middle two of the other four's pairs), into two arrays."""
+    (the median of 5 is the median of the fifth and the middle two of the other four's pairs), band by band
+    (BAND_ROWS)."""
     if len(snapshots) != 5:
         return sorted_pixels(snapshots)[(len(snapshots) - 1) // 2]
-    a, b, c, d, e = snapshots
-    low, high = np.minimum(a, b), np.minimum(c, d)
-    np.maximum(low, high, out=low)  # the larger of the pairs' minima
-    np.maximum(a, b, out=high)
-    np.minimum(high, np.maximum(c, d), out=high)  # the smaller of their maxima
-    median = np.minimum(low, high)
-    np.maximum(low, high, out=low)
-    np.minimum(low, e, out=low)
-    return np.maximum(median, low, out=median)
+    first = snapshots[0]
+    median = np.empty_like(first)
+    spares = [np.empty_like(first[:BAND_ROWS]) for _ in range(3)]
+    for top in range(0, first.shape[0], BAND_ROWS):
+        rows = slice(top, top + BAND_ROWS)
+        a, b, c, d, e = (snapshot[rows] for snapshot in snapshots)
+        low, high, spare = (array[: len(a)] for array in spares)
+        np.minimum(a, b, out=low), np.minimum(c, d, out=high)
+        np.maximum(low, high, out=low)  # the larger of the pairs' minima
+        np.maximum(a, b, out=high), np.maximum(c, d, out=spare)
+        np.minimum(high, spare, out=high)  # the smaller of their maxima
+        np.minimum(low, high, out=median[rows])
+        np.maximum(low, high, out=low)
+        np.minimum(low, e, out=low)
+        np.maximum(median[rows], low, out=median[rows])
+    return median
 
 
 class StaticStructure:
