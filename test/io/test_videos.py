@@ -27,7 +27,10 @@ from wand_calib_ros.sim.videos import write_camera_videos
 FPS = 30.0
 #: Each camera was started this long after the first (s): up to 5 s apart.
 STARTS = {"cam0": 0.0, "cam1": 2.3, "cam2": 4.9}
-SEEDS = range(3)
+#: Six takes: a camera's principal point moves by 0.15 px when the adjustment's discrete choices (its lens order)
+#: fall the other way on a change of its centres by a hundred-thousandth of a pixel, and over three takes (six
+#: values) one such camera moved the ratio from 0.77 to 1.45; over six takes 0.77 and 0.91.
+SEEDS = range(6)
 #: The videos lose the first seconds of two cameras and go through MPEG-4: their errors stay within this of the
 #: bag's, RMS over the seeds and cameras.
 AS_THE_BAG = 1.3
