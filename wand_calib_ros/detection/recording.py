@@ -38,7 +38,7 @@ from wand_calib_ros.detection.errors import ImageError
 from wand_calib_ros.detection.health import CameraHealth, HealthReport, ViewLight, health_report, view_light
 from wand_calib_ros.detection.masks import Mask, MaskTaker, StaticSources
 from wand_calib_ros.detection.structure import StaticStructure
-from wand_calib_ros.detection.tracking import Released, StreamLabeller
+from wand_calib_ros.detection.tracking import Prediction, Released, StreamLabeller
 from wand_calib_ros.detection.wand import WandDetection, WandOptions, identify_wand
 
 #: A camera's background is estimated again every this many images.
@@ -160,7 +160,7 @@ class CameraStream:
         self.labeller = StreamLabeller(max_hold_ns)
         self.sources = StaticSources(spec.image_size)
         self.structure = StaticStructure(blob_options.background)
-        self._wand_radius = WAND_MARGIN_PX  # how far the wand's spots reach from their centres, px
+        self._wand_spots: tuple[NDArray[np.float64], Blobs] | None = None  # the newest wand's points, its image's blobs
         self._encoding = "mono8"  # the newest image's
         self.given_mask = mask
         self.stats = CameraStats()
@@ -212,10 +212,7 @@ class CameraStream:
             return None, None, "bad_image"
         raw, gray = gray, self.sources.clean(gray)  # the learned lights' halos taken away
         prediction = self.labeller.predict(stamp_ns)
-        wand = [] if prediction is None or not prediction.moved else [
-            (float(u), float(v), prediction.gate_px + self._wand_radius) for u, v in prediction.points
-        ]  # fmt: skip
-        background = self._search_of(self._background_of(gray, stamp_ns, wand))
+        background = self._search_of(self._background_of(gray, stamp_ns, prediction))
         blobs = find_blobs(
             gray, self.blob_options, saturation=SATURATION.get(encoding, 255.0), mask=self._mask, background=background
         )
@@ -231,9 +228,8 @@ class CameraStream:
         if detection.points is not None and prediction is not None and prediction.moved and blobs.centres.size:
             gaps = distances(blobs.centres, detection.points).min(axis=1)
             claimed |= gaps < 1e-6
-        if detection.points is not None and blobs.centres.size:  # how far the wand's spots reach, for the structure
-            spots = distances(detection.points, blobs.centres).argmin(axis=1)
-            self._wand_radius = float(np.max(blobs.radii()[spots])) + WAND_MARGIN_PX
+        if detection.points is not None and blobs.centres.size:  # (how far its spots reach: when a snapshot needs it)
+            self._wand_spots = (detection.points, blobs)
         standing_out = self.sources.centres_standing_out(raw, background.threshold)
         since = self.labeller.since_ns if prediction is not None else None
         if self.sources.observe(stamp_ns, blobs, claimed, standing_out, since, raw):  # the mask changed
@@ -289,10 +285,22 @@ class CameraStream:
         searched = self._searched[2]
         return searched if background.sums is None else replace(searched, sums=background.sums)
 
-    def _background_of(self, gray: NDArray[Any], stamp_ns: int, wand: list[tuple[float, float, float]]) -> Background:
+    def _keep_out(self, prediction: Prediction | None) -> list[tuple[float, float, float]]:
+        """(u, v, radius px) where the wand's LEDs are expected (kept out of the structure): the track's predicted
+        points, as far as its gate and the newest wand's spots reach beyond them (none while it has not moved)."""
+        if prediction is None or not prediction.moved:
+            return []
+        reach = WAND_MARGIN_PX
+        if self._wand_spots is not None:
+            points, blobs = self._wand_spots
+            spots = distances(points, blobs.centres).argmin(axis=1)
+            reach += float(np.max(blobs.radii()[spots]))
+        return [(float(u), float(v), prediction.gate_px + reach) for u, v in prediction.points]
+
+    def _background_of(self, gray: NDArray[Any], stamp_ns: int, prediction: Prediction | None) -> Background:
         """The background of the image's box sums, estimated again every BACKGROUND_REFRESH images until a static
         structure is learned, then with each snapshot of it (and when the image changed kind), with the structure's
-        threshold; ``wand``: (u, v, radius px) where the wand's LEDs are expected (kept out of the structure)."""
+        threshold; ``prediction``: where the track expects the wand (kept out of the structure)."""
         current = self._background
         learned = current is not None and current.structure is not None  # (then the spatial background only shapes
         # the structure's threshold, made once per snapshot)
@@ -302,7 +310,7 @@ class CameraStream:
         if current is None or stale or current.threshold.shape != gray.shape or current.threshold.dtype != depth:
             sums, unit = box_sums(gray)
             if self.structure.due(stamp_ns):
-                self.structure.add(stamp_ns, gray, sums, wand)
+                self.structure.add(stamp_ns, gray, sums, self._keep_out(prediction))
             if current is not None and learned and self.structure.unchanged and current.threshold.dtype == depth:
                 self._since_background = 1  # (a still room's snapshot: the structure and its threshold stand)
                 self._background = replace(current, static=self.structure.pixels)

@@ -332,7 +332,7 @@ class StaticStructure:
                 sums = np.arange(int(structure.max()) + 1, dtype=np.float32)
                 noise = np.sqrt(np.float32(a) + np.float32(b) * sums)
                 table = np.minimum(np.ceil(np.maximum(sigmas * noise, least)), 65535.0).astype(np.uint16)
-                contrast = np.take(table, structure, out=np.empty_like(structure), mode="clip")
+                contrast = _looked_up(table, structure)
                 above = cv2.add(structure, contrast)
                 flicker = _flicker(structure, upper, (a, b), contrast, float(sigmas))
             else:
@@ -342,6 +342,15 @@ class StaticStructure:
             self._made = (median_of(list(self._images)), structure, above, flicker)
             self._made_noise, self._made_from = self._noise, len(self._sums)
         return self._made
+
+
+def _looked_up(table: NDArray[Any], indices: NDArray[Any]) -> NDArray[Any]:
+    """(H, W) ``table``'s entry at each of ``indices`` (H, W; clipped to its length), in the table's dtype, band by
+    band (BAND_ROWS: numpy widens a band's indices, not the whole image's, to 64 bits: twice as fast)."""
+    out = np.empty(indices.shape, table.dtype)
+    for top in range(0, indices.shape[0], BAND_ROWS):
+        np.take(table, indices[top : top + BAND_ROWS], out=out[top : top + BAND_ROWS], mode="clip")
+    return out
 
 
 def _scaled(image: NDArray[Any], factor: float) -> NDArray[Any]:
