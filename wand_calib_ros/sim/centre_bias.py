@@ -58,6 +58,8 @@ class DrawnBias:
         per_stop: False: the offsets are whole from ``from_stops`` on; True: they grow by themselves per stop
             beyond it.
         cameras: the cameras biased (indices; None: all).
+        grows: with ``per_stop`` False, the whole offsets from ``from_stops`` on grow by this fraction of themselves
+            per stop beyond it (a step and a growth: a LINEAR bias).
     """
 
     offset_px: tuple[float, float] = (0.0, 0.0)
@@ -65,12 +67,15 @@ class DrawnBias:
     from_stops: float = 0.0
     per_stop: bool = False
     cameras: tuple[int, ...] | None = None
+    grows: float = 0.0
 
     def sizes(self, brightness: FloatArray) -> FloatArray:
-        """How much of the offsets each point (any shape, stops over full scale) gets: 0 or 1, or the stops beyond
-        ``from_stops``."""
+        """How much of the offsets each point (any shape, stops over full scale) gets: 0 or 1 (plus ``grows`` per stop
+        beyond ``from_stops``), or the stops beyond it."""
         beyond = np.nan_to_num(brightness - self.from_stops, nan=-1.0)
-        return np.clip(beyond, 0.0, None) if self.per_stop else (beyond >= 0).astype(np.float64)
+        if self.per_stop:
+            return np.clip(beyond, 0.0, None)
+        return (beyond >= 0) * (1.0 + self.grows * np.clip(beyond, 0.0, None))
 
     def class_truth(self, camera: int, stops: FloatArray) -> FloatArray:
         """(3,) the (u, v, radial) offsets of the points of one class of ``camera`` on average, their brightness
