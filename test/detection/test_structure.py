@@ -12,6 +12,7 @@ from wand_calib_ros.core.model.rig import CameraSpec
 from wand_calib_ros.detection.background import box_sums, estimate_background
 from wand_calib_ros.detection.recording import CameraStream
 from wand_calib_ros.detection.structure import (
+    BAND_ROWS,
     MIN_LIGHT_PX,
     SNAPSHOT_NS,
     SNAPSHOTS,
@@ -119,15 +120,18 @@ def test_a_flickering_lamp_makes_no_blob_that_may_be_an_led_once_learned(seed: i
     assert sum(near_lamp) <= 2, near_lamp
 
 
-def test_the_median_and_the_second_largest_of_five_are_numpys() -> None:
+@pytest.mark.parametrize("shape", [(11, 13), (2 * BAND_ROWS + 7, 13)])  # one band; three, the last one short
+def test_the_median_and_the_second_largest_of_five_are_numpys(shape: tuple[int, int]) -> None:
     from wand_calib_ros.detection.structure import median_and_upper
 
     rng = np.random.default_rng(2)
-    for n in range(3, 6):
-        snapshots = [rng.integers(0, 2000, (11, 13)).astype(np.uint16) for _ in range(n)]
-        median, upper = median_and_upper(snapshots)
-        ordered = np.sort(np.stack(snapshots), axis=0)
-        assert np.array_equal(median, ordered[(n - 1) // 2]) and np.array_equal(upper, ordered[-2])
+    for dtype in (np.uint8, np.uint16, np.float32):
+        for n in range(3, 6):
+            snapshots = [rng.integers(0, 250, shape).astype(dtype) for _ in range(n)]
+            median, upper = median_and_upper(snapshots)
+            ordered = np.sort(np.stack(snapshots), axis=0)
+            assert np.array_equal(median, ordered[(n - 1) // 2]) and np.array_equal(upper, ordered[-2])
+            assert np.array_equal(median_of(snapshots), ordered[(n - 1) // 2])
 
 
 def test_a_still_rooms_snapshots_keep_the_threshold_and_a_lamp_switched_on_makes_it_again() -> None:
