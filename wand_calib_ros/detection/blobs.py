@@ -172,9 +172,13 @@ def touching(
 ) -> NDArray[np.bool_]:
     """(N, N) which blobs touch or overlap: closer than their radii (from their areas) plus ``margin_px`` (a number,
     or (1, N) per blob of the second axis; the diagonal True)."""
-    gaps = distances(centres, centres)
+    return np.asarray(clearances(centres, areas) < margin_px)
+
+
+def clearances(centres: FloatArray, areas: NDArray[np.int64]) -> FloatArray:
+    """(N, N) how far apart blobs are beyond their radii (from their areas), px (negative: they overlap)."""
     radii = np.sqrt(areas / np.pi)
-    return np.asarray(gaps < radii[:, None] + radii[None, :] + margin_px)
+    return np.asarray(distances(centres, centres) - (radii[:, None] + radii[None, :]))
 
 
 def fringes(centres: FloatArray, areas: NDArray[np.int64], peaks: FloatArray) -> NDArray[np.bool_]:
@@ -184,10 +188,9 @@ def fringes(centres: FloatArray, areas: NDArray[np.int64], peaks: FloatArray) ->
     smaller = areas[:, None] <= FRINGE_AREA * areas[None, :]
     if not smaller.any():  # (the common case: LEDs of like size, nothing to compare)
         return np.zeros(areas.shape, dtype=bool)
-    radii = np.sqrt(areas / np.pi)
-    reach = distances(centres, centres) - (radii[:, None] + radii[None, :] + TOUCH_PX)  # (< 0: touching)
-    halo = (reach < radii[None, :]) & (peaks[:, None] <= FRINGE_PEAK * peaks[None, :])
-    return np.asarray((smaller & ((reach < 0.0) | halo)).any(axis=1))
+    beyond = clearances(centres, areas) - TOUCH_PX  # (< 0: touching)
+    halo = (beyond < np.sqrt(areas / np.pi)[None, :]) & (peaks[:, None] <= FRINGE_PEAK * peaks[None, :])
+    return np.asarray((smaller & ((beyond < 0.0) | halo)).any(axis=1))
 
 
 NO_BLOBS = Blobs(np.zeros((0, 2)), np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros(0, dtype=bool))

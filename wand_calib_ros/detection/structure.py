@@ -36,6 +36,7 @@ structure pixel by pixel.
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Iterator
 from dataclasses import replace
 from typing import Any
 
@@ -112,6 +113,11 @@ def sorted_pixels(snapshots: list[NDArray[Any]]) -> list[NDArray[Any]]:
 BAND_ROWS = 32
 
 
+def _bands(height: int) -> Iterator[slice]:
+    """The rows of an image ``height`` rows high, BAND_ROWS at a time (the last band shorter)."""
+    return (slice(top, top + BAND_ROWS) for top in range(0, height, BAND_ROWS))
+
+
 def median_and_upper(snapshots: list[NDArray[Any]]) -> tuple[NDArray[Any], NDArray[Any]]:
     """The per-pixel median and second largest of 3-5 images (the lower median and the second largest of four): of
     five by thirteen minima and maxima instead of a sort's eighteen, band by band (BAND_ROWS)."""
@@ -121,8 +127,7 @@ def median_and_upper(snapshots: list[NDArray[Any]]) -> tuple[NDArray[Any], NDArr
     first = snapshots[0]
     median, upper = np.empty_like(first), np.empty_like(first)
     small, large = np.empty_like(first[:BAND_ROWS]), np.empty_like(first[:BAND_ROWS])
-    for top in range(0, first.shape[0], BAND_ROWS):
-        rows = slice(top, top + BAND_ROWS)
+    for rows in _bands(first.shape[0]):
         a, b, c, d, e = (snapshot[rows] for snapshot in snapshots)
         low, high, less, more = median[rows], upper[rows], small[: len(a)], large[: len(a)]
         np.minimum(a, b, out=low), np.maximum(a, b, out=high), np.minimum(c, d, out=less), np.maximum(c, d, out=more)
@@ -147,8 +152,7 @@ def median_of(snapshots: list[NDArray[Any]]) -> NDArray[Any]:
     first = snapshots[0]
     median = np.empty_like(first)
     spares = [np.empty_like(first[:BAND_ROWS]) for _ in range(3)]
-    for top in range(0, first.shape[0], BAND_ROWS):
-        rows = slice(top, top + BAND_ROWS)
+    for rows in _bands(first.shape[0]):
         a, b, c, d, e = (snapshot[rows] for snapshot in snapshots)
         low, high, spare = (array[: len(a)] for array in spares)
         np.minimum(a, b, out=low), np.minimum(c, d, out=high)
@@ -348,8 +352,8 @@ def _looked_up(table: NDArray[Any], indices: NDArray[Any]) -> NDArray[Any]:
     """(H, W) ``table``'s entry at each of ``indices`` (H, W; clipped to its length), in the table's dtype, band by
     band (BAND_ROWS: numpy widens a band's indices, not the whole image's, to 64 bits: twice as fast)."""
     out = np.empty(indices.shape, table.dtype)
-    for top in range(0, indices.shape[0], BAND_ROWS):
-        np.take(table, indices[top : top + BAND_ROWS], out=out[top : top + BAND_ROWS], mode="clip")
+    for rows in _bands(indices.shape[0]):
+        np.take(table, indices[rows], out=out[rows], mode="clip")
     return out
 
 

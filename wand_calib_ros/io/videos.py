@@ -169,7 +169,8 @@ def check_sources(sources: Mapping[str, CameraSource], sizes: Mapping[str, tuple
     for name, source in sources.items():
         if not source.path.exists():
             raise FormatError(source.path, f"no such file or folder (the video of camera '{name}')")
-        first = next(_frames(source), None)
+        # (the size alone: a video's first frame decoded as it comes, its luma plane left to the reader)
+        first = next(_frames(source) if source.is_folder else _decoded(source, None), None)
         if first is None:
             raise FormatError(source.path, f"holds no frame (the video of camera '{name}')")
         height, width = first[1].shape[:2]

@@ -13,6 +13,7 @@ from wand_calib_ros.collection.recording import detect_recording
 from wand_calib_ros.core.adjust.brightness_bias import MIN_CLASS_POINTS
 from wand_calib_ros.core.judge.metrics import camera_errors, rereference
 from wand_calib_ros.core.model.brightness import brightness_classes as model_classes
+from wand_calib_ros.core.model.brightness import radial_directions
 from wand_calib_ros.core.model.result import CalibrationResult
 from wand_calib_ros.core.model.rig import RigSpec, WandObservations
 from wand_calib_ros.detection.consistency import settle_labels
@@ -178,8 +179,7 @@ def centre_bias_by_class(
     if np.count_nonzero(classes == 0) < MIN_CLASS_POINTS:
         return {}
     reference = offsets[classes == 0].mean(axis=0)
-    away = points - principal_point
-    away /= np.linalg.norm(away, axis=1, keepdims=True)
+    away, _ = radial_directions(points, np.broadcast_to(principal_point, points.shape))
     out = {}
     for klass in range(1, int(classes.max(initial=0)) + 1):
         chosen = classes == klass
