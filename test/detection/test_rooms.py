@@ -103,7 +103,9 @@ def _near_calibrations(seed: int) -> tuple[Scenario, CalibrationResult, Calibrat
 def test_saturated_centres_drawn_off_on_purpose_are_measured_and_corrected() -> None:
     # 2-10 % of each camera's spots stay below full scale. The detector's brightness carries the bias to the
     # adjustment: each camera reports it, the calibration is within 1.3x of the unbiased take's in every error
-    # class (measured 1.06-1.21x, curves 0.86x), and the standard deviations cover the errors.
+    # class (measured 1.06-1.21x, curves 0.86x), and the standard deviations cover the errors: |error| / std at most
+    # 3 (z RMS 0.65-0.99, at most 2.24; they are widened 1.36-1.79x for centre errors that follow one another,
+    # without which the focal lengths' z RMS was 1.55 over these seeds, 1.74 over eight, up to 3.4).
     biased: dict[str, list[float]] = {}
     unbiased: dict[str, list[float]] = {}
     pooled: dict[str, list[float]] = {}
@@ -120,7 +122,7 @@ def test_saturated_centres_drawn_off_on_purpose_are_measured_and_corrected() -> 
     for key in biased:
         assert rms(biased[key]) <= 1.3 * rms(unbiased[key]), (key, rms(biased[key]), rms(unbiased[key]))
     for key in pooled:
-        assert rms(pooled[key]) <= 1.6 and np.max(np.abs(pooled[key])) <= 4.0, (key, pooled[key])
+        assert rms(pooled[key]) <= 1.3 and np.max(np.abs(pooled[key])) <= 3.0, (key, pooled[key])
 
 
 def test_each_class_is_reported_within_a_tenth_of_a_pixel_of_what_its_centres_carry() -> None:

@@ -31,6 +31,7 @@ from wand_calib_ros.core.adjust.bundle_problem import (
     BundleState,
     default_free_mask,
 )
+from wand_calib_ros.core.adjust.correlated_errors import error_correlation, widened
 from wand_calib_ros.core.adjust.gating import (
     HUBER_SIGMAS,
     VIEW_GATE_SIGMAS,
@@ -170,6 +171,11 @@ def refine_calibration(
     narrow_notes: list[str] = []
     if fixed.pinned is not None:
         result, fixed, narrow_notes = _narrow_principal_points(rig, problem, result, fixed, reference)
+    # (the covariance allows for centre errors that follow one another from image to image)
+    correlation = error_correlation(
+        result.residuals, problem.camera, problem.point, used[problem.placement], problem.n_cameras
+    )
+    result = widened(result, correlation)
 
     # 5. What cannot be right, then the result.
     # (what saturated centres pull is checked where no brightness tells the adjustment which to correct)
@@ -179,6 +185,8 @@ def refine_calibration(
     if classes is not None:  # (a camera whose bright centres could not be measured: nothing tells their bias)
         systematic += unmeasured_bias(problem, rig.camera_names)
     warnings = narrow_notes + _warnings(rig, result, fixed, reference, uv_used) + systematic
+    widening = correlation.line()
+    warnings += [] if widening is None else [widening]
     views_rejected = (some_views(uv[used]) & ~some_views(uv_used)).sum(axis=0)
     markers = free_placements(result.state, problem, uv_used)  # (the used placements' markers, freely)
     calibration = assemble(
