@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from detection import clean_images, room_images  # (the cases benchmarks/detection.py renders)
+from detection import SENSOR_WIDTH_MM, clean_images, room_images  # (the cases benchmarks/detection.py renders)
 
 ROOT = Path(__file__).resolve().parent.parent
 SIZES = ((640, 480), (1280, 1024))
@@ -42,7 +42,8 @@ data = np.load(sys.argv[1])
 rates = {}
 for case in data.files:
     images = data[case]
-    spec = CameraSpec("cam", (images.shape[2], images.shape[1]), (5.6, 5.6), 1.8, 92.5)
+    pixel_um = 1000.0 * float(sys.argv[2]) / images.shape[2]  # (benchmarks/detection.py's camera)
+    spec = CameraSpec("cam", (images.shape[2], images.shape[1]), (pixel_um, pixel_um), 1.8, 92.5)
     stream = CameraStream(spec, WandOptions())
     stamp, begin = 0, time.process_time()
     for _ in range(4):
@@ -83,7 +84,7 @@ def _tree(commit: str, folder: Path) -> Path:
 def _rates(tree: Path, images: Path) -> dict[str, float]:
     """Images/s per case of the detector at ``tree`` (its own process)."""
     done = subprocess.run(
-        [sys.executable, "-c", RATE, str(images)],
+        [sys.executable, "-c", RATE, str(images), str(SENSOR_WIDTH_MM)],
         check=True,
         capture_output=True,
         text=True,
