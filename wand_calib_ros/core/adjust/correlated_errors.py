@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wand_calib_ros.core.adjust.bundle_adjustment import camera_std
+from wand_calib_ros.core.adjust.linearisation import squared_norms
 
 if TYPE_CHECKING:
     from wand_calib_ros.core.adjust.bundle_adjustment import BundleResult
@@ -39,7 +40,7 @@ SIGNIFICANT = 3.0
 
 @dataclass(frozen=True)
 class ErrorCorrelation:
-    """How the residuals of one camera's LED follow one another from placement to placement.
+    """How a take's residuals follow one another from placement to placement (every camera's LEDs pooled).
 
     Attributes:
         lags: (K,) the correlation of residuals 1..K placements apart, up to the first lag that does not stand out
@@ -75,15 +76,16 @@ def error_correlation(
         residuals: (M, 2) reprojection residuals, px.
         camera: (M,) each one's camera.
         point: (M,) its point of the wand (0..N-1).
-        time: (M,) its placement's row in the views (the frame order; rows k apart are k images apart).
+        time: (M,) its placement's row in the views (their frame order: neighbouring rows are views one after the
+            other; rows in no time order show no correlation, and nothing is widened).
         n_cameras: C.
     """
     if residuals.shape != (camera.size, 2) or not camera.size == point.size == time.size:
         raise ValueError(f"residuals {residuals.shape} and indices of {camera.size}, {point.size}, {time.size}")
     if not residuals.size:
         return ErrorCorrelation((), 1.0)
-    scale = np.sqrt(np.bincount(camera, np.sum(residuals**2, axis=1), n_cameras) / np.maximum(
-        2 * np.bincount(camera, minlength=n_cameras), 1))  # fmt: skip
+    counts = np.bincount(camera, minlength=n_cameras)
+    scale = np.sqrt(np.bincount(camera, squared_norms(residuals), n_cameras) / np.maximum(2 * counts, 1))
     scaled = residuals / np.where(scale > 0, scale, 1.0)[camera, None]
     n_points = int(point.max()) + 1
     start = int(time.min())
@@ -105,7 +107,8 @@ def error_correlation(
 
 
 def widened(result: BundleResult, correlation: ErrorCorrelation) -> BundleResult:
-    """``result`` with its camera covariance (and standard deviations) widened by the correlation's factor."""
+    """``result`` with its camera covariance and standard deviations widened by the correlation's factor (its
+    normal equations, ``result.system``, stay the adjustment's own)."""
     if correlation.factor == 1.0:
         return result
     covariance = result.camera_covariance * correlation.factor
