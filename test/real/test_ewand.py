@@ -71,7 +71,9 @@ def test_the_time_offset_of_cam0_is_estimated_and_every_camera_fits_to_below_0_6
     cam0 = result.camera("cam0")
     # cam0 exposes 0.08 frames (8 ms at 10 Hz) before the others; the others agree with each other
     assert 0.07 < cam0.time_offset < 0.095
-    assert cam0.parameter_std["time_offset"] < 0.002
+    # known to 0.0026 frames: the residuals follow one another over 39 views, which widens every standard deviation
+    # 4.2x (0.0006 without; core/adjust/correlated_errors.py)
+    assert cam0.parameter_std["time_offset"] < 0.003
     for camera in result.cameras:
         if camera.name != "cam0":
             assert abs(camera.time_offset) < 0.005, camera.name
