@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from rigs import rms, timed_take, z_scores
 
-from wand_calib_ros.core.adjust.correlated_errors import SIGNIFICANT, error_correlation
+from wand_calib_ros.core.adjust.correlated_errors import MAX_LAG, SIGNIFICANT, error_correlation
 from wand_calib_ros.core.model.rig import WandObservations
 from wand_calib_ros.core.pipeline import calibrate
 from wand_calib_ros.sim.clocks import TakeOptions
@@ -32,7 +32,7 @@ def _series(rho: float, rng: np.random.Generator) -> tuple[np.ndarray, ...]:
 
 def _truncated_factor(rho: float, pairs: float) -> float:
     """1 + 2 sum rho^k over the lags whose correlation stands out of ``pairs`` independent pairs' scatter."""
-    lags = [rho**k for k in range(1, 11) if rho**k > SIGNIFICANT / np.sqrt(pairs)]
+    lags = [rho**k for k in range(1, MAX_LAG + 1) if rho**k > SIGNIFICANT / np.sqrt(pairs)]
     return 1.0 + 2.0 * sum(lags)
 
 
@@ -50,7 +50,7 @@ def test_correlated_residuals_give_the_factor_of_their_effective_sample_size(rho
     factors = [error_correlation(*_series(rho, np.random.default_rng(seed)), CAMERAS).factor for seed in range(5)]
     expected = _truncated_factor(rho, pairs)
     assert abs(expected / ((1 + rho) / (1 - rho)) - 1) < 0.03
-    # each lag's correlation is measured to about 1 / sqrt(pairs) = 0.006; the factor to twice the lags' sum of that
+    # each lag's correlation is measured to about 1 / sqrt(pairs) = 0.006, the factor (2 x their sum) to hundredths
     assert rms([f - expected for f in factors]) < 0.05 * expected, (factors, expected)
 
 
