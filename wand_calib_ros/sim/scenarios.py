@@ -496,14 +496,23 @@ SCENARIOS: dict[str, Callable[..., Scenario]] = {
 }
 
 
+def lengths(vectors: FloatArray) -> FloatArray:
+    """(...,) the lengths of (..., 3) vectors: the numbers numpy's norm over the last axis gives, without its
+    reduction per vector (ten times as fast on a stage's 600,000 points)."""
+    squares = vectors * vectors
+    return np.asarray(np.sqrt(squares[..., 0] + squares[..., 1] + squares[..., 2]))
+
+
 def visible(camera: TrueCamera, points: FloatArray) -> NDArray[np.bool_]:
-    """(...,) True where reference-frame points reach the camera's sensor."""
+    """(...,) True where reference-frame points reach the camera's sensor (only the points within its view angle are
+    projected: a camera of a large stage sees a small part of it)."""
     in_cam = camera.pose.apply(points)
     theta = np.arctan2(np.hypot(in_cam[..., 0], in_cam[..., 1]), in_cam[..., 2])
-    uv = project(camera.model, in_cam)
+    seen = (theta <= camera.true_max_view_angle) & (lengths(in_cam) > 1.0)
+    uv = project(camera.model, in_cam[seen])
     width, height = camera.spec.image_size
-    inside = (uv[..., 0] >= 0) & (uv[..., 0] <= width - 1) & (uv[..., 1] >= 0) & (uv[..., 1] <= height - 1)
-    return inside & (theta <= camera.true_max_view_angle) & (np.linalg.norm(in_cam, axis=-1) > 1.0)
+    seen[seen] = (uv[:, 0] >= 0) & (uv[:, 0] <= width - 1) & (uv[:, 1] >= 0) & (uv[:, 1] <= height - 1)
+    return seen
 
 
 def _wand_points(scenario: Scenario, wand_a: FloatArray, direction: FloatArray) -> FloatArray:
@@ -514,11 +523,12 @@ def visibility(scenario: Scenario, wand_a: FloatArray, direction: FloatArray, fa
     """(P, C, 3) which camera sees which LED: on the sensor and, with a cone, within the LEDs' beam."""
     points = _wand_points(scenario, wand_a, direction)
     seen = np.stack([visible(camera, points) for camera in scenario.cameras], axis=1)
-    if scenario.led_cone_deg is not None:
+    if scenario.led_cone_deg is not None:  # (looked at where the camera sees the LED)
         for c, camera in enumerate(scenario.cameras):
-            to_camera = camera.pose.center - points  # (P, 3, 3)
-            cosine = np.einsum("pki,pi->pk", to_camera, facing) / np.linalg.norm(to_camera, axis=-1)
-            seen[:, c] &= cosine >= np.cos(np.radians(scenario.led_cone_deg))
+            mine = seen[:, c]
+            to_camera = camera.pose.center - points[mine]  # (M, 3)
+            along = np.einsum("mi,mi->m", to_camera, np.broadcast_to(facing[:, None, :], points.shape)[mine])
+            mine[mine] = along / lengths(to_camera) >= np.cos(np.radians(scenario.led_cone_deg))
     return seen
 
 
@@ -569,8 +579,7 @@ def image_placements(
     seen = visibility(scenario, wand_a, direction, facing)
     uv = np.full((wand_a.shape[0], len(scenario.cameras), scenario.wand.n_points, 2), np.nan)
     for i, camera in enumerate(scenario.cameras):
-        projected = project(camera.model, camera.pose.apply(points))
-        uv[:, i] = np.where(seen[:, i, :, None], projected, np.nan)
+        uv[:, i][seen[:, i]] = project(camera.model, camera.pose.apply(points[seen[:, i]]))
     uv = uv + rng.normal(scale=noise_px, size=uv.shape) if noise_px > 0 else uv
     frames = np.arange(first_frame, first_frame + wand_a.shape[0])
     names = tuple(c.spec.name for c in scenario.cameras)

@@ -58,8 +58,10 @@ class Pose:
         return -self.rotation.T @ self.translation
 
     def apply(self, points: FloatArray) -> FloatArray:
-        """Map (..., 3) reference-frame points into this frame."""
-        return np.asarray(points) @ self.rotation.T + self.translation
+        """Map (..., 3) reference-frame points into this frame (as one (N, 3) product: a stack of (3, 3) ones costs
+        twice as much)."""
+        points = np.asarray(points)
+        return np.asarray(points.reshape(-1, 3) @ self.rotation.T + self.translation).reshape(points.shape)
 
     def compose(self, first: Pose) -> Pose:
         """The transform ``self after first`` (paper eq. 'transfer': R_ik = R_jk R_ij, T_ik = R_jk T_ij + T_jk)."""
