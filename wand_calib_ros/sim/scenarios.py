@@ -235,6 +235,27 @@ def mixed_three_camera_scenario(*, n_placements: int = 300, pinhole: bool = Fals
     return Scenario("mixed3", WandSpec.from_lengths(400.0, 200.0), cameras, volume, n_placements, min_views=2)
 
 
+def conventional_four_scenario(*, n_placements: int = 300) -> Scenario:
+    """Four 4.2 mm conventional cameras (the real pair's) on an arc 2.6 m around a 1.8 x 1.4 x 1.8 m volume, 36-37
+    degrees apart and alternately 0.6 and 0.2 m above its centre, all looking at it: a small lab's motion-capture
+    rig, where every camera sees most placements and each is placed by the others (a pair's two cameras only by
+    each other and the wand)."""
+    world_poses = []
+    for i, azimuth in enumerate(np.radians([-55.0, -18.0, 18.0, 55.0])):
+        height = -600.0 if i % 2 == 0 else -200.0  # (y is down)
+        centre = np.array([2600.0 * np.sin(azimuth), height, -2600.0 * np.cos(azimuth)])
+        world_poses.append(_look_at(centre, np.zeros(3), np.array([0.0, 1.0, 0.0])))
+    principal_points = ((335.0, 238.0), (322.0, 251.0), (331.0, 244.0), (326.0, 240.0))
+    cameras = tuple(
+        _conventional_camera(f"cam{i}", pose, principal_points[i])
+        for i, pose in enumerate(_relative_to_first(world_poses))
+    )
+    corners = np.array([[x, y, z] for x in (-900.0, 900.0) for y in (-700.0, 700.0) for z in (-900.0, 900.0)])
+    in_first = world_poses[0].apply(corners)
+    volume = np.stack([in_first.min(axis=0), in_first.max(axis=0)])
+    return Scenario("conventional4", WandSpec.from_lengths(400.0, 200.0), cameras, volume, n_placements)
+
+
 def paper_three_camera_scenario(**kwargs: float | tuple[float, float]) -> Scenario:
     """The paper's three-fisheye simulation (camera 2 at Euler (57.3, 57.3, 57.3) deg, T = [-1200, -200, 700] mm)."""
     scenario = paper_fisheye_scenario(n_cameras=3, **kwargs)  # type: ignore[arg-type]
@@ -485,6 +506,7 @@ SCENARIOS: dict[str, Callable[..., Scenario]] = {
     "paper4": paper_four_camera_scenario,
     "small_room": small_room_scenario,
     "conventional": conventional_pair_scenario,
+    "conventional4": conventional_four_scenario,
     "mixed": mixed_pair_scenario,
     "mixed3": mixed_three_camera_scenario,
     "ring6": ring_scenario,
