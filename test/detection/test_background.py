@@ -3,10 +3,11 @@ a window, and the window's own noise makes no blobs."""
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
-from wand_calib_ros.detection.background import estimate_background
+from wand_calib_ros.detection.background import box_sums, box_sums_above, estimate_background
 from wand_calib_ros.detection.blobs import BlobOptions, find_blobs
 from wand_calib_ros.sim.room import CameraRoom, Lamp, Sensor, Window
 from wand_calib_ros.sim.room_images import render_camera
@@ -65,3 +66,22 @@ def test_the_brightest_pixel_does_not_set_the_threshold() -> None:
     (image,) = _images(_room(lamps=(lamp,)), leds, 12.0, 1, 7)
     blobs = find_blobs(image, BlobOptions())
     assert np.all(np.linalg.norm(blobs.centres[:, None] - leds[None], axis=-1).min(axis=0) < 1.0)
+
+
+@pytest.mark.parametrize("size", [(1280, 1024), (1283, 1025), (640, 480)])
+@pytest.mark.parametrize("depth", [np.uint8, np.uint16])
+def test_box_sums_above_a_threshold_are_the_pixels_of_the_whole_images_sums(size: tuple[int, int], depth: type) -> None:
+    # a room with lamps, a window and LEDs, of a banded size, an odd one and an unbanded one: the same pixels, bit for
+    # bit, as comparing the whole image's box sums (8-bit images' in uint16, 16-bit ones' in float32)
+    window = Window((0.55 * size[0], 0.05 * size[1], 0.85 * size[0], 0.3 * size[1]), 30.0)
+    room = _room(windows=(window,), lamps=(Lamp((0.15 * size[0], 0.7 * size[1]), 3.0, 900.0),))
+    core, sigma = room.optics.terms()[0]
+    leds = np.array([[0.2 * size[0], 0.3 * size[1]], [0.5 * size[0], 0.5 * size[1]], [0.8 * size[0], 0.9 * size[1]]])
+    paths = [np.repeat(leds[:, None, :], 3, axis=1)] * 2
+    energy = [np.full((3, 3), 200.0 / core * 2 * np.pi * sigma**2 / 3)] * 2
+    images, _, _, _ = render_camera(room, size, paths, energy, np.random.default_rng(5))
+    for image in images:
+        gray = np.asarray(image).astype(depth) * (257 if depth == np.uint16 else 1)
+        sums, unit = box_sums(gray)
+        threshold = estimate_background(sums, unit=unit).threshold
+        assert np.array_equal(box_sums_above(gray, threshold), cv2.compare(sums, threshold, cv2.CMP_GT))

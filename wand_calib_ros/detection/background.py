@@ -222,3 +222,26 @@ def box_sums(gray: NDArray[Any]) -> tuple[NDArray[Any], float]:
     depth, unit = (cv2.CV_16U, float(BOX)) if gray.dtype == np.uint8 else (cv2.CV_32F, BOX * 257.0)
     sums = cv2.boxFilter(gray, depth, (BOX, BOX), normalize=False, borderType=cv2.BORDER_REPLICATE)
     return sums, unit
+
+
+#: Images of at least this many pixels are compared with their threshold band by band (:func:`box_sums_above`) ...
+BANDED_PIXELS = 1 << 20
+#: ... this many rows at a time.
+ABOVE_BAND_ROWS = 64
+
+
+def box_sums_above(gray: NDArray[Any], threshold: NDArray[Any]) -> NDArray[np.uint8]:
+    """(H, W) 255 where the box sums of a grey image (:func:`box_sums`) are above ``threshold`` (H, W, in the sums'
+    dtype), 0 elsewhere: the same pixels as comparing :func:`box_sums` with it, band by band (ABOVE_BAND_ROWS, each
+    summed with a row of the bands around it) for an image of BANDED_PIXELS or more, whose sums and threshold
+    outgrow a core's cache (at 1280x1024 0.53 ms instead of 0.62); a smaller image at once."""
+    height = gray.shape[0]
+    if gray.size < BANDED_PIXELS:
+        return np.asarray(cv2.compare(box_sums(gray)[0], threshold, cv2.CMP_GT), dtype=np.uint8)
+    above = np.empty(gray.shape[:2], np.uint8)
+    for top in range(0, height, ABOVE_BAND_ROWS):
+        bottom = min(top + ABOVE_BAND_ROWS, height)
+        first, last = max(top - 1, 0), min(bottom + 1, height)
+        sums = box_sums(gray[first:last])[0][top - first : bottom - first]
+        cv2.compare(sums, threshold[top:bottom], cv2.CMP_GT, dst=above[top:bottom])
+    return above

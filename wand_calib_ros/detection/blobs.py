@@ -28,6 +28,7 @@ from wand_calib_ros.detection.background import (
     Background,
     BackgroundOptions,
     box_sums,
+    box_sums_above,
     estimate_background,
     saturation_of,
 )
@@ -440,6 +441,23 @@ def _level_sum(background: Background, row: int, col: int) -> float:
     return float(levels[min(round(row / step), levels.shape[0] - 1), min(round(col / step), levels.shape[1] - 1)])
 
 
+def external_contours(binary: NDArray[Any]) -> list[NDArray[np.int32]]:
+    """The external contours of a sparse (H, W) binary image, as ``cv2.findContours`` (RETR_EXTERNAL,
+    CHAIN_APPROX_SIMPLE) gives them and in its order, found in the runs of rows that hold any pixel: nothing connects
+    across an empty row, and the rows' maxima cost a tenth of a scan for contours (at 1280x1024, 0.055 ms instead of
+    0.14). External contours are in turn much cheaper than labelling the whole image."""
+    occupied = np.flatnonzero(cv2.reduce(binary, 1, cv2.REDUCE_MAX))
+    if not occupied.size:
+        return []
+    breaks = np.flatnonzero(np.diff(occupied) > 1)
+    starts, ends = occupied[np.r_[0, breaks + 1]].tolist(), (occupied[np.r_[breaks, occupied.size - 1]] + 1).tolist()
+    contours: list[NDArray[np.int32]] = []
+    for top, bottom in zip(reversed(starts), reversed(ends), strict=True):  # (findContours lists the lowest first)
+        found, _ = cv2.findContours(binary[top:bottom], cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE, offset=(0, top))
+        contours.extend(found)  # type: ignore[arg-type]
+    return contours
+
+
 def find_blobs(
     gray: NDArray[Any],
     options: BlobOptions = BlobOptions(),
@@ -464,15 +482,28 @@ def find_blobs(
     if gray.dtype not in (np.uint8, np.uint16):
         gray = np.clip(np.round(gray), 0, 65535).astype(np.uint16)
     full = saturation_of(gray) if saturation is None else saturation
-    sums, unit = box_sums(gray) if background is None or background.sums is None else (background.sums, background.unit)
-    if background is None or background.threshold.shape != sums.shape or background.threshold.dtype != sums.dtype:
-        background = estimate_background(sums, options.background, unit=unit)
-    threshold = background.searched
-    above = cv2.compare(sums, threshold, cv2.CMP_GT)
+    depth = np.uint16 if gray.dtype == np.uint8 else np.float32  # (the box sums')
+    above: NDArray[Any]
+    if (
+        background is not None
+        and background.sums is None
+        and background.static is not None  # (the sums are then needed for the search alone)
+        and background.threshold.shape == gray.shape
+        and background.threshold.dtype == depth
+    ):
+        sums, threshold = None, background.searched
+        above = box_sums_above(gray, threshold)
+    else:
+        sums, unit = (
+            box_sums(gray) if background is None or background.sums is None else (background.sums, background.unit)
+        )
+        if background is None or background.threshold.shape != sums.shape or background.threshold.dtype != sums.dtype:
+            background = estimate_background(sums, options.background, unit=unit)
+        threshold = background.searched
+        above = cv2.compare(sums, threshold, cv2.CMP_GT)
     if background.search is None and mask is not None:  # (else the mask is in the threshold)
         above = cv2.subtract(above, mask)
-    # External contours of a sparse mask are much cheaper than labelling the whole image.
-    contours, _ = cv2.findContours(above, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+    contours = external_contours(above)
     rows: list[tuple[float, ...]] = []
     for contour in contours:
         x, y, bw, bh = cv2.boundingRect(contour)
@@ -484,7 +515,9 @@ def find_blobs(
             near = mask[max(y - 1, 0) : y + bh + 1, max(x - 1, 0) : x + bw + 1] if mask is not None else None
             touches = near is not None and cv2.countNonZero(near) > 0
             hidden = touches or (
-                background.static is None and hidden_continuation(sums, above, threshold, box, background)
+                sums is not None
+                and background.static is None
+                and hidden_continuation(sums, above, threshold, box, background)
             )
             rows += _measure(gray, box, area, background, options, full, hidden, above)
     if not rows:
