@@ -14,6 +14,8 @@ from wand_calib_ros.detection.recording import CameraStream
 from wand_calib_ros.detection.structure import (
     BAND_ROWS,
     MIN_LIGHT_PX,
+    QUIET_NS,
+    QUIET_SNAPSHOTS,
     SNAPSHOT_NS,
     SNAPSHOTS,
     StaticStructure,
@@ -153,6 +155,46 @@ def test_a_still_rooms_snapshots_keep_the_threshold_and_a_lamp_switched_on_makes
     made = [snapshot(k) for k in range(SNAPSHOTS, 3 * SNAPSHOTS)]  # a still room: made again once a window
     assert made == [False] * (SNAPSHOTS - 1) + [True] + [False] * (SNAPSHOTS - 1) + [True]
     assert snapshot(3 * SNAPSHOTS, lamp=True)  # a lamp switched on: its light stands above the threshold
+
+
+def test_a_still_room_keeps_a_snapshot_every_quiet_interval_and_a_change_at_once() -> None:
+    rng = np.random.default_rng(6)
+    structure = StaticStructure()
+    sums, unit = box_sums(np.clip(rng.normal(40.0, 2.0, (120, 160)), 0, 255).astype(np.uint8))
+    background = estimate_background(sums, unit=unit)
+    every = QUIET_NS // SNAPSHOT_NS
+
+    def due(k: int, lamp: bool = False, led: tuple[int, int] | None = None, kept_out: bool = False) -> bool:
+        """Whether the snapshot due at the k-th SNAPSHOT_NS was kept (an LED at ``led``, in a wand's disc or not)."""
+        assert structure.due(k * SNAPSHOT_NS)
+        image = np.clip(rng.normal(40.0, 2.0, (120, 160)), 0, 255).astype(np.uint8)
+        if lamp:
+            image[50:60, 70:80] = 200
+        keep_out = []
+        if led is not None:
+            image[led[1] - 1 : led[1] + 2, led[0] - 1 : led[0] + 2] = 220
+            keep_out = [(float(led[0]), float(led[1]), 6.0)] if kept_out else []
+        sums = box_sums(image)[0]
+        kept = structure.worth_keeping(k * SNAPSHOT_NS, sums, keep_out)
+        if kept:
+            structure.add(k * SNAPSHOT_NS, image, sums, keep_out)
+            structure.apply(background)
+        return kept
+
+    k = 0
+    while due(k):  # the window fills and stands unchanged through QUIET_SNAPSHOTS: every snapshot kept
+        k += 1
+    assert SNAPSHOTS <= k <= SNAPSHOTS + QUIET_SNAPSHOTS
+    made = structure.structure()
+    quiet = [False] + [due(j) for j in range(k + 1, k + 3 * every)]  # still: one kept every QUIET_NS
+    assert quiet == ([False] * (every - 1) + [True]) * 3
+    k += 3 * every
+    assert not due(k, led=(30, 90), kept_out=True)  # the wand passing, in its discs: still
+    assert due(k + 1, led=(30, 90))  # a light the wand's discs do not hold: kept at once
+    assert due(k + 2, lamp=True)  # a lamp switched on: kept at once, the room no longer still ...
+    assert all(due(j, lamp=True) for j in range(k + 3, k + 3 + QUIET_SNAPSHOTS))  # ... until it stands again
+    assert made is not None and structure.structure() is not None
+    assert np.max(structure.structure()[50:60, 70:80]) > np.max(made[50:60, 70:80])  # the lamp learned
 
 
 @pytest.mark.parametrize("level", [1.1, 1.2, 1.25])

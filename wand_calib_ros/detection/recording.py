@@ -310,7 +310,9 @@ class CameraStream:
         if current is None or stale or current.threshold.shape != gray.shape or current.threshold.dtype != depth:
             sums, unit = box_sums(gray)
             if self.structure.due(stamp_ns):
-                self.structure.add(stamp_ns, gray, sums, self._keep_out(prediction))
+                keep_out = self._keep_out(prediction)
+                if self.structure.worth_keeping(stamp_ns, sums, keep_out):
+                    self.structure.add(stamp_ns, gray, sums, keep_out)
             if current is not None and learned and self.structure.unchanged and current.threshold.dtype == depth:
                 self._since_background = 1  # (a still room's snapshot: the structure and its threshold stand)
                 self._background = replace(current, static=self.structure.pixels)
