@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wand_calib_ros.detection.background import (
+    BANDED_PIXELS,
     BOX,
     Background,
     BackgroundOptions,
@@ -443,9 +444,12 @@ def _level_sum(background: Background, row: int, col: int) -> float:
 
 def external_contours(binary: NDArray[Any]) -> list[NDArray[np.int32]]:
     """The external contours of a sparse (H, W) binary image, as ``cv2.findContours`` (RETR_EXTERNAL,
-    CHAIN_APPROX_SIMPLE) gives them and in its order, found in the runs of rows that hold any pixel: nothing connects
-    across an empty row, and the rows' maxima cost a tenth of a scan for contours (at 1280x1024, 0.055 ms instead of
-    0.14). External contours are in turn much cheaper than labelling the whole image."""
+    CHAIN_APPROX_SIMPLE) gives them and in its order. In an image of BANDED_PIXELS or more, found in the runs of rows
+    that hold any pixel: nothing connects across an empty row, and the rows' maxima cost a tenth of a scan for
+    contours (at 1280x1024 in a stream 0.10 ms instead of 0.18; at 640x480 the calls per run cost more than they
+    save: 0.06 ms instead of 0.04). External contours are in turn much cheaper than labelling the whole image."""
+    if binary.size < BANDED_PIXELS:
+        return list(cv2.findContours(binary, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)[0])  # type: ignore[arg-type]
     occupied = np.flatnonzero(cv2.reduce(binary, 1, cv2.REDUCE_MAX))
     if not occupied.size:
         return []
