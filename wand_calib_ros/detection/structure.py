@@ -92,7 +92,7 @@ NOISE_CHANGE = 1.5
 #: Once this many snapshots in a row changed nothing, the room is still: a snapshot due is only compared with the
 #: structure (its box sums beyond the threshold or below the floor, the wand's discs left out: no noise, no median)
 #: and kept only when that finds a change, or when the newest kept one is QUIET_NS old. A lamp switched on is seen
-#: as soon as before; a still room's snapshots span four times as long, at a fifth of the cost.
+#: as soon as before; a still room's snapshots span four times as long, at about a third of the cost.
 QUIET_SNAPSHOTS = 5
 QUIET_NS = 4 * SNAPSHOT_NS
 
