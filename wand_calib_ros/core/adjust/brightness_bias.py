@@ -11,12 +11,12 @@ is (:func:`~wand_calib_ros.core.adjust.model_order.reduce_radial`: the linearise
    fits better; else CLASSES. A shape fits where the classes' estimates differ from its generalised
    least-squares fit by no more than chance (chi-square at SHAPE_LEVEL), from the lowest start that fits. Fewer
    terms estimate a camera's parameters more surely;
-2. whether its bias differs from zero: all its terms together, chi-square at SIGNIFICANCE_LEVEL (else it has
-   none). In the CLASSES shape, which classes are biased is then a question of its shape: a class that does not
-   differ from zero at SHAPE_LEVEL is held there, the least significant first (class by class at
-   SIGNIFICANCE_LEVEL, a camera's 8-16x class 0.28 +- 0.08 px from zero was held there too, and the
-   others moved to make up for it). A LINEAR bias, once adjusted in that shape, whose growth or step does not
-   differ from zero (at SHAPE_LEVEL) is CONSTANT or PROPORTIONAL.
+2. whether its bias differs from zero: all its terms together, chi-square at SIGNIFICANCE_LEVEL (else it has none).
+   In the CLASSES shape, which classes are biased is then a question of its shape: a class that does not differ from
+   zero at SHAPE_LEVEL is held there, the least significant first, and the others are tested again as a whole (class
+   by class at SIGNIFICANCE_LEVEL, a camera's 8-16x class 0.28 +- 0.08 px from zero was held there too, and the
+   others moved to make up for it). A LINEAR bias, once adjusted in that shape, whose growth or step does not differ
+   from zero (at SHAPE_LEVEL) is CONSTANT or PROPORTIONAL.
 
 The camera is then adjusted again in that shape, from the fitted terms, and decided again there (a shape only
 ever gives way to a simpler one). Classes held at zero, and a camera without a bias, are measured as if their
@@ -182,7 +182,7 @@ class _Fit:
 def _significant(fit: _Fit, name: str, *, shape_tests: bool = True) -> _Fit:
     """The fit with what does not differ from zero held there: a LINEAR shape's step or growth (then PROPORTIONAL
     or CONSTANT; with ``shape_tests``), the whole bias (at SIGNIFICANCE_LEVEL), and of a CLASSES bias that does, the
-    classes that do not (at SHAPE_LEVEL, the least significant first)."""
+    classes that do not (at SHAPE_LEVEL, the least significant first, the rest tested again as a whole)."""
     if fit.shape == LINEAR and shape_tests:  # (a question of its shape: at SHAPE_LEVEL)
         step, growth = (_statistic(*_block(fit.estimate, fit.covariance, [j])) for j in (0, 1))
         if min(step, growth) > chi_square_quantile(SHAPE_LEVEL, _WIDTH):
@@ -193,21 +193,21 @@ def _significant(fit: _Fit, name: str, *, shape_tests: bool = True) -> _Fit:
             alone = fit.without([0])
             order = np.r_[_WIDTH : 2 * _WIDTH, 0:_WIDTH, 2 * _WIDTH : N_BIAS]
             fit = _Fit(PROPORTIONAL, fit.start, alone.estimate[order], alone.covariance[np.ix_(order, order)], [0])
-    if not fit.terms:
-        return fit
-    whole = _statistic(*_block(fit.estimate, fit.covariance, fit.terms))
-    if whole <= chi_square_quantile(SIGNIFICANCE_LEVEL, _WIDTH * len(fit.terms)):
-        log.debug("%s: centre bias %s %s (chi-square %.1f) held at zero", name, SHAPE_NAMES[fit.shape], fit.terms,
-                  whole)  # fmt: skip
-        return fit.without(fit.terms)
-    while fit.shape == CLASSES and len(fit.terms) > 1:  # (which classes are biased: a question of its shape)
+    while fit.terms:
+        whole = _statistic(*_block(fit.estimate, fit.covariance, fit.terms))
+        if whole <= chi_square_quantile(SIGNIFICANCE_LEVEL, _WIDTH * len(fit.terms)):
+            log.debug("%s: centre bias %s %s (chi-square %.1f) held at zero", name, SHAPE_NAMES[fit.shape],
+                      fit.terms, whole)  # fmt: skip
+            return fit.without(fit.terms)
+        if fit.shape != CLASSES or len(fit.terms) == 1:
+            break
         statistics = [_statistic(*_block(fit.estimate, fit.covariance, [j])) for j in fit.terms]
         weakest = int(np.argmin(statistics))
-        if statistics[weakest] > chi_square_quantile(SHAPE_LEVEL, _WIDTH):
+        if statistics[weakest] > chi_square_quantile(SHAPE_LEVEL, _WIDTH):  # (which classes: a question of its shape)
             break
         log.debug("%s: centre bias class %d (chi-square %.1f) held at zero", name, fit.terms[weakest] + 1,
                   statistics[weakest])  # fmt: skip
-        fit = fit.without([fit.terms[weakest]])
+        fit = fit.without([fit.terms[weakest]])  # (and the rest tested again as a whole)
     return fit
 
 
