@@ -250,9 +250,7 @@ def conventional_four_scenario(*, n_placements: int = 300) -> Scenario:
         _conventional_camera(f"cam{i}", pose, principal_points[i])
         for i, pose in enumerate(_relative_to_first(world_poses))
     )
-    corners = np.array([[x, y, z] for x in (-900.0, 900.0) for y in (-700.0, 700.0) for z in (-900.0, 900.0)])
-    in_first = world_poses[0].apply(corners)
-    volume = np.stack([in_first.min(axis=0), in_first.max(axis=0)])
+    volume = _box_in(world_poses[0], (-900.0, -700.0, -900.0), (900.0, 700.0, 900.0))
     return Scenario("conventional4", WandSpec.from_lengths(400.0, 200.0), cameras, volume, n_placements)
 
 
@@ -291,6 +289,14 @@ def _floor_in(first: Pose, point: FloatArray) -> FloatArray:
     return np.stack(
         [first.apply(point), first.rotation @ np.array([0.0, -1.0, 0.0]), first.rotation @ np.array([1.0, 0.0, 0.0])]
     )
+
+
+def _box_in(first: Pose, low: tuple[float, float, float], high: tuple[float, float, float]) -> FloatArray:
+    """(2, 3) the least and greatest corner of the axis-aligned volume, in the first camera's frame, that holds the
+    world box from ``low`` to ``high`` (mm)."""
+    corners = np.array([[x, y, z] for x in (low[0], high[0]) for y in (low[1], high[1]) for z in (low[2], high[2])])
+    in_first = first.apply(corners)
+    return np.stack([in_first.min(axis=0), in_first.max(axis=0)])
 
 
 def _relative_to_first(poses: list[Pose]) -> list[Pose]:
@@ -343,9 +349,7 @@ def mocap_scenario(*, n_cameras: int = 16, n_placements: int = 10_000, cone_deg:
         principal = np.array([640.0 + 4 * ((i * 7) % 5) - 8, 512.0 + 3 * ((i * 3) % 5) - 6])
         cameras.append(TrueCamera(spec, CameraModel(k, spec.m, principal, spec.image_size), pose, np.radians(38.0)))
     first = world_poses[0]
-    corners = np.array([[x, y, z] for x in (-2000.0, 2000.0) for y in (-2000.0, 0.0) for z in (-2000.0, 2000.0)])
-    in_first = first.apply(corners)
-    volume = np.stack([in_first.min(axis=0), in_first.max(axis=0)])
+    volume = _box_in(first, (-2000.0, -2000.0, -2000.0), (2000.0, 0.0, 2000.0))
     floor = _floor_in(first, np.zeros(3))
     wand = WandSpec.from_lengths(400.0, 200.0)
     return Scenario("mocap16", wand, tuple(cameras), volume, n_placements, 2, cone_deg, floor=floor)
@@ -383,10 +387,8 @@ def stage_scenario(*, n_rings: int = 4, per_ring: int = 16, n_placements: int = 
         principal = np.array([640.0 + 4 * ((i * 7) % 5) - 8, 512.0 + 3 * ((i * 3) % 5) - 6])
         model = CameraModel(k, spec.m, principal, spec.image_size)
         cameras.append(TrueCamera(spec, model, pose, np.radians(view_deg + 3.0)))
-    half = np.array([ZONE_MM / 2 * n_rings, 1000.0, 2500.0])
-    corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * half
-    in_first = world_poses[0].apply(corners + np.array([0.0, -1000.0, 0.0]))
-    volume = np.stack([in_first.min(axis=0), in_first.max(axis=0)])
+    half_x = ZONE_MM / 2 * n_rings
+    volume = _box_in(world_poses[0], (-half_x, -2000.0, -2500.0), (half_x, 0.0, 2500.0))
     name = f"stage{n_rings * per_ring}"
     return Scenario(name, WandSpec.from_lengths(400.0, 200.0), tuple(cameras), volume, n_placements, 2, 75.0)
 
@@ -423,9 +425,7 @@ def sparse_scenario(*, n_placements: int = 100) -> Scenario:
         camera_matrix = np.array([[focal, 0.0, centre_px[0]], [0.0, focal, centre_px[1]], [0.0, 0.0, 1.0]])
         model = from_opencv_pinhole(camera_matrix, np.array(lens), spec.m, spec.image_size, PLUMB_BOB)
         cameras.append(TrueCamera(spec, model, pose, np.radians(47.0)))
-    corners = np.array([[x, y, z] for x in (-600.0, 600.0) for y in (-450.0, 450.0) for z in (-450.0, 450.0)])
-    in_first = world_poses[0].apply(corners)
-    volume = np.stack([in_first.min(axis=0), in_first.max(axis=0)])
+    volume = _box_in(world_poses[0], (-600.0, -450.0, -450.0), (600.0, 450.0, 450.0))
     return Scenario(
         "sparse4",
         WandSpec((0.0, 289.6)),
@@ -466,9 +466,7 @@ def narrow_scenario(
         camera_matrix = np.array([[focal, 0.0, 639.5 + offsets[i][0]], [0.0, focal, 399.5 + offsets[i][1]], [0, 0, 1]])
         model = from_opencv_pinhole(camera_matrix, np.zeros(5), spec.m, spec.image_size, PLUMB_BOB)
         cameras.append(TrueCamera(spec, model, pose, np.radians(2.0)))
-    corners = np.array([[x, y, z] for x in (-25.0, 25.0) for y in (-15.0, 15.0) for z in (-25.0, 25.0)])
-    in_first = world_poses[0].apply(corners)
-    volume = np.stack([in_first.min(axis=0), in_first.max(axis=0)])
+    volume = _box_in(world_poses[0], (-25.0, -15.0, -25.0), (25.0, 15.0, 25.0))
     return Scenario("narrow4", WandSpec((0.0, 20.0)), tuple(cameras), volume, n_placements)
 
 
@@ -549,7 +547,7 @@ def visibility(scenario: Scenario, wand_a: FloatArray, direction: FloatArray, fa
         for c, camera in enumerate(scenario.cameras):
             mine = seen[:, c]
             to_camera = camera.pose.center - points[mine]  # (M, 3)
-            along = np.einsum("mi,mi->m", to_camera, np.broadcast_to(facing[:, None, :], points.shape)[mine])
+            along = np.einsum("mi,mi->m", to_camera, facing[np.nonzero(mine)[0]])  # (each LED's placement's facing)
             mine[mine] = along / lengths(to_camera) >= np.cos(np.radians(scenario.led_cone_deg))
     return seen
 
