@@ -211,6 +211,11 @@ def saturation_of(gray: NDArray[Any]) -> float:
 BOX = 3
 
 
+def sums_dtype(gray: NDArray[Any]) -> type[np.uint16] | type[np.float32]:
+    """The dtype of a grey image's :func:`box_sums`: uint16 for 8-bit pixels (exact), float32 for others."""
+    return np.uint16 if gray.dtype == np.uint8 else np.float32
+
+
 def box_sums(gray: NDArray[Any]) -> tuple[NDArray[Any], float]:
     """(sums, unit) of every BOX x BOX neighbourhood of a grey image, and the unit of min_contrast in them.
 

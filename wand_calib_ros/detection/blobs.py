@@ -32,6 +32,7 @@ from wand_calib_ros.detection.background import (
     box_sums_above,
     estimate_background,
     saturation_of,
+    sums_dtype,
 )
 from wand_calib_ros.detection.centres import (
     SATURATED_FLOOR,
@@ -486,7 +487,7 @@ def find_blobs(
     if gray.dtype not in (np.uint8, np.uint16):
         gray = np.clip(np.round(gray), 0, 65535).astype(np.uint16)
     full = saturation_of(gray) if saturation is None else saturation
-    depth = np.uint16 if gray.dtype == np.uint8 else np.float32  # (the box sums')
+    depth = sums_dtype(gray)
     above: NDArray[Any]
     if (
         background is not None

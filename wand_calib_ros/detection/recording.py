@@ -32,7 +32,7 @@ from wand_calib_ros.core.initialise.intrinsics_init import nominal_bearings
 from wand_calib_ros.core.model.bearings import BearingTable
 from wand_calib_ros.core.model.camera_model import CameraModel
 from wand_calib_ros.core.model.rig import CameraSpec, WandObservations
-from wand_calib_ros.detection.background import Background, box_sums, estimate_background, masked
+from wand_calib_ros.detection.background import Background, box_sums, estimate_background, masked, sums_dtype
 from wand_calib_ros.detection.blobs import ENCODINGS, BlobOptions, Blobs, distances, find_blobs, to_gray
 from wand_calib_ros.detection.errors import ImageError
 from wand_calib_ros.detection.health import CameraHealth, HealthReport, ViewLight, health_report, view_light
@@ -305,7 +305,7 @@ class CameraStream:
         learned = current is not None and current.structure is not None  # (then the spatial background only shapes
         # the structure's threshold, made once per snapshot)
         stale = (self._since_background >= BACKGROUND_REFRESH and not learned) or self.structure.due(stamp_ns)
-        depth = np.uint16 if gray.dtype == np.uint8 else np.float32
+        depth = sums_dtype(gray)
         self._since_background += 1
         if current is None or stale or current.threshold.shape != gray.shape or current.threshold.dtype != depth:
             sums, unit = box_sums(gray)
