@@ -267,11 +267,14 @@ def _measure(
     w = options.window
     x0, y0 = max(x - w, 0), max(y - w, 0)
     x1, y1 = min(x + bw + w, width), min(y + bh + w, height)
-    raw = gray[y0:y1, x0:x1].astype(np.float32)  # (exact for 8- and 16-bit pixels)
+    raw = gray[y0:y1, x0:x1]  # (its pixels as the camera gave them: 8- or 16-bit)
     row, col = min(y + bh // 2, height - 1), min(x + bw // 2, width - 1)
     unit = 1.0 if gray.itemsize == 1 else 257.0  # (8- or 16-bit pixels; itemsize: a dtype comparison costs more)
     level, noise, static, contrast = _local(background, row, col)
-    window = raw if background.static is None else raw - background.static[y0:y1, x0:x1]
+    under: NDArray[Any] | float = 0.0 if background.static is None else background.static[y0:y1, x0:x1]
+    window = (  # (float32: exact for 8- and 16-bit pixels and their differences)
+        raw.astype(np.float32) if isinstance(under, float) else np.subtract(raw, under, dtype=np.float32)
+    )
     floor = max(CENTRE_FLOOR_SIGMAS * noise, 0.5 * options.background.min_contrast * unit)
     peak = float(window.max()) - level
     bright = peak >= CORE_SPLIT * noise
@@ -281,7 +284,8 @@ def _measure(
     if bright or near_border:  # its core: where it splits, and whether the border cuts it
         core = (window > level + max(CORE_FRACTION * peak, CORE_SPLIT / 3 * noise)).astype(np.uint8)
         cores, _ = cv2.findContours(core, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
-        parts = [(None, tuple(cv2.boundingRect(core)))]  # type: ignore[list-item]
+        if near_border:  # (only there can the core reach the border: a spot's window lies inside the image)
+            parts = [(None, tuple(cv2.boundingRect(core)))]  # type: ignore[list-item]
     if bright and len(cores) >= 2:
         split: list[tuple[NDArray[np.bool_] | None, tuple[int, int, int, int]]] = []
         for outline in cores:
@@ -294,7 +298,6 @@ def _measure(
             split.append((region, tuple(cv2.boundingRect(outline))))  # type: ignore[arg-type]
         parts = split if len(split) >= 2 else parts
     own = cv2.dilate(above[y0:y1, x0:x1], _SQUARE5) > 0  # its pixels (not a lamp beside it) ...
-    under: NDArray[Any] | float = 0.0 if background.static is None else background.static[y0:y1, x0:x1]
     visible: NDArray[np.bool_] | None = None  # (None: all of the window, no saturated light under it)
     if isinstance(under, np.ndarray) and float(under.max()) >= SATURATED_STATIC * full:
         visible = np.asarray(under < SATURATED_STATIC * full)  # (... nor a lamp's or a window's saturated pixels
@@ -305,8 +308,9 @@ def _measure(
     sides = side_medians(window)
     base = 0.25 * sum(sides)
     least, ceiling = 0.0, 0.0
-    brightest_raw = float(raw[seen].max())
-    if brightest_raw >= full:  # saturated: measured by its outline, cut if that touches a saturated light
+    clipping = float(raw.max()) >= full  # (a pixel of the window at full scale: only then can one of its own be)
+    clipped = clipping and float(raw[seen].max()) >= full
+    if clipped:  # saturated: measured by its outline, cut if that touches a saturated light
         # (its clipped pixels show the least of its light that any of them can), or if so little of its light shows
         # above a bright region that the noise there would shape it
         brightest = float(np.max(under[seen])) if isinstance(under, np.ndarray) else under
@@ -325,14 +329,14 @@ def _measure(
         mine = own if part is None else own & part
         if part is not None and not mine.any():  # (a core of something else in the window)
             continue
-        saturated = (brightest_raw if part is None else float(raw[mine].max())) >= full
+        saturated = clipped if part is None else clipping and float(raw[mine].max()) >= full
         if saturated:
             top = ceiling if part is None else _ceiling(raw, under, mine, full) - base
             spot: SpotCentre | None = saturated_centre(window, base, top, mine, least)
             low = min(max(SATURATED_FLOOR * top, least), 0.5 * top)  # (the outline's floor, as saturated_centre's)
-            clipped = int(np.count_nonzero(mine & (raw >= full)))
+            at_full = int(np.count_nonzero(mine & (raw >= full)))
             outlined = int(np.count_nonzero(mine & (window - base >= low)))
-            stops = brightness_stops(clipped, outlined, top / low) if low > 0.0 else 0.0  # (no outline: just full)
+            stops = brightness_stops(at_full, outlined, top / low) if low > 0.0 else 0.0  # (no outline: just full)
         else:
             spot = spot_centre(window, floor if part is None else CORE_FRACTION * peak, mine, sides)
             if spot is not None:

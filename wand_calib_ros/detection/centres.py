@@ -74,9 +74,10 @@ def side_medians(window: Pixels) -> tuple[float, float, float, float]:
     """The medians of a window's (left, right, top, bottom) sides (a middle value for an even count)."""
     height, width = window.shape
     # (sorted Python lists: a side has a few dozen pixels, where numpy's per-call cost is most of the work)
-    left, right = (float(sorted(window[:, k].tolist())[height // 2]) for k in (0, -1))
-    top, bottom = (float(sorted(window[k].tolist())[width // 2]) for k in (0, -1))
-    return left, right, top, bottom
+    left, right, top, bottom = window[:, 0].tolist(), window[:, -1].tolist(), window[0].tolist(), window[-1].tolist()
+    for side in (left, right, top, bottom):
+        side.sort()
+    return float(left[height // 2]), float(right[height // 2]), float(top[width // 2]), float(bottom[width // 2])
 
 
 def side_plane(window: Pixels, sides: tuple[float, float, float, float] | None = None) -> tuple[float, float, float]:

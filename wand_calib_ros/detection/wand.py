@@ -129,19 +129,19 @@ class WandDetection:
 MAX_DEPTH_RATIO = 3.0
 
 
-def _depth_ratio(ab: float, bc: float, ratio: float, bearings: FloatArray | None) -> float:
+def _depth_ratio(ab: float, bc: float, ratio: float, bearings: list[list[float]] | None) -> float:
     """How many times as far from the camera one end of a triple must be as the other for its segments to look as
     they do (under the better of its two labellings): a line's image (a pinhole's, or the bearings' on a plane
     across their mean) scales each segment by the inverse of its ends' depths, so |ab| / |bc| = (|AB| / |BC|)
-    z_C / z_A; ``bearings`` (3, 3) of one end, the middle and the other end, or None: the pixels' ``ab`` and
-    ``bc``."""
+    z_C / z_A; ``bearings`` (3 x 3 numbers) of one end, the middle and the other end, or None: the pixels' ``ab``
+    and ``bc``."""
     if bearings is not None:
-        (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = bearings.tolist()
+        (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = bearings
         n0, n1, n2 = a0 + b0 + c0, a1 + b1 + c1, a2 + b2 + c2  # (their mean direction, unnormalised)
         da, db, dc = a0 * n0 + a1 * n1 + a2 * n2, b0 * n0 + b1 * n1 + b2 * n2, c0 * n0 + c1 * n1 + c2 * n2
         if min(da, db, dc) <= 0:  # (more than a hemisphere apart: no plane shows them all)
             return 1.0
-        pa, pb, pc = [(x / d, y / d, z / d) for (x, y, z), d in zip(bearings.tolist(), (da, db, dc), strict=True)]
+        pa, pb, pc = [(x / d, y / d, z / d) for (x, y, z), d in zip(bearings, (da, db, dc), strict=True)]
         ab, bc = math.dist(pa, pb), math.dist(pb, pc)
     if min(ab, bc) <= 0:
         return math.inf
@@ -163,17 +163,19 @@ def _score(
     """
     # The ends of the longest side are A and C; the third point is B. (Scalar arithmetic: numpy's calls cost more
     # than the sums on three points.)
-    (x0, y0), (x1, y1), (x2, y2) = triple.tolist()
+    corners = triple.tolist()
+    (x0, y0), (x1, y1), (x2, y2) = corners
     d01, d02, d12 = math.hypot(x1 - x0, y1 - y0), math.hypot(x2 - x0, y2 - y0), math.hypot(x2 - x1, y2 - y1)
     i, j, m, length = max(((0, 1, 2, d01), (0, 2, 1, d02), (1, 2, 0, d12)), key=lambda t: t[3])
     if length < options.min_length_px:
         return None
-    a, c, b = triple[i], triple[j], triple[m]
-    if bearings is None:
+    a, c, b = corners[i], corners[j], corners[m]
+    rays = None if bearings is None else bearings.tolist()
+    if rays is None:
         ax, ay = (c[0] - a[0]) / length, (c[1] - a[1]) / length
         off_line = abs(ax * (b[1] - a[1]) - ay * (b[0] - a[0])) / length
     else:
-        (p0, p1, p2), (q0, q1, q2), (r0, r1, r2) = bearings[i].tolist(), bearings[j].tolist(), bearings[m].tolist()
+        (p0, p1, p2), (q0, q1, q2), (r0, r1, r2) = rays[i], rays[j], rays[m]
         n0, n1, n2 = p1 * q2 - p2 * q1, p2 * q0 - p0 * q2, p0 * q1 - p1 * q0  # normal of the ends' great circle
         span = n0 * n0 + n1 * n1 + n2 * n2  # sin^2 of the angle between the ends' rays
         off_line = abs(n0 * r0 + n1 * r1 + n2 * r2) / max(span, 1e-12) if span > 0 else math.inf
@@ -182,14 +184,15 @@ def _score(
     ab, bc = math.hypot(b[0] - a[0], b[1] - a[1]), math.hypot(c[0] - b[0], c[1] - b[1])
     if min(ab, bc) <= 0:
         return None
-    if _depth_ratio(ab, bc, options.ratio, None if bearings is None else bearings[[i, m, j]]) > MAX_DEPTH_RATIO:
+    if _depth_ratio(ab, bc, options.ratio, None if rays is None else [rays[i], rays[m], rays[j]]) > MAX_DEPTH_RATIO:
         return None
+    order = [i, m, j]
     if ab < bc:  # A is the end farther from B
-        a, c, ab, bc = c, a, bc, ab
+        order, ab, bc = [j, m, i], bc, ab
     ratio = ab / bc
     ratio_error = abs(math.log(ratio / options.ratio))
     score = off_line / options.collinearity + 0.25 * ratio_error
-    return score, np.stack([a, b, c]), ratio
+    return score, triple[order], ratio
 
 
 def identify_wand(

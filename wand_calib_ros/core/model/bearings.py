@@ -21,8 +21,17 @@ class BearingTable:
 
     def __call__(self, uv: FloatArray) -> FloatArray:
         """(N, 3) unit bearings of (N, 2) pixels (radii beyond the table are clamped)."""
-        xy = (uv - self.model.principal_point) / self.model.m
+        model = self.model
+        xy = (uv - model.principal_point) / model.m
         r = np.hypot(xy[:, 0], xy[:, 1])
         theta = np.interp(r, self.radius, self.theta)
-        scale = np.where(r > 0, np.sin(theta) / np.where(r > 0, r, 1.0), 1.0 / self.model.k[0])
-        return np.column_stack([xy * scale[:, None], np.cos(theta)])
+        off_axis = r > 0  # (on the axis: sin(theta) / r's limit, 1 / k1)
+        scale = (
+            np.sin(theta) / r
+            if off_axis.all()
+            else np.where(off_axis, np.sin(theta) / np.where(off_axis, r, 1.0), 1.0 / model.k[0])
+        )
+        bearings = np.empty((r.shape[0], 3))  # (filled in place: a few points' column_stack costs more than its maths)
+        np.multiply(xy, scale[:, None], out=bearings[:, :2])
+        np.cos(theta, out=bearings[:, 2])
+        return bearings
