@@ -117,17 +117,29 @@ def test_a_saturated_spots_outline_rises_to_stay_clear_of_a_saturated_light_besi
     assert _clear_outline(light, ceiling, 4.0, seen & visible, visible)[1]
 
 
+@pytest.mark.parametrize("size", [(1280, 1024), (640, 480)])
 @pytest.mark.parametrize("seed", range(3))
-def test_external_contours_are_opencvs_in_its_order(seed: int) -> None:
-    # rendered spots in a 1280x1024 image, some close enough to share rows, and pixels on the image's borders: the
-    # contours of the runs of occupied rows are those of the whole image, in its order, point for point
+def test_external_contours_are_opencvs_in_its_order(seed: int, size: tuple[int, int]) -> None:
+    # rendered spots, some close enough to share rows, and pixels on the image's borders: the contours of the runs of
+    # occupied rows are those of the whole image, in its order, point for point
     rng = np.random.default_rng(seed)
-    spots = np.column_stack([rng.uniform(0, 1279, 12), rng.uniform(0, 1023, 12)])
-    image = render_image((1280, 1024), spots, RenderOptions(), rng)
+    width, height = size
+    spots = np.column_stack([rng.uniform(0, width - 1, 12), rng.uniform(0, height - 1, 12)])
+    image = render_image(size, spots, RenderOptions(), rng)
     sums, unit = box_sums(image)
     above = cv2.compare(sums, estimate_background(sums, unit=unit).threshold, cv2.CMP_GT)
     above[0, 5:9] = above[-1, 100:103] = above[400:403, -1] = 255
     expected, _ = cv2.findContours(above, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
     found = external_contours(above)
     assert len(found) == len(expected) >= 12
+    assert all(np.array_equal(a, b) for a, b in zip(found, expected, strict=True))
+
+
+def test_external_contours_of_an_image_lit_in_most_rows_are_opencvs() -> None:
+    # a speckled image (pixels in most rows: scanned whole) gives OpenCV's contours too
+    rng = np.random.default_rng(5)
+    above = np.where(rng.random((480, 640)) > 0.995, 255, 0).astype(np.uint8)
+    expected, _ = cv2.findContours(above, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+    found = external_contours(above)
+    assert len(found) == len(expected) > 100
     assert all(np.array_equal(a, b) for a, b in zip(found, expected, strict=True))

@@ -117,8 +117,9 @@ def noise_model(level: FloatArray, variance: FloatArray, *, from_median: bool = 
         n = float(keep.sum())
         if n < 2:
             break
-        sx, sy = float(x[keep].sum()), float(y[keep].sum())
-        sxx, sxy = float(x[keep] @ x[keep]), float(x[keep] @ y[keep])
+        kept_x, kept_y = x[keep], y[keep]
+        sx, sy = float(kept_x.sum()), float(kept_y.sum())
+        sxx, sxy = float(kept_x @ kept_x), float(kept_x @ kept_y)
         spread = n * sxx - sx * sx
         b = max((n * sxy - sx * sy) / spread, 0.0) if spread > 1e-9 * max(n * sxx, 1.0) else 0.0
         a = max((sy - b * sx) / n, 0.0)

@@ -62,8 +62,8 @@ def view_light(blobs: Blobs, points: FloatArray) -> ViewLight | None:
     """The light of a view's LEDs: the blobs nearest its (K, 2) points (None: the blobs were not measured)."""
     if blobs.lengths is None or blobs.contrast is None or not blobs.centres.size:
         return None
-    finite = np.all(np.isfinite(points), axis=1)
-    nearest = np.argmin(distances(points[finite], blobs.centres), axis=1)
+    finite = np.isfinite(points).all(axis=1)
+    nearest = distances(points if finite.all() else points[finite], blobs.centres).argmin(axis=1)
     brightness = np.full(nearest.size, np.nan) if blobs.brightness is None else blobs.brightness[nearest]
     return ViewLight(
         blobs.peaks[nearest], blobs.saturated[nearest], blobs.lengths[nearest], blobs.contrast[nearest], brightness
