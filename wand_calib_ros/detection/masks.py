@@ -369,19 +369,20 @@ class StaticSources:
         changed = self._forget(stamp_ns, standing_out)
         if blobs.centres.size:
             self._match(stamp_ns, blobs, claimed, track_since_ns)
-        keep = (stamp_ns - self._last) <= CANDIDATE_GAP_S * 1e9
-        age = (stamp_ns - self._first) / 1e9
-        presence = self._count / (self._seen - self._born + 1)
-        learned = keep & (age >= STATIC_LEARN_S) & (presence >= STATIC_PRESENCE)
-        for i in np.flatnonzero(learned):
-            centre = (float(self._centres[i, 0]), float(self._centres[i, 1]))
-            source = Source(centre, float(self._radii[i]) + MASK_MARGIN_PX, int(self._first[i]), stamp_ns)
-            self.sources.append(source)
-            self.patches.append(LightPatch(source, self.size))
-            changed = True
-        if gray is not None:
+        if self._centres.size:  # (none: nothing to learn or forget, the common case)
+            keep = (stamp_ns - self._last) <= CANDIDATE_GAP_S * 1e9
+            age = (stamp_ns - self._first) / 1e9
+            presence = self._count / (self._seen - self._born + 1)
+            learned = keep & (age >= STATIC_LEARN_S) & (presence >= STATIC_PRESENCE)
+            for i in np.flatnonzero(learned):
+                centre = (float(self._centres[i, 0]), float(self._centres[i, 1]))
+                source = Source(centre, float(self._radii[i]) + MASK_MARGIN_PX, int(self._first[i]), stamp_ns)
+                self.sources.append(source)
+                self.patches.append(LightPatch(source, self.size))
+                changed = True
+            self._keep(keep & ~learned)
+        if gray is not None and self.sources:
             changed |= self._learn_halos(gray, blobs)
-        self._keep(keep & ~learned)
         if changed:
             self._mask = None
         return changed
@@ -396,8 +397,10 @@ class StaticSources:
     def _match(self, stamp_ns: int, blobs: Blobs, claimed: NDArray[np.bool_], since_ns: int | None) -> None:
         """Count the blobs on the candidates they match (a claimed blob only on a candidate older than the track);
         the unclaimed others are new candidates."""
-        radii = blobs.radii()
         new = ~claimed
+        if not self._centres.size and not new.any():  # (no candidate, and every blob the wand's: the common case)
+            return
+        radii = blobs.radii()
         if self._centres.size:
             matched, index = self._nearest(blobs)
             for b in np.flatnonzero(matched):
