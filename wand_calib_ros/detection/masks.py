@@ -369,7 +369,7 @@ class StaticSources:
         changed = self._forget(stamp_ns, standing_out)
         if blobs.centres.size:
             self._match(stamp_ns, blobs, claimed, track_since_ns)
-        if self._centres.size:  # (none: nothing to learn or forget, the common case)
+        if self._centres.size:  # (no candidate light: nothing to learn or forget, the common case)
             keep = (stamp_ns - self._last) <= CANDIDATE_GAP_S * 1e9
             age = (stamp_ns - self._first) / 1e9
             presence = self._count / (self._seen - self._born + 1)
