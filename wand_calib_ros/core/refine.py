@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wand_calib_ros.core.adjust.assembly import assemble, free_placements
-from wand_calib_ros.core.adjust.brightness_bias import stops_of, unmeasured_bias
+from wand_calib_ros.core.adjust.brightness_bias import bias_costs, stops_of, unmeasured_bias
 from wand_calib_ros.core.adjust.bundle_adjustment import BundleResult, bundle_adjust, camera_std
 from wand_calib_ros.core.adjust.bundle_problem import (
     INTRINSICS,
@@ -185,6 +185,7 @@ def refine_calibration(
     if classes is not None:  # (a camera whose bright centres could not be measured: nothing tells their bias)
         systematic += unmeasured_bias(problem, rig.camera_names)
     warnings = narrow_notes + _warnings(rig, result, fixed, reference, uv_used) + systematic
+    warnings += bias_costs(result.camera_covariance, fixed.bias, rig.camera_names)
     widening = correlation.line()
     warnings += [] if widening is None else [widening]
     views_rejected = (some_views(uv[used]) & ~some_views(uv_used)).sum(axis=0)
