@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wand_calib_ros.core.adjust.bundle_adjustment import BundleResult
-from wand_calib_ros.core.adjust.bundle_problem import BIAS, N_CAMERA_PARAMS, BundleProblem, CameraBias
+from wand_calib_ros.core.adjust.bundle_problem import BIAS, GEOMETRY_PARTS, N_CAMERA_PARAMS, BundleProblem, CameraBias
 from wand_calib_ros.core.adjust.chi_square import chi_square_quantile
 from wand_calib_ros.core.adjust.linearisation import in_pixels, squared_norms
 from wand_calib_ros.core.model.brightness import (
@@ -138,13 +138,6 @@ def unmeasured_bias(problem: BundleProblem, names: tuple[str, ...]) -> list[str]
 #: that grows with brightness and a pair's baseline); a cost beyond this factor on a parameter's standard deviation
 #: is said (what a bias's correction is held to: its calibration within 1.3x of the same take's without it).
 BIAS_COST = 1.3
-#: The geometry a bias's cost is said of: (name, its columns in a camera's parameter vector).
-_GEOMETRY = (
-    ("focal length", (0,)),
-    ("principal point", (5, 6)),
-    ("orientation", (7, 8, 9)),
-    ("position", (10, 11, 12)),
-)
 
 
 def bias_costs(covariance: FloatArray, free: NDArray[np.bool_] | None, names: tuple[str, ...]) -> list[str]:
@@ -157,7 +150,7 @@ def bias_costs(covariance: FloatArray, free: NDArray[np.bool_] | None, names: tu
         return []
     cameras = len(names)
     bias = (np.arange(cameras)[:, None] * N_CAMERA_PARAMS + BIAS.start + np.arange(N_BIAS)[None, :])[free]
-    columns = np.array([j for _, group in _GEOMETRY for j in group])
+    columns = np.array([j for _, group in GEOMETRY_PARTS for j in group])
     geometry = (np.arange(cameras)[:, None] * N_CAMERA_PARAMS + columns[None, :]).reshape(-1)
     across = covariance[np.ix_(geometry, bias)]
     explained = np.einsum("ij,jk,ik->i", across, np.linalg.pinv(covariance[np.ix_(bias, bias)], hermitian=True), across)
@@ -168,7 +161,7 @@ def bias_costs(covariance: FloatArray, free: NDArray[np.bool_] | None, names: tu
     lines = []
     for c, name in enumerate(names):
         first, worst, what = 0, 1.0, ""
-        for group, group_columns in _GEOMETRY:
+        for group, group_columns in GEOMETRY_PARTS:
             cost = float(factor[c, first : first + len(group_columns)].max())
             first += len(group_columns)
             if cost > worst:

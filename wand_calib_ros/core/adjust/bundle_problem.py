@@ -50,6 +50,13 @@ TIMING = slice(TIME_OFFSET, READOUT + 1)
 LENS = slice(READOUT + 1, READOUT + 1 + N_EXTRA)
 #: The centre bias in a camera's parameter vector: per brightness class 1.. its offsets along u, v and radially.
 BIAS = slice(LENS.stop, N_CAMERA_PARAMS)
+#: A camera's geometry as a user names it: (name, its indices in a camera's parameter vector).
+GEOMETRY_PARTS = (
+    ("focal length", (0,)),
+    ("principal point", (5, 6)),
+    ("orientation", (7, 8, 9)),
+    ("position", (10, 11, 12)),
+)
 #: Every intrinsic parameter's index in a camera's parameter vector.
 INTRINSICS = np.r_[0:N_INTRINSIC, LENS.start : LENS.stop]
 #: Names of the per-camera parameters in order (rotation as a small-angle update, rad; the timing

@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wand_calib_ros.core.adjust.bundle_adjustment import BundleResult, bundle_adjust
-from wand_calib_ros.core.adjust.bundle_problem import BundleProblem, PlacementTiming
+from wand_calib_ros.core.adjust.bundle_problem import GEOMETRY_PARTS, BundleProblem, PlacementTiming
 from wand_calib_ros.core.errors import CoreError
 from wand_calib_ros.core.model.geometry import rotvec_from_rotation
 from wand_calib_ros.core.model.rig import RigSpec
@@ -35,13 +35,6 @@ BIAS_SIGMAS = 5.0
 MIN_POINTS = 30
 #: The saturated points are moved by the difference and the adjustment made again this many times.
 ALTERNATIONS = 3
-#: What a bias pulls: (name, its columns in CAMERA_PARAM_NAMES).
-_PARAMETERS = (
-    ("focal length", (0,)),
-    ("principal point", (5, 6)),
-    ("orientation", (7, 8, 9)),
-    ("position", (10, 11, 12)),
-)
 _UNITS = {"focal length": "%", "principal point": "px", "orientation": "deg", "position": "mm"}
 
 
@@ -177,7 +170,7 @@ def _pulls(
     shift[7:10] = rotvec_from_rotation(full.state.poses[c].rotation @ corrected.state.poses[c].rotation.T)
     shift[10:13] = full.state.poses[c].translation - corrected.state.poses[c].translation
     out = []
-    for name, columns in _PARAMETERS:
+    for name, columns in GEOMETRY_PARTS:  # (what a bias pulls)
         index = list(columns)
         std = full.camera_std[c, index]
         estimated = free[c, index] & (std > 0)
