@@ -167,8 +167,9 @@ def bias_costs(covariance: FloatArray, free: NDArray[np.bool_] | None, names: tu
             if cost > worst:
                 worst, what = cost, group
         if worst > BIAS_COST:
+            whose = "its centre bias" if free[c].any() else "the other cameras' centre bias"
             lines.append(
-                f"{name}: its centre bias and its {what} are hard to tell apart in these views: estimating the bias "
+                f"{name}: {whose} and its {what} are hard to tell apart in these views: estimating the bias "
                 f"leaves its {what} {worst:.2f}x less precise than a known bias would (said in its standard "
                 "deviations); cameras that see the volume from other directions, or LEDs that stay below full scale, "
                 "tell them apart"
